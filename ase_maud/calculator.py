@@ -1,0 +1,181 @@
+"""MaudCalculator: points that all repel, some tied by zero-length springs.
+
+Energy, each pair counted once (the specification's P double-counts: P = 2E)::
+
+    E = sum_{i<j} a**3 Q / L_ij  +  sum_{(i,j) in springs} Q L_ij**2 / 2
+
+``a`` is a length and ``Q`` a force per length, in whatever units the user
+works in (ASE's eV and Angstrom if the scene is mixed with other ASE tools).
+Forces follow ASE's sign, ``f = -dE/dr``. The property ``stiffness`` holds the
+nodal blocks ``K_mm = d2E/dr_m2`` (N, dim, dim), the Hessian's diagonal blocks:
+the stiffness at point m with every other point held fixed.
+"""
+
+import numpy as np
+from ase.calculators.calculator import Calculator, all_changes
+
+from .hessian import dense_hessian
+from .kernels import repulsion_numba, repulsion_numpy, voigt_to_blocks
+from .springs import check_springs, spring_degrees, spring_terms
+
+#: Relative tolerance on the spread of z for a ``dim=2`` scene.
+PLANE_TOLERANCE = 1e-10
+
+_BACKENDS = {'numba': repulsion_numba, 'numpy': repulsion_numpy}
+
+
+class MaudCalculator(Calculator):
+    """ASE calculator for the Maud potential.
+
+    Parameters
+    ----------
+    springs : array-like of shape (K, 2)
+        Atom index pairs tied by a spring. Each pair at most once (in either
+        order); a duplicate, a self-spring or an index out of range is a
+        ``ValueError`` that names the spring.
+    a : float
+        Length in the repulsion ``a**3 Q / L`` (default 1).
+    Q : float
+        Spring constant, force per length (default 1).
+    dim : 2 or 3
+        ``2``: every point lies on one plane ``z = const`` (checked to a
+        relative :data:`PLANE_TOLERANCE`), forces have ``z = 0`` exactly and
+        the blocks are 2x2. ``3`` (default): 3x3 blocks.
+    backend : 'numba' or 'numpy'
+        The direct-sum kernel: ``numba`` (default, compiled, parallel over
+        ``NUMBA_NUM_THREADS``) or ``numpy`` (the slow reference).
+
+    Only what is asked is computed: ``energy``/``forces`` never build the
+    blocks; asking for ``stiffness`` computes all three in one pass.
+    """
+
+    implemented_properties = ['energy', 'free_energy', 'forces', 'stiffness']
+    default_parameters = {'springs': np.zeros((0, 2), dtype=int), 'a': 1.0,
+                          'Q': 1.0, 'dim': 3, 'backend': 'numba'}
+    discard_results_on_any_change = True
+    nolabel = True
+
+    #: Largest number of atoms for which :meth:`get_hessian` builds the dense
+    #: (dim N)**2 matrix: 3000 atoms in 3D is an 81e6-entry, 648 MB array.
+    max_hessian_atoms = 3000
+
+    def __init__(self, springs=(), a=1.0, Q=1.0, dim=3, backend='numba',
+                 **kwargs):
+        super().__init__(springs=check_springs(springs), a=a, Q=Q, dim=dim,
+                         backend=backend, **kwargs)
+        self._check_parameters()
+
+    def set(self, **kwargs):
+        if 'springs' in kwargs:
+            kwargs['springs'] = check_springs(kwargs['springs'])
+        changed = super().set(**kwargs)
+        self._check_parameters()
+        return changed
+
+    def _check_parameters(self):
+        p = self.parameters
+        for name in ('a', 'Q'):
+            value = p[name]
+            if not (np.isscalar(value) and np.isfinite(value) and value > 0):
+                raise ValueError(f'{name} must be a positive finite number, '
+                                 f'got {value!r}')
+        if p['dim'] not in (2, 3):
+            raise ValueError(f"dim must be 2 or 3, got {p['dim']!r}")
+        if p['backend'] not in _BACKENDS:
+            raise ValueError(f"backend must be one of {sorted(_BACKENDS)}, "
+                             f"got {p['backend']!r}")
+
+    @property
+    def springs(self):
+        """The (K, 2) int array of sprung pairs."""
+        return self.parameters['springs']
+
+    def check_atoms(self, atoms):
+        """Validate ``atoms`` for this potential; return its positions.
+
+        Raises ValueError naming the problem: periodic boundaries, a spring
+        index beyond the last atom, a non-finite position, or (``dim=2``) a
+        point off the plane of the others.
+        """
+        if np.any(atoms.pbc):
+            raise ValueError(f'periodic boundaries are not supported (pbc='
+                             f'{atoms.pbc.tolist()}): 1/L needs an Ewald sum;'
+                             ' set atoms.pbc = False')
+        natoms = len(atoms)
+        check_springs(self.springs, natoms)
+        positions = atoms.get_positions()
+        bad = np.flatnonzero(~np.isfinite(positions).all(axis=1))
+        if bad.size:
+            raise ValueError(f'atom {bad[0]} has a non-finite position '
+                             f'{positions[bad[0]].tolist()}')
+        if self.parameters['dim'] == 2 and natoms > 1:
+            z = positions[:, 2]
+            extent = max(np.ptp(positions[:, :2]), self.parameters['a'])
+            off = np.abs(z - z[0])
+            if off.max() > PLANE_TOLERANCE * extent:
+                k = int(np.argmax(off))
+                raise ValueError(f'dim=2 needs every point on one plane z = '
+                                 f'const: atom {k} has z = {z[k]!r}, atom 0 '
+                                 f'has z = {z[0]!r}')
+        return positions
+
+    def calculate(self, atoms=None, properties=('energy',),
+                  system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        positions = self.check_atoms(self.atoms)
+        p = self.parameters
+        dim, c = p['dim'], p['a']**3 * p['Q']
+        want_blocks = 'stiffness' in properties
+        flat = positions.copy()
+        if dim == 2:
+            flat[:, 2] = 0.0
+        e_rep, f_rep, block6 = _BACKENDS[p['backend']](flat, want_blocks)
+        if not np.isfinite(e_rep):
+            raise_on_coincident(flat)
+        e_spr, f_spr = spring_terms(flat, self.springs, p['Q'])
+        energy = c * e_rep + e_spr
+        forces = c * f_rep + f_spr
+        if dim == 2:
+            forces[:, 2] = 0.0
+        self.results['energy'] = self.results['free_energy'] = energy
+        self.results['forces'] = forces
+        if want_blocks:
+            blocks = c * voigt_to_blocks(block6, dim)
+            deg = spring_degrees(self.springs, len(flat))
+            blocks += p['Q'] * deg[:, None, None] * np.eye(dim)
+            self.results['stiffness'] = blocks
+
+    def get_stiffness(self, atoms=None):
+        """Nodal blocks ``K_mm``, shape (N, dim, dim), units of ``Q``."""
+        return self.get_property('stiffness', atoms)
+
+    def get_hessian(self, atoms=None):
+        """The full analytic Hessian ``d2E/dr dr``, shape (dim N, dim N).
+
+        For analysis of small scenes only; refuses more than
+        :attr:`max_hessian_atoms` atoms with a ValueError.
+        """
+        atoms = atoms if atoms is not None else self.atoms
+        if len(atoms) > self.max_hessian_atoms:
+            raise ValueError(
+                f'get_hessian: {len(atoms)} atoms exceed max_hessian_atoms = '
+                f'{self.max_hessian_atoms} (the dense matrix would hold '
+                f'{(self.parameters["dim"] * len(atoms))**2:.2e} entries); use'
+                ' Hessian-vector products (ase_maud.hessian) instead')
+        positions = self.check_atoms(atoms)
+        p = self.parameters
+        return dense_hessian(positions, self.springs, p['a'], p['Q'], p['dim'])
+
+
+def raise_on_coincident(positions):
+    """Raise ValueError naming two points at the same position."""
+    order = np.lexsort(positions.T[::-1])
+    same = np.all(positions[order[1:]] == positions[order[:-1]], axis=1)
+    if np.any(same):
+        k = int(np.argmax(same))
+        i, j = sorted((int(order[k]), int(order[k + 1])))
+        raise ValueError(f'atoms {i} and {j} are at the same position '
+                         f'{positions[i].tolist()}: the repulsion a^3 Q / L '
+                         'is infinite there')
+    raise FloatingPointError('the repulsion overflowed: points closer than '
+                             'the float64 range allows')

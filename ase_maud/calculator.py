@@ -11,6 +11,8 @@ nodal blocks ``K_mm = d2E/dr_m2`` (N, dim, dim), the Hessian's diagonal blocks:
 the stiffness at point m with every other point held fixed.
 """
 
+from numbers import Integral, Real
+
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
@@ -50,8 +52,10 @@ class MaudCalculator(Calculator):
     """
 
     implemented_properties = ['energy', 'free_energy', 'forces', 'stiffness']
-    default_parameters = {'springs': np.zeros((0, 2), dtype=int), 'a': 1.0,
-                          'Q': 1.0, 'dim': 3, 'backend': 'numba'}
+    # springs default to a tuple: Calculator.todict compares each parameter
+    # with its default by ``!=``, which fails on an ndarray default.
+    default_parameters = {'springs': (), 'a': 1.0, 'Q': 1.0, 'dim': 3,
+                          'backend': 'numba'}
     discard_results_on_any_change = True
     nolabel = True
 
@@ -61,29 +65,15 @@ class MaudCalculator(Calculator):
 
     def __init__(self, springs=(), a=1.0, Q=1.0, dim=3, backend='numba',
                  **kwargs):
-        super().__init__(springs=check_springs(springs), a=a, Q=Q, dim=dim,
-                         backend=backend, **kwargs)
-        self._check_parameters()
+        super().__init__(springs=springs, a=a, Q=Q, dim=dim, backend=backend,
+                         **kwargs)
 
     def set(self, **kwargs):
+        """Set parameters; invalid values raise ValueError and are not kept."""
         if 'springs' in kwargs:
             kwargs['springs'] = check_springs(kwargs['springs'])
-        changed = super().set(**kwargs)
-        self._check_parameters()
-        return changed
-
-    def _check_parameters(self):
-        p = self.parameters
-        for name in ('a', 'Q'):
-            value = p[name]
-            if not (np.isscalar(value) and np.isfinite(value) and value > 0):
-                raise ValueError(f'{name} must be a positive finite number, '
-                                 f'got {value!r}')
-        if p['dim'] not in (2, 3):
-            raise ValueError(f"dim must be 2 or 3, got {p['dim']!r}")
-        if p['backend'] not in _BACKENDS:
-            raise ValueError(f"backend must be one of {sorted(_BACKENDS)}, "
-                             f"got {p['backend']!r}")
+        _check_parameters({**self.parameters, **kwargs})
+        return super().set(**kwargs)
 
     @property
     def springs(self):
@@ -115,8 +105,8 @@ class MaudCalculator(Calculator):
             if off.max() > PLANE_TOLERANCE * extent:
                 k = int(np.argmax(off))
                 raise ValueError(f'dim=2 needs every point on one plane z = '
-                                 f'const: atom {k} has z = {z[k]!r}, atom 0 '
-                                 f'has z = {z[0]!r}')
+                                 f'const: atom {k} has z = {z[k]}, atom 0 '
+                                 f'has z = {z[0]}')
         return positions
 
     def calculate(self, atoms=None, properties=('energy',),
@@ -165,6 +155,21 @@ class MaudCalculator(Calculator):
         positions = self.check_atoms(atoms)
         p = self.parameters
         return dense_hessian(positions, self.springs, p['a'], p['Q'], p['dim'])
+
+
+def _check_parameters(p):
+    """Raise ValueError unless a, Q, dim and backend in ``p`` are valid."""
+    for name in ('a', 'Q'):
+        value = p[name]
+        if not (isinstance(value, Real) and np.isfinite(value)
+                and value > 0):
+            raise ValueError(f'{name} must be a positive finite number, '
+                             f'got {value!r}')
+    if not (isinstance(p['dim'], Integral) and p['dim'] in (2, 3)):
+        raise ValueError(f"dim must be 2 or 3, got {p['dim']!r}")
+    if p['backend'] not in _BACKENDS:
+        raise ValueError(f"backend must be one of {sorted(_BACKENDS)}, "
+                         f"got {p['backend']!r}")
 
 
 def raise_on_coincident(positions):

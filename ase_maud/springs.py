@@ -17,8 +17,14 @@ def check_springs(springs, natoms=None):
     if raw.ndim != 2 or raw.shape[1] != 2:
         raise ValueError(f'springs must have shape (K, 2), got {raw.shape}')
     if not np.issubdtype(raw.dtype, np.integer):
-        if not np.issubdtype(raw.dtype, np.number) or np.any(raw != np.round(raw)):
-            raise ValueError('springs must hold integer atom indices')
+        if not np.issubdtype(raw.dtype, np.number):
+            raise ValueError(f'springs must hold integer atom indices, got '
+                             f'dtype {raw.dtype}')
+        bad = ~np.isfinite(raw) | (raw != np.round(raw))
+        if bad.any():
+            k = int(np.flatnonzero(bad.any(axis=1))[0])
+            raise ValueError(f'spring {k} {raw[k].tolist()} is not a pair of '
+                             'integer atom indices')
     pairs = raw.astype(int)
     for k, (i, j) in enumerate(pairs):
         if i < 0 or j < 0:

@@ -1,0 +1,264 @@
+"""Maud: nodal-Newton dynamic relaxation (the tensor and scalar Maud steps).
+
+Each point m moves by its own out-of-balance force divided by its own
+stiffness, every other point held fixed (the specification's step, with ASE's
+force sign ``f = -dE/dr``)::
+
+    tensor:  dr_m = gamma * K_mm^-1 f_m
+    scalar:  dr_m = gamma * f_m / Tr(K_mm)
+
+and, after Day's dynamic relaxation, the previous move is carried over with a
+damping weight: ``v <- beta * v + dr; r <- r + v``. The rules that make this a
+robust optimiser (chosen on the scene suite, see docs/optimizer.md):
+
+- ``target='minimum'``: each block is replaced by its absolute value
+  ``V |Lambda| V^T`` (eigenvalues floored at ``floor * max|lambda|``), so no
+  point steps uphill along a negative principal direction and a singular block
+  (a point with no spring in 3D has ``Tr K_mm = 0``) stays invertible.
+  ``target='stationary'`` keeps the signs: the plain Newton-like step of the
+  specification, which can converge on saddles and maxima.
+- Kinetic-damping restarts: the carried velocity is dropped when it points
+  against the force (``v . f < 0``), as in FIRE and Barnes's form finding.
+- A step that raises the merit (the energy for ``'minimum'``, ``|f|**2`` for
+  ``'stationary'``) is taken back at no extra force call: the optimiser returns
+  to the previous point, whose forces it kept, halves gamma and restarts.
+  Gamma grows by ``gamma_growth`` after each accepted step, up to ``gamma_max``.
+- The momentum weight grows with the steps since the last restart,
+  ``beta_k = min(k / (k + 3), beta_max)`` (Nesterov's schedule).
+- No point moves further in one step than ``maxstep_nn`` times its distance to
+  its nearest other point (nor than ``maxstep`` if given).
+"""
+
+import numpy as np
+from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
+from scipy.spatial import cKDTree
+
+_METHODS = ('tensor', 'scalar')
+_TARGETS = ('minimum', 'stationary')
+
+
+class Maud(Optimizer):
+    """The Maud optimiser; see the module docstring for the step rules.
+
+    Parameters
+    ----------
+    atoms : Atoms (or anything with ``__ase_optimizable__``)
+        The system to relax. Its calculator should offer the ``stiffness``
+        property (as :class:`ase_maud.MaudCalculator` does); otherwise the
+        nodal blocks are estimated as ``kappa I`` with ``kappa`` the secant
+        (Barzilai-Borwein) curvature ``s.y / s.s`` of the last step, starting
+        from ``kappa0``, and the log says so once.
+    method : 'tensor' (default) or 'scalar'
+        ``K_mm^-1 f_m`` or ``f_m / Tr K_mm``.
+    target : 'minimum' (default) or 'stationary'
+        Move only downhill, or seek any stationary point (see above).
+    gamma : float
+        Initial step factor (default 1: the full nodal Newton step).
+    gamma_max : float
+        Largest step factor gamma may grow to (default 1).
+    gamma_growth : float
+        Factor gamma grows by after each accepted step (default 1.1).
+    beta_max : float
+        Largest momentum weight (default 0.98).
+    floor : float
+        Relative eigenvalue floor of a nodal block (default 1e-2).
+    maxstep_nn : float
+        Largest move of a point in one step, as a fraction of its distance to
+        its nearest other point (default 0.5).
+    maxstep : float or None
+        Largest move of a point in one step, in length units (default None:
+        only ``maxstep_nn`` applies).
+    kappa0 : float
+        Initial stiffness estimate when the calculator has no ``stiffness``
+        (default 70, ASE's BFGS initial Hessian in eV/A**2).
+    restart, logfile, trajectory, append_trajectory, **kwargs
+        As for every ASE optimizer.
+    """
+
+    def __init__(self, atoms, restart=None, logfile='-', trajectory=None,
+                 append_trajectory=False, method='tensor', target='minimum',
+                 gamma=1.0, gamma_max=1.0, gamma_growth=1.1, beta_max=0.98,
+                 floor=1e-2, maxstep_nn=0.5, maxstep=None, kappa0=70.0,
+                 power_shrink=1.0, **kwargs):
+        self.power_shrink = power_shrink
+        if method not in _METHODS:
+            raise ValueError(f'method must be one of {_METHODS}, got {method!r}')
+        if target not in _TARGETS:
+            raise ValueError(f'target must be one of {_TARGETS}, got {target!r}')
+        for name, value in (('gamma', gamma), ('gamma_max', gamma_max),
+                            ('floor', floor), ('maxstep_nn', maxstep_nn),
+                            ('kappa0', kappa0)):
+            if not value > 0:
+                raise ValueError(f'{name} must be positive, got {value!r}')
+        if not 0 <= beta_max < 1:
+            raise ValueError(f'beta_max must be in [0, 1), got {beta_max!r}')
+        if gamma_growth < 1:
+            raise ValueError(f'gamma_growth must be >= 1, got {gamma_growth!r}')
+        self.method = method
+        self.target = target
+        self.gamma0 = gamma
+        self.gamma_max = gamma_max
+        self.gamma_growth = gamma_growth
+        self.beta_max = beta_max
+        self.floor = floor
+        self.maxstep_nn = maxstep_nn
+        self.maxstep = maxstep
+        self.kappa0 = kappa0
+        super().__init__(atoms, restart, logfile, trajectory,
+                         append_trajectory=append_trajectory, **kwargs)
+        self._said_estimate = False
+
+    def todict(self):
+        d = super().todict()
+        d.update(method=self.method, target=self.target, gamma=self.gamma0,
+                 gamma_max=self.gamma_max, gamma_growth=self.gamma_growth,
+                 beta_max=self.beta_max, floor=self.floor,
+                 maxstep_nn=self.maxstep_nn)
+        return d
+
+    def initialize(self):
+        self.v = None           # last move, (N, 3)
+        self.gamma = self.gamma0
+        self.k = 0              # accepted steps since the last restart
+        self.kappa = self.kappa0
+        self.last = None        # x, merit, forces, blocks where the last step began
+
+    def read(self):
+        state = self.load()
+        self.initialize()
+        self.gamma, self.k, self.kappa = state['gamma'], state['k'], state['kappa']
+        if state['v'] is not None:
+            self.v = np.asarray(state['v'], dtype=float)
+        if state['last'] is not None:
+            self.last = {key: value if key == 'merit' or value is None
+                         else np.asarray(value, dtype=float)
+                         for key, value in state['last'].items()}
+
+    def _dump_state(self):
+        self.dump({'gamma': self.gamma, 'k': self.k, 'kappa': self.kappa,
+                   'v': self.v,
+                   'last': self.last})
+
+    # -- the pieces of a step -------------------------------------------------
+
+    def _atoms(self):
+        """The Atoms behind the optimizable, or None (a filter, say)."""
+        return getattr(self.optimizable, 'atoms', None)
+
+    def _stiffness(self):
+        """Nodal blocks (N, d, d) from the calculator, or None."""
+        atoms = self._atoms()
+        calc = getattr(atoms, 'calc', None)
+        if calc is None or 'stiffness' not in calc.implemented_properties:
+            if not self._said_estimate:
+                self.logfile.write(
+                    'Maud: the calculator gives no stiffness; nodal blocks '
+                    'are estimated as kappa I (secant curvature)\n')
+                self._said_estimate = True
+            return None
+        return calc.get_property('stiffness', atoms)
+
+    def _merit(self, forces):
+        if self.target == 'minimum':
+            return self.optimizable.get_value()
+        return float(np.vdot(forces, forces))
+
+    def _direction(self, forces, blocks):
+        """The Maud direction ``K_mm^-1 f_m`` (or ``f_m / Tr``) per point."""
+        if blocks is None:
+            return forces / self.kappa
+        d = blocks.shape[-1]
+        lam, vec = np.linalg.eigh(blocks)
+        size = np.abs(lam)
+        floor = self.floor * size.max(axis=1, keepdims=True)
+        floor = np.maximum(floor, np.finfo(float).tiny)
+        if self.target == 'minimum':
+            lam = np.maximum(size, floor)
+        else:
+            lam = np.where(lam < 0, -1.0, 1.0) * np.maximum(size, floor)
+        step = np.zeros_like(forces)
+        f = forces[:, :d]
+        if self.method == 'tensor':
+            proj = np.einsum('nij,ni->nj', vec, f) / lam
+            step[:, :d] = np.einsum('nij,nj->ni', vec, proj)
+        else:
+            step[:, :d] = f / lam.sum(axis=1, keepdims=True)
+        return step
+
+    def _bound(self, step, x):
+        """Scale each point's move down to its allowed length."""
+        length = np.linalg.norm(step, axis=1)
+        limit = np.full(len(x), np.inf)
+        if len(x) > 1:
+            nn = cKDTree(x).query(x, k=2)[0][:, 1]
+            limit = self.maxstep_nn * nn
+        if self.maxstep is not None:
+            limit = np.minimum(limit, self.maxstep)
+        scale = np.minimum(1.0, limit / np.maximum(length, np.finfo(float).tiny))
+        return step * scale[:, None]
+
+    def step(self):
+        opt = self.optimizable
+        x = opt.get_x().reshape(-1, 3)
+        forces = -opt.get_gradient().reshape(-1, 3)
+        blocks = self._stiffness()
+        merit = self._merit(forces)
+
+        last = self.last
+        if last is not None and merit > last['merit'] + _merit_tol(last['merit']):
+            # Uphill: go back to where the last step began, gently.
+            x, merit = last['x'], last['merit']
+            forces, blocks = last['forces'], last['blocks']
+            self.gamma *= 0.5
+            self.v = None
+            self.k = 0
+        else:
+            if last is not None:
+                if blocks is None:
+                    self._update_kappa(x, forces)
+                self.gamma = min(self.gamma * self.gamma_growth, self.gamma_max)
+            if self.v is not None and np.vdot(self.v, forces) < 0:
+                # Overshoot: kinetic-damping restart, and a smaller gamma.
+                if self.power_shrink == 'secant':
+                    f0 = last['forces']
+                    t = np.vdot(self.v, f0) / np.vdot(self.v, f0 - forces)
+                    self.gamma *= min(max(t, 0.2), 0.9)
+                else:
+                    self.gamma *= self.power_shrink
+                self.v = None
+                self.k = 0
+        direction = self.gamma * self._direction(forces, blocks)
+        if self.v is not None:
+            beta = min(self.k / (self.k + 3.0), self.beta_max)
+            direction = direction + beta * self.v
+        self.k += 1
+        move = self._bound(direction, x)
+        self.last = {'x': x.copy(), 'merit': merit, 'forces': forces.copy(),
+                     'blocks': blocks}
+        opt.set_x((x + move).ravel())
+        self.v = opt.get_x().reshape(-1, 3) - x   # the move constraints allowed
+        self._dump_state()
+        self._stiffness()   # blocks, energy and forces in one calculator call
+
+    # Both first ask for the blocks, so that the calculator computes them
+    # together with the first forces, in one call.
+    def irun(self, fmax=0.05, steps=DEFAULT_MAX_STEPS):
+        self._stiffness()
+        return super().irun(fmax, steps)
+
+    def run(self, fmax=0.05, steps=DEFAULT_MAX_STEPS):
+        self._stiffness()
+        return super().run(fmax, steps)
+
+    def _update_kappa(self, x, forces):
+        """Secant curvature of the last step, for calculators with no blocks."""
+        s = (x - self.last['x']).ravel()
+        y = (self.last['forces'] - forces).ravel()
+        sy, ss = np.vdot(s, y), np.vdot(s, s)
+        if sy > 0 and ss > 0:
+            self.kappa = sy / ss
+
+
+def _merit_tol(merit):
+    """Rounding slack when comparing merits (energies sum N**2 terms)."""
+    return 1e-12 * max(abs(merit), 1e-300)

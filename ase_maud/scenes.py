@@ -1,0 +1,244 @@
+"""Scenes for the Maud potential: seeded starts with their springs and fixings.
+
+Every builder is ``builder(size=<default>, seed=0, a=1.0, Q=1.0)`` and returns
+an :class:`ase.Atoms` (``pbc=False``, no cell) with a :class:`MaudCalculator`
+attached and the scene's fixed points held by
+:class:`ase.constraints.FixAtoms`. Positions are drawn in units of ``a`` from
+``numpy.random.default_rng(seed)`` and multiplied by ``a`` last, so one seed
+gives the same shape at every ``a``. Starts are near the scale of the
+equilibrium but not at it, and no two points start closer than
+:data:`MIN_DISTANCE` ``a``.
+"""
+
+import numpy as np
+from ase import Atoms
+from ase.build import molecule as g2_molecule
+from ase.constraints import FixAtoms
+from ase.neighborlist import NeighborList, natural_cutoffs
+from scipy.spatial import cKDTree
+
+from .calculator import MaudCalculator
+
+#: Closest start of two points, in units of ``a``.
+MIN_DISTANCE = 0.2
+
+
+def _scene(positions, springs, a, Q, dim=3, fixed=(), symbols=None):
+    """Atoms at ``a * positions`` with the calculator and fixed indices set."""
+    atoms = Atoms(symbols, positions=a * np.asarray(positions), pbc=False)
+    atoms.calc = MaudCalculator(springs, a=a, Q=Q, dim=dim)
+    if len(fixed):
+        atoms.set_constraint(FixAtoms(indices=fixed))
+    return atoms
+
+
+def _count(size, least, scene):
+    """``size`` as an int, or ValueError if it is below ``least``."""
+    if int(size) != size or size < least:
+        raise ValueError(f'{scene} needs an integer size >= {least}, '
+                         f'got {size!r}')
+    return int(size)
+
+
+def _path(n):
+    """Springs (i, i+1) along n points."""
+    return np.column_stack([np.arange(n - 1), np.arange(1, n)])
+
+
+def _grid(n):
+    """Unit n x n grid centred on the origin at z = 0.
+
+    Returns positions (n*n, 3), the springs between grid neighbours and a
+    boolean mask of the boundary points.
+    """
+    c = np.arange(n) - (n - 1) / 2
+    x, y = np.meshgrid(c, c, indexing='ij')
+    positions = np.column_stack([x.ravel(), y.ravel(), np.zeros(n * n)])
+    idx = np.arange(n * n).reshape(n, n)
+    springs = np.concatenate([
+        np.column_stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()]),
+        np.column_stack([idx[:-1].ravel(), idx[1:].ravel()])])
+    edge = np.zeros((n, n), dtype=bool)
+    edge[[0, -1], :] = edge[:, [0, -1]] = True
+    return positions, springs, edge.ravel()
+
+
+def _ball(rng, n):
+    """n points uniform in the ball of one point per unit volume, redrawing
+    any point closer than MIN_DISTANCE to an earlier one."""
+    radius = (3 * n / (4 * np.pi)) ** (1 / 3)
+
+    def draw(m):
+        v = rng.normal(size=(m, 3))
+        r = radius * rng.uniform(size=(m, 1)) ** (1 / 3)
+        return r * v / np.linalg.norm(v, axis=1, keepdims=True)
+
+    positions = draw(n)
+    while True:
+        pairs = cKDTree(positions).query_pairs(MIN_DISTANCE,
+                                               output_type='ndarray')
+        if not len(pairs):
+            return positions
+        close = np.unique(pairs[:, 1])
+        positions[close] = draw(len(close))
+
+
+def dimer(size=2, seed=0, a=1.0, Q=1.0):
+    """Two points tied by one spring: equilibrium length ``a``.
+
+    ``size`` is ignored. Starts at a random orientation and a length between
+    1.2 a and 2 a. Nothing fixed.
+    """
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=3)
+    d *= rng.uniform(1.2, 2.0) / np.linalg.norm(d)
+    return _scene([-d / 2, d / 2], [(0, 1)], a, Q)
+
+
+def ring(size=24, seed=0, a=1.0, Q=1.0):
+    """``size`` points on a plane (dim=2), each sprung to its two neighbours.
+
+    Starts on the circle of the equilibrium radius (design.md, about
+    size a / 4) with each coordinate moved in-plane by up to a fifth of the
+    spacing. Nothing fixed.
+    """
+    n = _count(size, 3, 'ring')
+    rng = np.random.default_rng(seed)
+    s = np.sin(np.pi * np.arange(1, n) / n)
+    radius = (np.sum(1 / s) / (16 * s[0]**2)) ** (1 / 3)
+    phi = 2 * np.pi * np.arange(n) / n
+    xy = radius * np.column_stack([np.cos(phi), np.sin(phi)])
+    xy += rng.uniform(-0.2, 0.2, (n, 2)) * 2 * radius * s[0]
+    springs = np.concatenate([_path(n), [(n - 1, 0)]])
+    return _scene(np.column_stack([xy, np.zeros(n)]), springs, a, Q, dim=2)
+
+
+def chain(size=30, seed=0, a=1.0, Q=1.0):
+    """``size`` points in 3D sprung in a line, the ends fixed size a / 3 apart.
+
+    Interior points start on the straight line, evenly spaced, then moved
+    off it by up to 0.3 a in y and z; the repulsion buckles the chain.
+    """
+    n = _count(size, 3, 'chain')
+    rng = np.random.default_rng(seed)
+    positions = np.zeros((n, 3))
+    positions[:, 0] = np.linspace(0, n / 3, n)
+    positions[1:-1, 1:] = rng.uniform(-0.3, 0.3, (n - 2, 2))
+    return _scene(positions, _path(n), a, Q, fixed=[0, n - 1])
+
+
+def net2d(size=8, seed=0, a=1.0, Q=1.0):
+    """A size x size square net of spacing a on a plane (dim=2).
+
+    Springs tie grid neighbours; the boundary points are fixed and the
+    interior starts moved in-plane by up to 0.3 a per coordinate.
+    """
+    n = _count(size, 3, 'net2d')
+    rng = np.random.default_rng(seed)
+    positions, springs, edge = _grid(n)
+    positions[~edge, :2] += rng.uniform(-0.3, 0.3, ((n - 2)**2, 2))
+    return _scene(positions, springs, a, Q, dim=2, fixed=np.flatnonzero(edge))
+
+
+def net3d(size=6, seed=0, a=1.0, Q=1.0):
+    """A free size x size square net in 3D, springs between grid neighbours.
+
+    Starts flat at spacing a with every coordinate moved by up to 0.25 a.
+    Nothing fixed: the springs hold the net together.
+    """
+    n = _count(size, 2, 'net3d')
+    rng = np.random.default_rng(seed)
+    positions, springs, _ = _grid(n)
+    positions += rng.uniform(-0.25, 0.25, positions.shape)
+    return _scene(positions, springs, a, Q)
+
+
+def hanging_net(size=8, seed=0, a=1.0, Q=1.0):
+    """Form finding: a size x size net in 3D with its boundary on a saddle.
+
+    Boundary points sit at spacing a on the hyperbolic paraboloid
+    z = h (x**2 - y**2), h = 1 / (size a), so edge midpoints are about
+    size a / 4 off the plane; they are fixed. Springs tie grid neighbours;
+    the interior starts flat, each coordinate moved by up to 0.3 a.
+    """
+    n = _count(size, 3, 'hanging_net')
+    rng = np.random.default_rng(seed)
+    positions, springs, edge = _grid(n)
+    x, y = positions[edge, 0], positions[edge, 1]
+    positions[edge, 2] = (x**2 - y**2) / n
+    positions[~edge] += rng.uniform(-0.3, 0.3, ((n - 2)**2, 3))
+    return _scene(positions, springs, a, Q, fixed=np.flatnonzero(edge))
+
+
+def random_graph(size=30, seed=0, a=1.0, Q=1.0):
+    """``size`` points in 3D on a random connected spring graph.
+
+    A random spanning tree (each point, in random order, tied to a random
+    earlier one) plus random extra springs, about 1.5 size springs in all.
+    Starts uniform in a ball of one point per a**3. Nothing fixed.
+    """
+    n = _count(size, 2, 'random_graph')
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(n)
+    parent = order[rng.integers(0, np.arange(1, n))]
+    springs = {(min(i, j), max(i, j)) for i, j in zip(order[1:].tolist(),
+                                                      parent.tolist())}
+    while len(springs) < min(round(1.5 * n), n * (n - 1) // 2):
+        i, j = sorted(rng.choice(n, 2, replace=False).tolist())
+        springs.add((i, j))
+    return _scene(_ball(rng, n), sorted(springs), a, Q)
+
+
+def all_pairs(size=10, seed=0, a=1.0, Q=1.0):
+    """A cluster of ``size`` points in 3D with every pair sprung.
+
+    Starts uniform in a ball of one point per a**3. Nothing fixed.
+    """
+    n = _count(size, 2, 'all_pairs')
+    rng = np.random.default_rng(seed)
+    springs = np.column_stack(np.triu_indices(n, 1))
+    return _scene(_ball(rng, n), springs, a, Q)
+
+
+def molecule(size='C6H6', seed=0, a=1.0, Q=1.0):
+    """The bond graph of a molecule from ``ase.build.molecule``.
+
+    ``size`` is the molecule's name (any of ``ase.collections.g2`` with two
+    atoms or more). Bonds are ASE's: ``NeighborList`` on ``natural_cutoffs``.
+    Positions are scaled so that the mean bond length is a, then each
+    coordinate is moved by up to 0.1 a. Nothing fixed.
+    """
+    mol = g2_molecule(size)
+    if len(mol) < 2:
+        raise ValueError(f'molecule {size!r} has a single atom: no springs')
+    rng = np.random.default_rng(seed)
+    nl = NeighborList(natural_cutoffs(mol), self_interaction=False,
+                      bothways=False)
+    nl.update(mol)
+    bonds = nl.get_connectivity_matrix().tocoo()
+    springs = np.column_stack([bonds.row, bonds.col])
+    positions = mol.positions
+    bond = positions[bonds.row] - positions[bonds.col]
+    positions = positions / np.linalg.norm(bond, axis=1).mean()
+    positions += rng.uniform(-0.1, 0.1, positions.shape)
+    return _scene(positions, springs, a, Q, symbols=mol.symbols)
+
+
+SCENES = {f.__name__: f for f in (dimer, ring, chain, net2d, net3d,
+                                  hanging_net, random_graph, all_pairs,
+                                  molecule)}
+
+#: Small scenes (under 60 points each) for the optimiser tests and benchmark.
+SUITE = [('dimer', 2), ('ring', 16), ('chain', 20), ('net2d', 6),
+         ('net3d', 5), ('hanging_net', 6), ('random_graph', 24),
+         ('all_pairs', 8), ('molecule', 'C6H6')]
+
+
+def build(name, size=None, seed=0, **kwargs):
+    """Build scene ``name`` (a key of :data:`SCENES`); ``size=None`` takes
+    the builder's default. Other keywords (``a``, ``Q``) go to the builder."""
+    if name not in SCENES:
+        raise ValueError(f'unknown scene {name!r}; known: {", ".join(SCENES)}')
+    if size is not None:
+        kwargs['size'] = size
+    return SCENES[name](seed=seed, **kwargs)

@@ -1,0 +1,327 @@
+"""MaudCalculator: derivatives, analytic cases, 2D/3D blocks, ASE behaviour."""
+
+import itertools
+
+import numpy as np
+import pytest
+from ase import Atoms
+from ase.calculators.fd import calculate_numerical_forces
+from ase.io import read, write
+from scipy.spatial.distance import pdist, squareform
+
+from ase_maud.calculator import MaudCalculator
+
+SHAPES = ['chain', 'ring', 'star', 'tree', 'all_pairs']
+#: Central-difference step, in units of the point spacing (1 here). It leaves
+#: relative errors of at most 4e-10 on these scenes (4e-8 at 1e-4, where the
+#: h**2 truncation dominates; 3e-9 at 1e-6, where rounding does).
+STEP = 1e-5
+FD_RTOL = 1e-8
+
+
+def make_springs(shape, n, rng):
+    """(K, 2) sprung pairs of a graph on ``n`` points."""
+    idx = np.arange(n)
+    if shape == 'chain':
+        return np.c_[idx[:-1], idx[1:]]
+    if shape == 'ring':
+        return np.c_[idx, np.roll(idx, -1)]
+    if shape == 'star':
+        return np.c_[np.zeros(n - 1, dtype=int), idx[1:]]
+    if shape == 'tree':
+        label = rng.permutation(n)
+        parent = [rng.integers(k) for k in range(1, n)]
+        return np.c_[label[parent], label[1:]]
+    if shape == 'all_pairs':
+        return np.array(list(itertools.combinations(idx, 2)))
+    raise ValueError(shape)
+
+
+@pytest.fixture
+def scene(random_points):
+    """Factory: ``n`` random points, springs of ``shape``, a calculator."""
+    def build(shape='tree', n=9, dim=3, seed=0, **kwargs):
+        rng = np.random.default_rng(seed)
+        kwargs = {'a': 1.3, 'Q': 0.7, 'dim': dim, **kwargs}
+        calc = MaudCalculator(springs=make_springs(shape, n, rng), **kwargs)
+        return Atoms(f'H{n}', random_points(n, dim, seed), calculator=calc)
+    return build
+
+
+def rel_err(actual, expected):
+    """Largest deviation relative to the largest entry of ``expected``."""
+    return np.abs(actual - expected).max() / np.abs(expected).max()
+
+
+def fd_hessian(atoms, dim, h=STEP):
+    """Central differences of minus the forces, shape (dim N, dim N)."""
+    p0 = atoms.get_positions()
+    columns = []
+    for i, k in itertools.product(range(len(atoms)), range(dim)):
+        forces = []
+        for step in (h, -h):
+            p = p0.copy()
+            p[i, k] += step
+            atoms.positions = p
+            forces.append(atoms.get_forces()[:, :dim].ravel())
+        columns.append((forces[1] - forces[0]) / (2 * h))
+    atoms.positions = p0
+    return np.array(columns).T
+
+
+def block_diagonal(hessian, dim):
+    """The (N, dim, dim) diagonal blocks of a (dim N, dim N) matrix."""
+    n = len(hessian) // dim
+    return hessian.reshape(n, dim, n, dim)[np.arange(n), :, np.arange(n)]
+
+
+# -- derivatives -------------------------------------------------------------
+
+@pytest.mark.parametrize('seed', [0, 1])
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('shape', SHAPES)
+def test_forces_are_minus_energy_gradient(scene, shape, dim, seed):
+    """Forces against ASE's central differences of the energy."""
+    atoms = scene(shape, n=9, dim=dim, seed=seed)
+    forces = atoms.get_forces()
+    numerical = calculate_numerical_forces(atoms, eps=STEP,
+                                           icarts=range(dim))
+    err = rel_err(forces[:, :dim], numerical)
+    print(f'forces vs FD energy  {shape:9s} dim={dim} seed={seed}: {err:.1e}')
+    assert err < FD_RTOL
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('shape', SHAPES)
+def test_hessian_and_blocks_are_force_derivatives(scene, shape, dim, seed):
+    atoms = scene(shape, n=8, dim=dim, seed=seed)
+    calc = atoms.calc
+    numerical = fd_hessian(atoms, dim)
+    hessian = calc.get_hessian(atoms)
+    blocks = calc.get_stiffness(atoms)
+    err_h = rel_err(hessian, numerical)
+    err_k = rel_err(blocks, block_diagonal(numerical, dim))
+    print(f'Hessian, blocks vs FD forces {shape:9s} dim={dim} seed={seed}: '
+          f'{err_h:.1e}, {err_k:.1e}')
+    assert hessian.shape == (dim * 8, dim * 8)
+    assert blocks.shape == (8, dim, dim)
+    assert err_h < FD_RTOL and err_k < FD_RTOL
+    np.testing.assert_allclose(hessian, hessian.T, rtol=1e-14)
+    np.testing.assert_allclose(block_diagonal(hessian, dim), blocks,
+                               rtol=0, atol=1e-12 * np.abs(blocks).max())
+
+
+# -- analytic cases (design.md section 2) -------------------------------------
+
+def random_rotation(seed):
+    """A random 3x3 rotation matrix."""
+    q, r = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    q *= np.sign(np.diag(r))
+    return q * np.linalg.det(q)
+
+
+@pytest.mark.parametrize('a, Q', [(1.0, 1.0), (0.3, 2.5), (7.0, 0.1)])
+def test_dimer_equilibrium(a, Q):
+    """One spring: zero forces at L = a, E = c/a + Q a**2/2, K = 3Q n n^T."""
+    n = random_rotation(0)[0]
+    atoms = Atoms('H2', [np.ones(3), np.ones(3) + a * n],
+                  calculator=MaudCalculator(springs=[[0, 1]], a=a, Q=Q))
+    assert atoms.get_potential_energy() == pytest.approx(1.5 * Q * a**2,
+                                                         rel=1e-14)
+    np.testing.assert_allclose(atoms.get_forces(), 0, atol=1e-14 * Q * a)
+    expected = 3 * Q * np.outer(n, n)
+    np.testing.assert_allclose(atoms.calc.get_stiffness(atoms),
+                               [expected, expected], atol=1e-14 * Q)
+
+
+@pytest.mark.parametrize('a, Q', [(1.0, 1.0), (2.5, 0.4)])
+def test_sprung_triangle_has_sides_a(a, Q):
+    corners = a / np.sqrt(3) * np.array(
+        [[np.cos(t), np.sin(t), 0] for t in 2 * np.pi * np.arange(3) / 3])
+    atoms = Atoms('H3', corners @ random_rotation(1).T,
+                  calculator=MaudCalculator(springs=[[0, 1], [1, 2], [2, 0]],
+                                            a=a, Q=Q))
+    assert np.allclose(pdist(atoms.positions), a)
+    np.testing.assert_allclose(atoms.get_forces(), 0, atol=1e-14 * Q * a)
+
+
+def ring_radius_energy(n, a, Q):
+    """Radius and energy of the sprung ring of ``n`` points in equilibrium."""
+    s = np.sum(1 / np.sin(np.pi * np.arange(1, n) / n))
+    sin2 = np.sin(np.pi / n) ** 2
+    radius = (a**3 * s / (16 * sin2)) ** (1 / 3)
+    energy = 2 * n * Q * sin2 * radius**2 + a**3 * Q * n * s / (4 * radius)
+    return radius, energy
+
+
+def test_ring_formula_values():
+    radius, energy = ring_radius_energy(50, 1.0, 1.0)
+    assert radius == pytest.approx(12.6771550, abs=5e-8)
+    assert energy == pytest.approx(190.0872603, abs=5e-8)
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('n, a, Q', [(50, 1.0, 1.0), (7, 0.5, 3.0),
+                                     (120, 2.0, 0.25)])
+def test_ring_in_equilibrium(n, a, Q, dim):
+    radius, energy = ring_radius_energy(n, a, Q)
+    t = 2 * np.pi * np.arange(n) / n
+    positions = radius * np.c_[np.cos(t), np.sin(t), np.zeros(n)]
+    ring = np.c_[np.arange(n), np.roll(np.arange(n), -1)]
+    atoms = Atoms(f'H{n}', positions + [0.5, -2.0, 3.0],
+                  calculator=MaudCalculator(springs=ring, a=a, Q=Q, dim=dim))
+    assert atoms.get_potential_energy() == pytest.approx(energy, rel=1e-12)
+    np.testing.assert_allclose(atoms.get_forces(), 0, atol=1e-12 * Q * radius)
+
+
+@pytest.mark.parametrize('scale, Q', [(1.0, 3.0), (0.01, 1.0), (40.0, 0.2)])
+def test_scaling_in_a_and_Q(scene, scale, Q):
+    """Positions scale with a: E as Q a**2, forces as Q a, blocks as Q."""
+    unit = scene('tree', n=10, seed=3, a=1.0, Q=1.0)
+    scaled = unit.copy()
+    scaled.positions *= scale
+    scaled.calc = MaudCalculator(springs=unit.calc.springs, a=scale, Q=Q)
+    assert scaled.get_potential_energy() == pytest.approx(
+        Q * scale**2 * unit.get_potential_energy(), rel=1e-13)
+    np.testing.assert_allclose(scaled.get_forces(),
+                               Q * scale * unit.get_forces(), rtol=1e-12)
+    np.testing.assert_allclose(scaled.calc.get_stiffness(scaled),
+                               Q * unit.calc.get_stiffness(unit), rtol=1e-12)
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('shape', SHAPES)
+def test_no_net_force_or_torque(scene, shape, dim, seed):
+    atoms = scene(shape, n=30, dim=dim, seed=seed)
+    forces = atoms.get_forces()
+    r = atoms.positions - atoms.positions.mean(axis=0)
+    size = np.abs(forces).sum()
+    np.testing.assert_allclose(forces.sum(axis=0), 0, atol=1e-13 * size)
+    np.testing.assert_allclose(np.cross(r, forces).sum(axis=0), 0,
+                               atol=1e-13 * size * np.abs(r).max())
+
+
+# -- 2D and 3D blocks ---------------------------------------------------------
+
+@pytest.mark.parametrize('seed', [0, 1])
+@pytest.mark.parametrize('shape', SHAPES)
+def test_blocks_2d_and_3d(scene, shape, seed):
+    """2D: z forces exactly 0, 2x2 blocks, Tr = sum c/L**3 + 2 Q deg.
+
+    3D: the repulsive part is traceless, Tr = 3 Q deg. The 2D blocks of a
+    planar scene are the xy part of its 3D blocks.
+    """
+    flat = scene(shape, n=12, dim=2, seed=seed)
+    flat.positions[:, 2] = 4.25
+    p = flat.calc.parameters
+    c, Q = p['a']**3 * p['Q'], p['Q']
+    deg = np.bincount(flat.calc.springs.ravel(), minlength=len(flat))
+    inv3 = squareform(pdist(flat.positions) ** -3.0).sum(axis=1)
+    blocks2 = flat.calc.get_stiffness(flat)
+    assert blocks2.shape == (12, 2, 2)
+    assert np.all(flat.get_forces()[:, 2] == 0.0)
+    np.testing.assert_allclose(np.trace(blocks2, axis1=1, axis2=2),
+                               c * inv3 + 2 * Q * deg, rtol=1e-12)
+
+    space = flat.copy()
+    space.calc = MaudCalculator(**{**p, 'dim': 3})
+    blocks3 = space.calc.get_stiffness(space)
+    assert blocks3.shape == (12, 3, 3)
+    scale = c * inv3.max()
+    np.testing.assert_allclose(np.trace(blocks3, axis1=1, axis2=2),
+                               3 * Q * deg, rtol=0, atol=1e-13 * scale)
+    np.testing.assert_allclose(blocks3[:, :2, :2], blocks2, rtol=0,
+                               atol=1e-13 * scale)
+    np.testing.assert_allclose(space.get_forces()[:, :2],
+                               flat.get_forces()[:, :2], rtol=1e-13)
+
+
+# -- ASE behaviour ------------------------------------------------------------
+
+def count_calculations(calc, monkeypatch):
+    """Wrap ``calc.calculate``; return the list of properties of each call."""
+    calls = []
+    calculate = calc.calculate
+
+    def counted(atoms=None, properties=('energy',), system_changes=()):
+        calls.append(list(properties))
+        return calculate(atoms, properties, system_changes)
+
+    monkeypatch.setattr(calc, 'calculate', counted)
+    return calls
+
+
+def test_results_are_cached_and_blocks_lazy(scene, monkeypatch):
+    atoms = scene()
+    calc = atoms.calc
+    calls = count_calculations(calc, monkeypatch)
+    energy = atoms.get_potential_energy()
+    assert atoms.get_potential_energy() == energy
+    forces = atoms.get_forces()
+    assert len(calls) == 1
+    assert 'stiffness' not in calc.results
+
+    blocks = calc.get_stiffness(atoms)
+    assert len(calls) == 2 and 'stiffness' in calc.results
+    calc.get_stiffness(atoms)
+    np.testing.assert_allclose(atoms.get_forces(), forces, rtol=1e-13)
+    assert len(calls) == 2
+
+    atoms.positions[3] += [0.1, 0.0, -0.05]
+    assert atoms.get_potential_energy() != energy
+    assert len(calls) == 3 and 'stiffness' not in calc.results
+    assert not np.array_equal(calc.get_stiffness(atoms), blocks)
+
+
+def test_set_discards_results(scene):
+    atoms = scene()
+    calc = atoms.calc
+    energy = atoms.get_potential_energy()
+    calc.get_stiffness(atoms)
+    calc.set(a=2.0)
+    assert calc.results == {}
+    fresh = MaudCalculator(springs=calc.springs, a=2.0, Q=0.7)
+    expected = fresh.get_potential_energy(atoms)
+    assert atoms.get_potential_energy() == pytest.approx(expected, rel=1e-14)
+    assert expected != pytest.approx(energy)
+
+
+def test_todict_and_trajectory_round_trip(scene, tmp_path):
+    atoms = scene('ring', n=7, dim=2, backend='numpy')
+    calc = atoms.calc
+    params = calc.todict()
+    np.testing.assert_array_equal(params['springs'], calc.springs)
+    assert (params['a'], params['Q'], params['dim']) == (1.3, 0.7, 2)
+    assert params['backend'] == 'numpy'
+
+    energy, forces = atoms.get_potential_energy(), atoms.get_forces()
+    write(tmp_path / 'scene.traj', atoms)
+    back = read(tmp_path / 'scene.traj')
+    assert back.calc.name == calc.name == 'maudcalculator'
+    saved = back.calc.parameters
+    np.testing.assert_array_equal(saved['springs'], calc.springs)
+    assert {k: saved[k] for k in ('a', 'Q', 'dim', 'backend')} == {
+        'a': 1.3, 'Q': 0.7, 'dim': 2, 'backend': 'numpy'}
+    assert back.get_potential_energy() == energy
+    np.testing.assert_array_equal(back.get_forces(), forces)
+    # The saved parameters rebuild the same calculator.
+    back.calc = MaudCalculator(**saved)
+    assert back.get_potential_energy() == pytest.approx(energy, rel=1e-14)
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('shape', ['chain', 'all_pairs'])
+def test_backends_agree(scene, shape, dim):
+    atoms = scene(shape, n=40, dim=dim, seed=5)
+    reference = atoms.copy()
+    reference.calc = MaudCalculator(**{**atoms.calc.parameters,
+                                       'backend': 'numpy'})
+    assert atoms.get_potential_energy() == pytest.approx(
+        reference.get_potential_energy(), rel=1e-12)
+    for got, want in [(atoms.get_forces(), reference.get_forces()),
+                      (atoms.calc.get_stiffness(atoms),
+                       reference.calc.get_stiffness(reference))]:
+        np.testing.assert_allclose(got, want, rtol=0,
+                                   atol=1e-12 * np.abs(want).max())

@@ -1,0 +1,108 @@
+"""Scenes: valid, seeded, scalable starts with a reachable minimum."""
+
+import numpy as np
+import pytest
+from ase.collections import g2
+from ase.constraints import FixAtoms
+from ase.optimize import FIRE
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial.distance import pdist
+
+from ase_maud.calculator import MaudCalculator
+from ase_maud.scenes import SCENES, SUITE, build
+
+CASES = [(name, None) for name in SCENES] + SUITE
+UNITS = [(0, 1.0, 1.0), (3, 2.5, 0.3), (11, 0.04, 7.0)]  # seed, a, Q
+
+
+def assert_held_together(atoms):
+    """One spring component, or every component holds a fixed point."""
+    n, springs = len(atoms), atoms.calc.springs
+    graph = coo_matrix((np.ones(len(springs)), springs.T), shape=(n, n))
+    count, labels = connected_components(graph, directed=False)
+    fixed = [i for c in atoms.constraints for i in c.get_indices()]
+    if fixed:
+        assert set(labels[fixed]) == set(range(count))
+    else:
+        assert count == 1
+
+
+@pytest.mark.parametrize('seed, a, Q', UNITS)
+@pytest.mark.parametrize('name, size', CASES)
+def test_start_is_valid_and_not_converged(name, size, seed, a, Q):
+    atoms = build(name, size, seed=seed, a=a, Q=Q)
+    calc = atoms.calc
+    assert isinstance(calc, MaudCalculator)
+    assert calc.parameters['a'] == a and calc.parameters['Q'] == Q
+    assert not atoms.pbc.any()
+    assert all(isinstance(c, FixAtoms) for c in atoms.constraints)
+    assert np.isfinite(atoms.get_potential_energy())
+    forces = atoms.get_forces()
+    assert np.isfinite(forces).all()
+    assert np.linalg.norm(forces, axis=1).max() > 1e-3 * Q * a
+    assert pdist(atoms.positions).min() > 0.05 * a
+    if calc.parameters['dim'] == 2:
+        assert np.all(atoms.positions[:, 2] == atoms.positions[0, 2])
+    assert_held_together(atoms)
+
+
+@pytest.mark.parametrize('name, size', CASES)
+def test_seed_fixes_start_and_a_scales_it(name, size):
+    positions = build(name, size, seed=5).positions
+    assert np.array_equal(build(name, size, seed=5).positions, positions)
+    assert not np.allclose(build(name, size, seed=6).positions, positions)
+    scaled = build(name, size, seed=5, a=3.7, Q=0.2).positions
+    np.testing.assert_allclose(scaled, 3.7 * positions, rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize('name', [n for n in g2.names if len(g2[n]) > 1])
+def test_every_g2_molecule_is_one_bond_graph(name):
+    atoms = build('molecule', name, seed=2)
+    assert atoms.get_chemical_formula() == g2[name].get_chemical_formula()
+    assert pdist(atoms.positions).min() > 0.05
+    assert_held_together(atoms)
+
+
+def test_scenes_are_what_they_say():
+    a = 2.0
+    chain = build('chain', 30, a=a)
+    assert list(chain.constraints[0].get_indices()) == [0, 29]
+    assert np.isclose(chain.get_distance(0, 29), 10 * a)
+    ring = build('ring', 50, a=a)  # equilibrium radius 12.677155 a
+    radii = np.linalg.norm(ring.positions - ring.positions.mean(0), axis=1)
+    assert abs(radii.mean() / (12.677155 * a) - 1) < 0.05
+    net = build('hanging_net', 8, a=a)
+    edge = net.constraints[0].get_indices()
+    x, y, z = net.positions[edge].T
+    assert len(edge) == 28 and np.ptp(z) > 2 * a
+    np.testing.assert_allclose(z, (x**2 - y**2) / (8 * a), atol=1e-12)
+    assert len(build('net2d', 8).constraints[0].get_indices()) == 28
+    assert len(build('random_graph', 30).calc.springs) == 45
+    assert len(build('all_pairs', 10).calc.springs) == 45
+    mol = build('molecule', 'C6H6', a=a)
+    i, j = mol.calc.springs.T
+    bonds = np.linalg.norm(mol.positions[i] - mol.positions[j], axis=1)
+    assert len(bonds) == 12 and abs(bonds.mean() / a - 1) < 0.1
+
+
+def test_build_names_sizes_and_errors():
+    assert len(build('ring')) == 24 and len(build('net2d')) == 64
+    assert len(build('molecule', 'CH4')) == 5
+    with pytest.raises(ValueError, match='ring, chain'):
+        build('torus')
+    with pytest.raises(ValueError, match='size >= 3'):
+        build('chain', 2)
+    with pytest.raises(ValueError, match='single atom'):
+        build('molecule', 'H')
+    assert {name for name, _ in SUITE} == set(SCENES)
+    assert all(len(build(name, size)) < 60 for name, size in SUITE)
+
+
+@pytest.mark.parametrize('name, size', SUITE)
+def test_fire_reaches_a_minimum(name, size):
+    atoms = build(name, size)
+    opt = FIRE(atoms, logfile=None)
+    assert opt.run(fmax=1e-4, steps=5000), f'{name}: {opt.nsteps} steps'
+    assert np.linalg.norm(atoms.get_forces(), axis=1).max() < 1e-4
+    print(f'FIRE {name} {size}: {opt.nsteps} steps')

@@ -18,7 +18,11 @@ robust optimiser (chosen on the scene suite, see docs/optimizer.md):
   ``target='stationary'`` keeps the signs: the plain Newton-like step of the
   specification, which can converge on saddles and maxima.
 - Kinetic-damping restarts: the carried velocity is dropped when it points
-  against the force (``v . f < 0``), as in FIRE and Barnes's form finding.
+  against the new Maud direction (``v . K^-1 f < 0``; with the absolute-value
+  blocks of ``'minimum'`` this is FIRE's and Barnes's ``v . f < 0`` measured
+  in the nodal metric),
+  and gamma shrinks by ``overshoot_shrink``: an overshoot means the step was
+  too long (the two-point problem, for one, needs gamma = 1/2).
 - A step that raises the merit (the energy for ``'minimum'``, ``|f|**2`` for
   ``'stationary'``) is taken back at no extra force call: the optimiser returns
   to the previous point, whose forces it kept, halves gamma and restarts.
@@ -58,6 +62,8 @@ class Maud(Optimizer):
         Largest step factor gamma may grow to (default 1).
     gamma_growth : float
         Factor gamma grows by after each accepted step (default 1.1).
+    overshoot_shrink : float
+        Factor gamma shrinks by at a kinetic-damping restart (default 0.8).
     beta_max : float
         Largest momentum weight (default 0.98).
     floor : float
@@ -79,8 +85,7 @@ class Maud(Optimizer):
                  append_trajectory=False, method='tensor', target='minimum',
                  gamma=1.0, gamma_max=1.0, gamma_growth=1.1, beta_max=0.98,
                  floor=1e-2, maxstep_nn=0.5, maxstep=None, kappa0=70.0,
-                 power_shrink=1.0, **kwargs):
-        self.power_shrink = power_shrink
+                 overshoot_shrink=0.8, **kwargs):
         if method not in _METHODS:
             raise ValueError(f'method must be one of {_METHODS}, got {method!r}')
         if target not in _TARGETS:
@@ -92,6 +97,9 @@ class Maud(Optimizer):
                 raise ValueError(f'{name} must be positive, got {value!r}')
         if not 0 <= beta_max < 1:
             raise ValueError(f'beta_max must be in [0, 1), got {beta_max!r}')
+        if not 0 < overshoot_shrink <= 1:
+            raise ValueError('overshoot_shrink must be in (0, 1], got '
+                             f'{overshoot_shrink!r}')
         if gamma_growth < 1:
             raise ValueError(f'gamma_growth must be >= 1, got {gamma_growth!r}')
         self.method = method
@@ -99,6 +107,7 @@ class Maud(Optimizer):
         self.gamma0 = gamma
         self.gamma_max = gamma_max
         self.gamma_growth = gamma_growth
+        self.overshoot_shrink = overshoot_shrink
         self.beta_max = beta_max
         self.floor = floor
         self.maxstep_nn = maxstep_nn
@@ -112,6 +121,7 @@ class Maud(Optimizer):
         d = super().todict()
         d.update(method=self.method, target=self.target, gamma=self.gamma0,
                  gamma_max=self.gamma_max, gamma_growth=self.gamma_growth,
+                 overshoot_shrink=self.overshoot_shrink,
                  beta_max=self.beta_max, floor=self.floor,
                  maxstep_nn=self.maxstep_nn)
         return d
@@ -168,21 +178,22 @@ class Maud(Optimizer):
         if blocks is None:
             return forces / self.kappa
         d = blocks.shape[-1]
+        tiny = np.finfo(float).tiny
+        f = forces[:, :d]
+        step = np.zeros_like(forces)
         lam, vec = np.linalg.eigh(blocks)
         size = np.abs(lam)
-        floor = self.floor * size.max(axis=1, keepdims=True)
-        floor = np.maximum(floor, np.finfo(float).tiny)
-        if self.target == 'minimum':
-            lam = np.maximum(size, floor)
-        else:
-            lam = np.where(lam < 0, -1.0, 1.0) * np.maximum(size, floor)
-        step = np.zeros_like(forces)
-        f = forces[:, :d]
-        if self.method == 'tensor':
-            proj = np.einsum('nij,ni->nj', vec, f) / lam
-            step[:, :d] = np.einsum('nij,nj->ni', vec, proj)
-        else:
-            step[:, :d] = f / lam.sum(axis=1, keepdims=True)
+        floor = np.maximum(self.floor * size.max(axis=1), tiny)
+        if self.method == 'scalar':
+            trace = size.sum(axis=1) if self.target == 'minimum' else lam.sum(axis=1)
+            trace = np.where(trace < 0, -1.0, 1.0) * np.maximum(np.abs(trace), floor)
+            step[:, :d] = f / trace[:, None]
+            return step
+        safe = np.maximum(size, floor[:, None])
+        if self.target == 'stationary':
+            safe *= np.where(lam < 0, -1.0, 1.0)
+        proj = np.einsum('nij,ni->nj', vec, f) / safe
+        step[:, :d] = np.einsum('nij,nj->ni', vec, proj)
         return step
 
     def _bound(self, step, x):
@@ -212,25 +223,20 @@ class Maud(Optimizer):
             self.gamma *= 0.5
             self.v = None
             self.k = 0
-        else:
-            if last is not None:
-                if blocks is None:
-                    self._update_kappa(x, forces)
-                self.gamma = min(self.gamma * self.gamma_growth, self.gamma_max)
-            if self.v is not None and np.vdot(self.v, forces) < 0:
-                # Overshoot: kinetic-damping restart, and a smaller gamma.
-                if self.power_shrink == 'secant':
-                    f0 = last['forces']
-                    t = np.vdot(self.v, f0) / np.vdot(self.v, f0 - forces)
-                    self.gamma *= min(max(t, 0.2), 0.9)
-                else:
-                    self.gamma *= self.power_shrink
-                self.v = None
-                self.k = 0
-        direction = self.gamma * self._direction(forces, blocks)
+        elif last is not None:
+            if blocks is None:
+                self._update_kappa(x, forces)
+            self.gamma = min(self.gamma * self.gamma_growth, self.gamma_max)
+        direction = self._direction(forces, blocks)
+        if self.v is not None and np.vdot(self.v, direction) < 0:
+            # Overshoot: kinetic-damping restart, and a smaller gamma.
+            self.gamma *= self.overshoot_shrink
+            self.v = None
+            self.k = 0
+        direction *= self.gamma
         if self.v is not None:
             beta = min(self.k / (self.k + 3.0), self.beta_max)
-            direction = direction + beta * self.v
+            direction += beta * self.v
         self.k += 1
         move = self._bound(direction, x)
         self.last = {'x': x.copy(), 'merit': merit, 'forces': forces.copy(),

@@ -15,6 +15,8 @@ from ase import Atoms
 from ase.build import molecule as g2_molecule
 from ase.constraints import FixAtoms
 from ase.neighborlist import NeighborList, natural_cutoffs
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import laplacian
 from scipy.spatial import cKDTree
 
 from .calculator import MaudCalculator
@@ -73,14 +75,19 @@ def _ball(rng, n):
         r = radius * rng.uniform(size=(m, 1)) ** (1 / 3)
         return r * v / np.linalg.norm(v, axis=1, keepdims=True)
 
-    positions = draw(n)
+    return _separated(draw(n), lambda p: draw(len(p)))
+
+
+def _separated(positions, redraw):
+    """``positions`` with every point closer than MIN_DISTANCE to an earlier
+    one replaced by ``redraw(its positions)``, until none is."""
     while True:
         pairs = cKDTree(positions).query_pairs(MIN_DISTANCE,
                                                output_type='ndarray')
         if not len(pairs):
             return positions
         close = np.unique(pairs[:, 1])
-        positions[close] = draw(len(close))
+        positions[close] = redraw(positions[close])
 
 
 def dimer(size=2, seed=0, a=1.0, Q=1.0):
@@ -175,7 +182,11 @@ def random_graph(size=30, seed=0, a=1.0, Q=1.0):
 
     A random spanning tree (each point, in random order, tied to a random
     earlier one) plus random extra springs, about 1.5 size springs in all.
-    Starts uniform in a ball of one point per a**3. Nothing fixed.
+    Starts from the graph's spectral layout (the three lowest non-trivial
+    eigenvectors of its Laplacian, scaled to a mean spring length of a), every
+    coordinate moved by up to 0.1 a (and points closer than MIN_DISTANCE
+    moved apart): untangled, so the start lies in one clear basin. Nothing
+    fixed.
     """
     n = _count(size, 2, 'random_graph')
     rng = np.random.default_rng(seed)
@@ -186,7 +197,23 @@ def random_graph(size=30, seed=0, a=1.0, Q=1.0):
     while len(springs) < min(round(1.5 * n), n * (n - 1) // 2):
         i, j = sorted(rng.choice(n, 2, replace=False).tolist())
         springs.add((i, j))
-    return _scene(_ball(rng, n), sorted(springs), a, Q)
+    springs = np.array(sorted(springs))
+    return _scene(_spectral_layout(springs, n, rng), springs, a, Q)
+
+
+def _spectral_layout(springs, n, rng):
+    """Spectral layout of a connected graph, mean edge length 1, jittered,
+    points closer than MIN_DISTANCE pushed apart at random."""
+    lap = laplacian(coo_matrix((np.ones(len(springs)), springs.T),
+                               shape=(n, n)), symmetrized=True).toarray()
+    vectors = np.linalg.eigh(lap)[1][:, 1:4]
+    positions = np.zeros((n, 3))
+    positions[:, :vectors.shape[1]] = vectors
+    edge = positions[springs[:, 0]] - positions[springs[:, 1]]
+    positions /= np.linalg.norm(edge, axis=1).mean()
+    positions += rng.uniform(-0.1, 0.1, positions.shape)
+    return _separated(positions, lambda p: p + rng.uniform(
+        -MIN_DISTANCE, MIN_DISTANCE, p.shape))
 
 
 def all_pairs(size=10, seed=0, a=1.0, Q=1.0):
@@ -224,14 +251,35 @@ def molecule(size='C6H6', seed=0, a=1.0, Q=1.0):
     return _scene(positions, springs, a, Q, symbols=mol.symbols)
 
 
+def cage(size=8, seed=0, a=1.0, Q=1.0):
+    """A known saddle: one free point inside a fixed ring, on its axis.
+
+    ``size`` fixed points on a circle of radius a in the plane z = 0, two
+    fixed anchors on the axis at z = +-2a, and a free point sprung to both
+    anchors. The centre is a stationary point of index 1 for size >= 4: stable
+    in the plane, unstable along the axis (zz stiffness
+    ``Q (2 - size + 1/2)`` at a = Q = 1); the minima lie on the axis on either
+    side. The free point starts within 0.05 a of the centre.
+    """
+    n = _count(size, 3, 'cage')
+    rng = np.random.default_rng(seed)
+    angle = 2 * np.pi * np.arange(n) / n
+    ring_points = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(n)])
+    anchors = [[0, 0, 2.0], [0, 0, -2.0]]
+    free = rng.uniform(-0.05, 0.05, (1, 3))
+    positions = np.concatenate([ring_points, anchors, free])
+    springs = [(n + 2, n), (n + 2, n + 1)]
+    return _scene(positions, springs, a, Q, fixed=np.arange(n + 2))
+
+
 SCENES = {f.__name__: f for f in (dimer, ring, chain, net2d, net3d,
                                   hanging_net, random_graph, all_pairs,
-                                  molecule)}
+                                  molecule, cage)}
 
 #: Small scenes (under 60 points each) for the optimiser tests and benchmark.
 SUITE = [('dimer', 2), ('ring', 16), ('chain', 20), ('net2d', 6),
          ('net3d', 5), ('hanging_net', 6), ('random_graph', 24),
-         ('all_pairs', 8), ('molecule', 'C6H6')]
+         ('all_pairs', 8), ('molecule', 'C6H6'), ('cage', 8)]
 
 
 def build(name, size=None, seed=0, **kwargs):

@@ -1,0 +1,230 @@
+"""Maud against independent answers: FIRE/BFGS from the same start, analytic
+minima, ASE's own optimizer tests, and the ASE machinery around an optimizer."""
+
+import numpy as np
+import pytest
+from ase import Atoms
+from ase.constraints import FixAtoms, FixCartesian
+from ase.io import read
+from ase.optimize import BFGS, FIRE
+from ase.optimize.basin import BasinHopping
+
+# ASE's own optimizer tests, run against Maud through the fixtures below.
+from ase.test.optimize.test_optimizers import (  # noqa: F401
+    fixture_atoms,
+    fixture_ref_atoms,
+    test_optimize,
+    test_path,
+    test_run_twice,
+    test_unconverged,
+)
+
+from ase_maud import Maud, MaudCalculator
+from ase_maud.scenes import SUITE, build
+
+FMAX = 1e-6
+
+
+@pytest.fixture(name='optcls')
+def fixture_optcls():
+    return Maud
+
+
+@pytest.fixture(name='kwargs')
+def fixture_kwargs():
+    return {}
+
+
+@pytest.fixture(name='testdir')
+def fixture_testdir(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def relax(atoms, opt, fmax=FMAX, steps=20000, **kwargs):
+    with opt(atoms, logfile=None, **kwargs) as dyn:
+        converged = dyn.run(fmax=fmax, steps=steps)
+    assert converged, f'{opt.__name__} did not reach fmax={fmax}'
+    return atoms
+
+
+@pytest.mark.parametrize('method', ['tensor', 'scalar'])
+@pytest.mark.parametrize('name,size', SUITE)
+def test_same_minimum_as_fire_and_bfgs(name, size, method):
+    seed = sum(map(ord, f'{name}{method}')) % 97   # a fresh seed per case
+    results = {}
+    for opt, kw in ((Maud, {'method': method}), (BFGS, {}), (FIRE, {})):
+        # fmax 1e-8: positions then sit within ~1e-7 a of the minimum even
+        # along the soft modes of a ring or a chain.
+        atoms = relax(build(name, size, seed=seed), opt, fmax=1e-8, **kw)
+        results[opt.__name__] = atoms
+    maud, bfgs, fire = (results[k] for k in ('Maud', 'BFGS', 'FIRE'))
+    agree = {name: same_minimum(maud, ref) for name, ref in
+             (('BFGS', bfgs), ('FIRE', fire))}
+    # From a start near a basin boundary BFGS and FIRE may part ways; Maud
+    # must then match one of them, and both wherever they agree.
+    if same_minimum(bfgs, fire):
+        assert all(agree.values()), agree
+    else:
+        assert any(agree.values()), agree
+
+
+def same_minimum(one, other):
+    """Equal energies (1e-8 relative) and equal sorted pair distances (1e-5 a):
+    the same shape whatever rigid motion (or the rotation of a chain about
+    its fixed ends) or relabelling of equivalent points lies between them."""
+    e, e_other = one.get_potential_energy(), other.get_potential_energy()
+    shape_gap = (np.sort(one.get_all_distances(), axis=None)
+                 - np.sort(other.get_all_distances(), axis=None))
+    return bool(abs(e - e_other) <= 1e-8 * abs(e_other)
+                and np.abs(shape_gap).max() < 1e-5 * one.calc.parameters['a'])
+
+
+@pytest.mark.parametrize('n', [12, 50])
+def test_ring_radius_is_analytic(n):
+    k = np.arange(1, n)
+    s = np.sum(1 / np.sin(np.pi * k / n))
+    radius = (s / (16 * np.sin(np.pi / n) ** 2)) ** (1 / 3)
+    atoms = relax(build('ring', n, seed=n), Maud, fmax=1e-9)
+    r = np.linalg.norm(atoms.positions - atoms.positions.mean(axis=0), axis=1)
+    assert np.allclose(r, radius, rtol=1e-8)
+    energy = 2 * n * np.sin(np.pi / n) ** 2 * radius**2 + n * s / (4 * radius)
+    assert atoms.get_potential_energy() == pytest.approx(energy, rel=1e-12)
+
+
+@pytest.mark.parametrize('seed', [3, 4])
+def test_dimer_and_triangle_are_analytic(seed):
+    rng = np.random.default_rng(seed)
+    a, q = rng.uniform(0.5, 2.0, 2)
+    for springs, n in (([(0, 1)], 2), ([(0, 1), (1, 2), (0, 2)], 3)):
+        atoms = Atoms(positions=rng.uniform(-a, a, (n, 3)))
+        atoms.calc = MaudCalculator(springs, a=a, Q=q)
+        relax(atoms, Maud, fmax=1e-10 * q * a)
+        d = atoms.get_all_distances()[np.triu_indices(n, 1)]
+        assert np.allclose(d, a, rtol=1e-9)
+
+
+def test_basin_hopping_finds_lower_minimum(tmp_path, monkeypatch):
+    # Twelve all-pairs points have (at least) two minima, E = 105.516 and
+    # 105.850; from seed 3 a local relaxation ends in the higher one.
+    monkeypatch.chdir(tmp_path)
+    atoms = build('all_pairs', 12, seed=3)
+    local = atoms.copy()
+    local.calc = MaudCalculator(**atoms.calc.parameters)
+    e_local = relax(local, Maud).get_potential_energy()
+    assert e_local == pytest.approx(105.8504249, abs=1e-6)
+    np.random.seed(1)
+    with BasinHopping(atoms, temperature=2.0, dr=0.7, optimizer=Maud,
+                      fmax=1e-4, logfile=None, optimizer_logfile=None,
+                      trajectory=None, local_minima_trajectory=None) as bh:
+        bh.run(12)
+        e_min, _ = bh.get_minimum()
+    assert e_min == pytest.approx(105.5158274, abs=1e-4)
+
+
+@pytest.mark.parametrize('seed', [0, 5])
+def test_fixed_atoms_and_cartesian_components_stay(seed):
+    atoms = build('random_graph', 20, seed=seed)
+    start = atoms.positions.copy()
+    atoms.set_constraint([FixAtoms(indices=[0, 1]),
+                          FixCartesian(2, mask=[False, False, True]),
+                          FixCartesian(3, mask=[True, True, False])])
+    relax(atoms, Maud)
+    assert np.array_equal(atoms.positions[:2], start[:2])
+    assert atoms.positions[2, 2] == start[2, 2]
+    assert np.array_equal(atoms.positions[3, :2], start[3, :2])
+    assert np.abs(atoms.positions - start).max() > 0.1
+
+
+def test_restart_reproduces_uninterrupted_run(tmp_path):
+    straight = build('hanging_net', 6, seed=2)
+    with Maud(straight, logfile=None) as opt:
+        opt.run(fmax=0, steps=30)
+    interrupted = build('hanging_net', 6, seed=2)
+    restart = tmp_path / 'maud.json'
+    with Maud(interrupted, logfile=None, restart=restart) as opt:
+        opt.run(fmax=0, steps=17)
+    with Maud(interrupted, logfile=None, restart=restart) as opt:
+        opt.run(fmax=0, steps=13)
+    assert np.allclose(interrupted.positions, straight.positions,
+                       rtol=0, atol=1e-12)
+
+
+def test_trajectory_and_log_are_readable(tmp_path):
+    atoms = build('net2d', 5, seed=1)
+    traj, log = tmp_path / 'maud.traj', tmp_path / 'maud.log'
+    with Maud(atoms, logfile=log, trajectory=traj) as opt:
+        opt.run(fmax=1e-4)
+    images = read(traj, ':')
+    assert len(images) == opt.nsteps + 1
+    assert np.allclose(images[-1].positions, atoms.positions)
+    assert images[-1].calc.name == atoms.calc.name
+    lines = log.read_text().splitlines()
+    assert lines[0].split() == ['Step', 'Time', 'Energy', 'fmax']
+    assert lines[-1].startswith('Maud:')
+    assert float(lines[-1].split()[-1]) < 1e-4
+
+
+def test_one_calculator_call_per_step():
+    atoms = build('ring', 20, seed=4)
+    calls = []
+    original = atoms.calc.calculate
+    atoms.calc.calculate = lambda *a, **k: (calls.append(a[1]),
+                                            original(*a, **k))
+    with Maud(atoms, logfile=None) as opt:
+        opt.run(fmax=1e-6)
+    assert len(calls) == opt.nsteps + 1
+    assert all('stiffness' in props for props in calls)
+
+
+@pytest.mark.parametrize('method', ['tensor', 'scalar'])
+def test_stationary_target_finds_the_cage_saddle(method):
+    # The cage centre is a saddle; only the tensor step sees its negative
+    # axial stiffness (the trace of the block is positive).
+    atoms = build('cage', 8, seed=7)
+    centre = np.zeros(3)
+    saddle = build('cage', 8, seed=7)
+    if method == 'tensor':
+        relax(saddle, Maud, fmax=1e-9, target='stationary', method=method)
+        assert np.abs(saddle.positions[-1] - centre).max() < 1e-8
+    leaver = build('cage', 8, seed=7)
+    leaver.calc = MaudCalculator(**atoms.calc.parameters)
+    relax(leaver, Maud, fmax=1e-9, target='minimum', method=method)
+    assert abs(leaver.positions[-1, 2]) > 0.5
+    assert np.abs(leaver.positions[-1, :2]).max() < 1e-7
+
+
+def test_estimated_blocks_are_announced(tmp_path):
+    from ase.calculators.lj import LennardJones
+    from ase.cluster import Icosahedron
+    # A 13-atom LJ icosahedron at its nearest-neighbour distance 2**(1/6).
+    atoms = Icosahedron('Ar', 2, latticeconstant=2 ** (2 / 3))
+    atoms.rattle(0.05, seed=3)
+    atoms.calc = LennardJones(rc=10.0)
+    reference = atoms.copy()
+    reference.calc = LennardJones(rc=10.0)
+    log = tmp_path / 'lj.log'
+    with Maud(atoms, logfile=log) as opt:
+        assert opt.run(fmax=1e-6, steps=2000)
+    relax(reference, FIRE)   # BFGS and LBFGS stop at saddles from here
+    assert log.read_text().count('estimated') == 1
+    assert atoms.get_potential_energy() == pytest.approx(
+        reference.get_potential_energy(), rel=1e-9)
+    gap = atoms.get_all_distances() - reference.get_all_distances()
+    assert np.abs(gap).max() < 1e-5
+
+
+@pytest.mark.parametrize('bad', [{'method': 'vector'}, {'target': 'max'},
+                                 {'gamma': 0}, {'beta_max': 1.0},
+                                 {'floor': -1}, {'overshoot_shrink': 0}])
+def test_bad_parameters_are_refused(bad):
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        Maud(build('dimer'), logfile=None, **bad)
+
+
+def test_todict_reports_the_method():
+    opt = Maud(build('dimer'), method='scalar', target='stationary',
+               logfile=None)
+    d = opt.todict()
+    assert d['optimizer'] == 'Maud'
+    assert (d['method'], d['target']) == ('scalar', 'stationary')

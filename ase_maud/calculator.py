@@ -23,7 +23,7 @@ from .springs import check_springs, spring_degrees, spring_terms
 #: Relative tolerance on the spread of z for a ``dim=2`` scene.
 PLANE_TOLERANCE = 1e-10
 
-_BACKENDS = {'numba': repulsion_numba, 'numpy': repulsion_numpy}
+BACKENDS = {'numba': repulsion_numba, 'numpy': repulsion_numpy}
 
 
 class MaudCalculator(Calculator):
@@ -119,7 +119,7 @@ class MaudCalculator(Calculator):
         flat = positions.copy()
         if dim == 2:
             flat[:, 2] = 0.0
-        e_rep, f_rep, block6 = _BACKENDS[p['backend']](flat, want_blocks)
+        e_rep, f_rep, block6 = BACKENDS[p['backend']](flat, want_blocks)
         if not np.isfinite(e_rep):
             raise_on_coincident(flat)
         e_spr, f_spr = spring_terms(flat, self.springs, p['Q'])
@@ -167,8 +167,8 @@ def _check_parameters(p):
                              f'got {value!r}')
     if not (isinstance(p['dim'], Integral) and p['dim'] in (2, 3)):
         raise ValueError(f"dim must be 2 or 3, got {p['dim']!r}")
-    if p['backend'] not in _BACKENDS:
-        raise ValueError(f"backend must be one of {sorted(_BACKENDS)}, "
+    if p['backend'] not in BACKENDS:
+        raise ValueError(f"backend must be one of {sorted(BACKENDS)}, "
                          f"got {p['backend']!r}")
 
 

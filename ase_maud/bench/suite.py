@@ -1,0 +1,108 @@
+"""Every chosen optimiser on every start, each run written as soon as it ends.
+
+For each start (scene, size, seed) a tight reference run (``reference``
+optimiser to ``ref_fmax``) fixes the reference energy ``e_ref``, the lowest
+energy it reached; every compared run then starts from the same positions and
+its samples are appended to ``samples.csv`` and flushed. ``runs.csv`` holds
+one line per run (the reference runs with status ``'reference'``). Before
+the first start, every optimiser makes a few untimed steps, so that one-off
+costs (numba loading its compiled kernels) stay out of the timings.
+"""
+
+import csv
+import sys
+
+import numpy as np
+
+from ..scenes import build
+from .runner import Run, classify, run_optimizer
+
+SAMPLE_COLUMNS = ('scene', 'size', 'seed', 'optimiser', 'calls', 'time_s',
+                  'fmax', 'energy', 'energy_error', 'status')
+RUN_COLUMNS = ('scene', 'size', 'seed', 'natoms', 'optimiser', 'status',
+               'calls', 'time_s', 'fmax', 'energy', 'e_ref', 'error')
+
+
+class Progress:
+    """A one-line text progress bar on stderr (or nothing if not shown)."""
+
+    def __init__(self, total, show):
+        self.total, self.done, self.show = total, 0, show
+
+    def __call__(self, label):
+        if self.show:
+            width = 30
+            filled = width * self.done // self.total
+            sys.stderr.write(f'\r[{"#" * filled}{"." * (width - filled)}] '
+                             f'{self.done}/{self.total} {label:<48.48}')
+            sys.stderr.flush()
+        self.done += 1
+
+    def close(self):
+        if self.show:
+            sys.stderr.write('\n')
+
+
+def _run_row(run):
+    """The runs.csv line of ``run``: its last sample, status and error."""
+    last = run.samples[-1] if len(run.samples) else np.full(4, np.nan)
+    return dict(zip(RUN_COLUMNS, (run.scene, run.size, run.seed, run.natoms,
+                                  run.optimiser, run.status, len(run.samples),
+                                  *last[1:], run.e_ref, run.error)))
+
+
+def run_suite(starts, optimisers, outdir, *, fmax=1e-6, steps=10000,
+              reference='LBFGS', ref_fmax=1e-9, energy_rtol=1e-6,
+              progress=False):
+    """Run ``optimisers`` (names) on ``starts``, a non-empty list of
+    (scene, size, seed).
+
+    Writes ``samples.csv`` and ``runs.csv`` in ``outdir`` (a pathlib.Path)
+    and returns ``(runs, interrupted)``: the list of finished compared
+    :class:`Run` and whether a KeyboardInterrupt cut the suite short.
+    """
+    runs, interrupted = [], False
+    bar = Progress(len(starts) * (len(optimisers) + 1), progress)
+    with open(outdir / 'samples.csv', 'w', newline='') as fs, \
+            open(outdir / 'runs.csv', 'w', newline='') as fr:
+        samples_csv = csv.DictWriter(fs, SAMPLE_COLUMNS)
+        runs_csv = csv.DictWriter(fr, RUN_COLUMNS)
+        samples_csv.writeheader()
+        runs_csv.writeheader()
+        try:
+            warm = build(*starts[0][:2], seed=starts[0][2])
+            for name in dict.fromkeys([reference, *optimisers]):
+                run_optimizer(warm, name, fmax, 3)  # one-off costs, untimed
+            for scene, size, seed in starts:
+                start = build(scene, size, seed=seed)
+                key = dict(scene=scene, size=size, seed=seed,
+                           natoms=len(start))
+                bar(f'{scene} {size} seed {seed}: reference {reference}')
+                samples, converged, error = run_optimizer(
+                    start, reference, ref_fmax, steps)
+                e_ref = samples[:, 3].min()
+                if not converged:
+                    print(f'\nwarning: reference {reference} did not reach '
+                          f'fmax {ref_fmax:g} on {scene} {size} seed {seed}; '
+                          f'e_ref is its lowest energy. {error}',
+                          file=sys.stderr)
+                runs_csv.writerow(_run_row(Run(
+                    **key, optimiser=reference, samples=samples,
+                    status='reference', e_ref=e_ref, error=error)))
+                for name in optimisers:
+                    bar(f'{scene} {size} seed {seed}: {name}')
+                    samples, converged, error = run_optimizer(
+                        start, name, fmax, steps)
+                    status = classify(samples, converged, error, e_ref,
+                                      energy_rtol)
+                    run = Run(**key, optimiser=name, samples=samples,
+                              status=status, e_ref=e_ref, error=error)
+                    samples_csv.writerows(run.rows())
+                    runs_csv.writerow(_run_row(run))
+                    fs.flush()
+                    fr.flush()
+                    runs.append(run)
+        except KeyboardInterrupt:
+            interrupted = True
+    bar.close()
+    return runs, interrupted

@@ -1,0 +1,262 @@
+"""The ``ase-maud`` command (also ``python -m ase_maud``).
+
+- ``ase-maud relax``: relax a built-in scene with Maud, ASE's log on stdout
+  and a trajectory for ``ase gui``.
+- ``ase-maud bench``: every chosen optimiser from the same starts, force
+  calls and wall time against the error; CSV, markdown and PNG in ``--out``.
+- ``ase-maud backends``: time per call against accuracy of the kernels.
+
+``--threads N`` sets OMP_NUM_THREADS, OPENBLAS_NUM_THREADS, MKL_NUM_THREADS
+and NUMBA_NUM_THREADS to N and calls ``numba.set_num_threads(N)``. BLAS reads
+its variables when numpy is first imported, which importing ase_maud already
+does; so if they were not N in the environment, the command starts itself
+again with them set (or, when ``main(argv)`` is called from Python, warns).
+Each command imports what it needs when it runs (relax needs no matplotlib).
+"""
+
+import argparse
+import inspect
+import os
+import sys
+import warnings
+from pathlib import Path
+
+THREAD_VARIABLES = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS',
+                    'MKL_NUM_THREADS', 'NUMBA_NUM_THREADS')
+
+
+def pin_threads(n, restart):
+    """Pin every thread pool to ``n`` threads; see the module docstring.
+
+    ``restart``: re-execute ``python -m ase_maud <sys.argv[1:]>`` if BLAS may
+    already run with another count (only right when run as a program).
+    """
+    value = str(n)
+    in_force = all(os.environ.get(v) == value for v in THREAD_VARIABLES)
+    os.environ.update(dict.fromkeys(THREAD_VARIABLES, value))
+    if not in_force and 'numpy' in sys.modules:
+        if restart:
+            os.execv(sys.executable,
+                     [sys.executable, '-m', 'ase_maud', *sys.argv[1:]])
+        warnings.warn(f'--threads {n}: numpy was imported before the thread '
+                      'variables were set, so BLAS may use another count; '
+                      'set them in the environment to pin BLAS too')
+    import numba
+    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+
+
+def _size(text):
+    """A scene size: an int if it reads as one, else the text ('C6H6')."""
+    try:
+        return int(text)
+    except ValueError:
+        return text
+
+
+def _pairs(scenes, sizes, suite):
+    """(scene, size) pairs: the suite's by default, ``scenes`` x ``sizes`` if
+    both are given; a scene without a size takes its suite sizes, or its
+    builder's default."""
+    from .scenes import SCENES
+    names = scenes or list(dict.fromkeys(name for name, _ in suite))
+    if sizes:
+        return [(name, size) for name in names for size in sizes]
+    default = {name: inspect.signature(build).parameters['size'].default
+               for name, build in SCENES.items()}
+    return [(name, size) for name in names
+            for size in [s for m, s in suite if m == name] or [default[name]]]
+
+
+def relax(args):
+    """``ase-maud relax``: exit status 0 if converged, else 1."""
+    from .bench.runner import CallRecorder
+    from .optimizer import Maud
+    from .scenes import build
+
+    atoms = build(args.scene, args.size, seed=args.seed)
+    with CallRecorder(atoms.calc) as recorder, \
+            Maud(atoms, method=args.method, logfile='-',
+                 trajectory=args.traj) as opt:
+        converged = opt.run(fmax=args.fmax, steps=args.steps)
+    fmax = (atoms.get_forces()**2).sum(axis=1).max() ** 0.5
+    print(f'{"converged" if converged else "NOT converged"}: {args.scene} '
+          f'{len(atoms)} points, {opt.nsteps} steps, '
+          f'{len(recorder.samples)} force calls, energy '
+          f'{atoms.get_potential_energy():.12g}, fmax {fmax:.3g}; '
+          f'trajectory {args.traj}')
+    return 0 if converged else 1
+
+
+def bench(args):
+    """``ase-maud bench``: exit status 0, or 130 if interrupted."""
+    from .bench import report
+    from .bench.suite import run_suite
+    from .scenes import SUITE
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    levels = sorted(args.fmax, reverse=True)
+    starts = [(scene, size, seed)
+              for scene, size in _pairs(args.scenes, args.sizes, SUITE)
+              for seed in args.seeds]
+    show = sys.stderr.isatty() if args.progress is None else args.progress
+    runs, interrupted = run_suite(
+        starts, args.optimizers, out, fmax=levels[-1], steps=args.steps,
+        reference=args.reference, ref_fmax=args.ref_fmax,
+        energy_rtol=args.energy_rtol, progress=show)
+    if interrupted:
+        print(f'interrupted: reporting the {len(runs)} finished runs',
+              file=sys.stderr)
+    if runs:
+        summary = report.summarize(runs, levels)
+        report.write_csv(out / 'summary.csv', summary)
+        info = report.environment(args.argv)
+        info['runs'] = (f'{len(runs)} of {len(starts) * len(args.optimizers)}'
+                        + ' (interrupted)' * interrupted)
+        info['reference'] = (f'lowest energy of {args.reference} to fmax '
+                             f'{args.ref_fmax:g}; another minimum beyond '
+                             f'relative {args.energy_rtol:g}')
+        info['step budget'] = args.steps
+        (out / 'summary.md').write_text(report.markdown(summary, levels, info))
+        report.plot_convergence(runs, out, levels)
+        print((out / 'summary.md').read_text())
+    print(f'results in {out}/')
+    return 130 if interrupted else 0
+
+
+def backends(args):
+    """``ase-maud backends``: exit status 0."""
+    from .bench import report
+    from .bench.backends import measure_backends
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = measure_backends(args.natoms, args.backends, repeats=args.repeats,
+                            seed=args.seed)
+    report.write_csv(out / 'backends.csv', rows)
+    (out / 'backends.md').write_text(report.backends_markdown(
+        rows, report.environment(args.argv)))
+    report.plot_backends(rows, out / 'backends.png')
+    print((out / 'backends.md').read_text())
+    print(f'results in {out}/')
+    return 0
+
+
+def _add_threads(parser, default, default_text):
+    parser.add_argument('--threads', type=int, default=default, metavar='N',
+                        help='pin OpenMP, BLAS and numba to N threads '
+                        f'(default: {default_text})')
+
+
+def build_parser():
+    """The argparse parser of ``ase-maud`` and its three commands."""
+    from .bench.optimizers import OPTIMIZERS
+    from .calculator import BACKENDS
+    from .scenes import SCENES
+
+    parser = argparse.ArgumentParser(
+        prog='ase-maud', description='The Maud algorithm for points that '
+        'repel and are tied by springs: relax a scene, or benchmark.')
+    commands = parser.add_subparsers(dest='command', metavar='COMMAND')
+
+    p = commands.add_parser(
+        'relax', help='relax a built-in scene with Maud',
+        description='Relax a built-in scene with Maud, printing ASE\'s log, '
+        'write a trajectory for "ase gui" and a one-line summary.')
+    p.add_argument('--scene', default='hanging_net', choices=SCENES,
+                   metavar='NAME', help=f'of: {", ".join(SCENES)} '
+                   '(default: %(default)s)')
+    p.add_argument('--size', type=_size, help="scene size (default: the "
+                   "builder's; molecule takes a name such as C6H6)")
+    p.add_argument('--seed', type=int, default=0,
+                   help='seed of the start (default: %(default)s)')
+    p.add_argument('--method', default='tensor', choices=('tensor', 'scalar'),
+                   help='Maud step (default: %(default)s)')
+    p.add_argument('--fmax', type=float, default=1e-3,
+                   help='largest atomic force norm at convergence '
+                   '(default: %(default)s)')
+    p.add_argument('--steps', type=int, default=1000,
+                   help='step budget (default: %(default)s)')
+    p.add_argument('--traj', default='maud.traj',
+                   help='trajectory file (default: %(default)s)')
+    _add_threads(p, None, 'leave the environment alone')
+    p.set_defaults(func=relax)
+
+    p = commands.add_parser(
+        'bench', help='force calls and wall time against error, per optimiser',
+        description='Run every optimiser from the same starts (scene, size, '
+        'seed), sampling fmax, energy, force calls and wall time at every '
+        'calculator call; the energy error is against the lowest energy of '
+        'a tight reference run. Writes samples.csv (one row per sample), '
+        'runs.csv, summary.csv and summary.md (calls and time to each fmax '
+        'level, and their ratio to the best ASE optimiser), and log-log PNGs '
+        'of fmax and energy error against calls and time. Ctrl-C stops and '
+        'reports what finished.')
+    p.add_argument('--scenes', nargs='+', choices=SCENES, metavar='NAME',
+                   help=f'of: {", ".join(SCENES)} (default: those of '
+                   'scenes.SUITE, at their suite sizes)')
+    p.add_argument('--sizes', nargs='+', type=_size, metavar='SIZE',
+                   help='sizes of every scene (default: suite sizes)')
+    p.add_argument('--seeds', nargs='+', type=int, default=[0], metavar='K',
+                   help='seeds of the starts (default: 0)')
+    p.add_argument('--optimizers', nargs='+', choices=OPTIMIZERS,
+                   default=list(OPTIMIZERS), metavar='NAME',
+                   help=f'of: {", ".join(OPTIMIZERS)} (default: all)')
+    p.add_argument('--fmax', nargs='+', type=float, default=[1e-3, 1e-6],
+                   help='fmax levels of the summary; runs stop at the lowest '
+                   '(default: 1e-3 1e-6)')
+    p.add_argument('--steps', type=int, default=10000,
+                   help='step budget of every run (default: %(default)s)')
+    p.add_argument('--reference', choices=OPTIMIZERS, default='LBFGS',
+                   metavar='NAME', help='optimiser of the reference runs '
+                   '(default: %(default)s)')
+    p.add_argument('--ref-fmax', type=float, default=1e-9,
+                   help='fmax of the reference runs (default: %(default)s)')
+    p.add_argument('--energy-rtol', type=float, default=1e-6,
+                   help='relative energy difference from the reference '
+                   'beyond which a converged run is in another minimum '
+                   '(default: %(default)s)')
+    p.add_argument('--out', default='maud-bench',
+                   help='output directory (default: %(default)s)')
+    p.add_argument('--progress', action=argparse.BooleanOptionalAction,
+                   help='progress bar on stderr (default: if it is a tty)')
+    _add_threads(p, 1, '1')
+    p.set_defaults(func=bench)
+
+    p = commands.add_parser(
+        'backends',
+        help='time per call against accuracy of the calculator backends',
+        description='Time one energy-and-forces call, and one call with the '
+        'nodal stiffness, of every backend on N random points, and its '
+        'relative error against the numpy reference. Writes backends.csv, '
+        'backends.md and backends.png.')
+    p.add_argument('--natoms', nargs='+', type=int,
+                   default=[100, 300, 1000, 3000], metavar='N',
+                   help='numbers of points (default: 100 300 1000 3000)')
+    p.add_argument('--backends', nargs='+', choices=BACKENDS,
+                   default=list(BACKENDS), metavar='NAME',
+                   help=f'of: {", ".join(BACKENDS)} (default: all)')
+    p.add_argument('--repeats', type=int, default=3,
+                   help='timed calls per point, the best kept '
+                   '(default: %(default)s)')
+    p.add_argument('--seed', type=int, default=0,
+                   help='seed of the points (default: %(default)s)')
+    p.add_argument('--out', default='maud-bench',
+                   help='output directory (default: %(default)s)')
+    _add_threads(p, 1, '1')
+    p.set_defaults(func=backends)
+    return parser
+
+
+def main(argv=None):
+    """Run ``ase-maud`` on ``argv`` (default ``sys.argv[1:]``); return the
+    exit status. Without a command, print the help."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 0
+    args.argv = sys.argv[1:] if argv is None else list(argv)
+    if args.threads is not None:
+        pin_threads(args.threads, restart=argv is None)
+    return args.func(args)

@@ -7,7 +7,8 @@
 """
 
 from .calculator import MaudCalculator
-from .optimizer import Maud
+from .optimizer import DivergenceError, Maud, MaudError, StagnationError
 
-__all__ = ['MaudCalculator', 'Maud']
+__all__ = ['MaudCalculator', 'Maud', 'MaudError', 'DivergenceError',
+           'StagnationError']
 __version__ = '0.1.0'

@@ -31,11 +31,32 @@ robust optimiser (chosen on the scene suite, see docs/optimizer.md):
   ``beta_k = min(k / (k + 3), beta_max)`` (Nesterov's schedule).
 - No point moves further in one step than ``maxstep_nn`` times its distance to
   its nearest other point (nor than ``maxstep`` if given).
+- A run never goes on for ever: a scene whose spring graph has a free
+  component beside others (no finite minimum) is reported in the log before
+  the first step; :class:`DivergenceError` stops a run whose points spread
+  beyond ``divergence_factor`` times their start size (or ``a N``), or, on a
+  scene known to have no finite minimum, beyond twice their start size; and
+  :class:`StagnationError` one whose gamma underflows or whose fmax has not
+  improved for ``patience`` steps. The trajectory written so far stays valid.
 """
 
 import numpy as np
 from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 from scipy.spatial import cKDTree
+
+from .topology import describe_unbounded, unbounded_components
+
+class MaudError(RuntimeError):
+    """A run that cannot go on; the message (also in the log) says why."""
+
+
+class DivergenceError(MaudError):
+    """The points flew apart: the scene has no finite stationary point."""
+
+
+class StagnationError(MaudError):
+    """No progress: gamma underflowed or fmax stopped improving."""
+
 
 _METHODS = ('tensor', 'scalar')
 _TARGETS = ('minimum', 'stationary')
@@ -77,6 +98,13 @@ class Maud(Optimizer):
     kappa0 : float
         Initial stiffness estimate when the calculator has no ``stiffness``
         (default 70, ASE's BFGS initial Hessian in eV/A**2).
+    divergence_factor : float
+        Growth of the scene's size (largest distance from the centroid) over
+        its reference, ``max(start size, a N)``, that counts as divergence
+        (default 1e3).
+    patience : int
+        Steps without a 0.1 % improvement of fmax after which the run stops
+        as stagnant (default 2000).
     restart, logfile, trajectory, append_trajectory, **kwargs
         As for every ASE optimizer.
     """
@@ -85,7 +113,8 @@ class Maud(Optimizer):
                  append_trajectory=False, method='tensor', target='minimum',
                  gamma=1.0, gamma_max=1.0, gamma_growth=1.1, beta_max=0.98,
                  floor=1e-2, maxstep_nn=0.5, maxstep=None, kappa0=70.0,
-                 overshoot_shrink=0.8, **kwargs):
+                 overshoot_shrink=0.8, divergence_factor=1e3, patience=2000,
+                 **kwargs):
         if method not in _METHODS:
             raise ValueError(f'method must be one of {_METHODS}, got {method!r}')
         if target not in _TARGETS:
@@ -113,6 +142,8 @@ class Maud(Optimizer):
         self.maxstep_nn = maxstep_nn
         self.maxstep = maxstep
         self.kappa0 = kappa0
+        self.divergence_factor = divergence_factor
+        self.patience = patience
         super().__init__(atoms, restart, logfile, trajectory,
                          append_trajectory=append_trajectory, **kwargs)
         self._said_estimate = False
@@ -132,11 +163,15 @@ class Maud(Optimizer):
         self.k = 0              # accepted steps since the last restart
         self.kappa = self.kappa0
         self.last = None        # x, merit, forces, blocks where the last step began
+        self.size0 = None       # reference size for the divergence test
+        self.unbounded = []     # spring components that make E unbounded
+        self.best = (np.inf, 0)  # best fmax so far, and the step it was seen
 
     def read(self):
         state = self.load()
         self.initialize()
         self.gamma, self.k, self.kappa = state['gamma'], state['k'], state['kappa']
+        self.size0, self.best = state['size0'], tuple(state['best'])
         if state['v'] is not None:
             self.v = np.asarray(state['v'], dtype=float)
         if state['last'] is not None:
@@ -146,8 +181,8 @@ class Maud(Optimizer):
 
     def _dump_state(self):
         self.dump({'gamma': self.gamma, 'k': self.k, 'kappa': self.kappa,
-                   'v': self.v,
-                   'last': self.last})
+                   'v': self.v, 'last': self.last, 'size0': self.size0,
+                   'best': list(self.best)})
 
     # -- the pieces of a step -------------------------------------------------
 
@@ -227,6 +262,7 @@ class Maud(Optimizer):
             if blocks is None:
                 self._update_kappa(x, forces)
             self.gamma = min(self.gamma * self.gamma_growth, self.gamma_max)
+        self._check_progress(x, forces)
         direction = self._direction(forces, blocks)
         if self.v is not None and np.vdot(self.v, direction) < 0:
             # Overshoot: kinetic-damping restart, and a smaller gamma.
@@ -246,15 +282,62 @@ class Maud(Optimizer):
         self._dump_state()
         self._stiffness()   # blocks, energy and forces in one calculator call
 
-    # Both first ask for the blocks, so that the calculator computes them
-    # together with the first forces, in one call.
+    # Both check the scene first and ask for the blocks, so that the
+    # calculator computes them together with the first forces, in one call.
     def irun(self, fmax=0.05, steps=DEFAULT_MAX_STEPS):
-        self._stiffness()
+        self._preflight()
         return super().irun(fmax, steps)
 
     def run(self, fmax=0.05, steps=DEFAULT_MAX_STEPS):
-        self._stiffness()
+        self._preflight()
         return super().run(fmax, steps)
+
+    def _preflight(self):
+        """Say in the log if the scene has no finite minimum; get blocks."""
+        atoms = self._atoms()
+        springs = getattr(getattr(atoms, 'calc', None), 'springs', None)
+        if springs is not None and self.target == 'minimum':
+            self.unbounded = unbounded_components(atoms, springs)
+            if self.unbounded:
+                self.logfile.write('Maud: warning: '
+                                   f'{describe_unbounded(self.unbounded)}\n')
+        self._stiffness()
+
+    def _stop(self, error, message):
+        self.logfile.write(f'Maud: stopped: {message}\n')
+        raise error(message)
+
+    def _check_progress(self, x, forces):
+        """Raise DivergenceError or StagnationError; see the module docstring."""
+        size = np.linalg.norm(x - x.mean(axis=0), axis=1).max()
+        if self.size0 is None:
+            calc = getattr(self._atoms(), 'calc', None)
+            a = getattr(calc, 'parameters', {}).get('a', 0.0)
+            reference = size if self.unbounded else max(size, a * len(x))
+            self.size0 = max(reference, np.finfo(float).tiny)
+        factor = 2.0 if self.unbounded else self.divergence_factor
+        if size > factor * self.size0:
+            why = (describe_unbounded(self.unbounded) if self.unbounded
+                   else 'no stationary point in reach')
+            self._stop(DivergenceError,
+                       f'diverged at step {self.nsteps}: the points spread to '
+                       f'{size:.3g}, {size / self.size0:.3g} times their '
+                       f'reference size {self.size0:.3g}; {why}')
+        fmax = np.linalg.norm(forces, axis=1).max()
+        if fmax < (1 - 1e-3) * self.best[0]:
+            self.best = (fmax, self.nsteps)
+        elif self.nsteps - self.best[1] > self.patience:
+            self._stop(StagnationError,
+                       f'stagnant at step {self.nsteps}: fmax {fmax:.3g} has '
+                       f'not improved on {self.best[0]:.3g} for '
+                       f'{self.patience} steps (a requested fmax below the '
+                       'rounding noise of the forces, or an oscillation)')
+        if self.gamma < 1e-12 * self.gamma0:
+            self._stop(StagnationError,
+                       f'stagnant at step {self.nsteps}: gamma fell to '
+                       f'{self.gamma:.3g}; every step raised the '
+                       f'{"energy" if self.target == "minimum" else "|f|^2"}'
+                       ' (energy and forces may disagree)')
 
     def _update_kappa(self, x, forces):
         """Secant curvature of the last step, for calculators with no blocks."""

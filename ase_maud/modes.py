@@ -1,0 +1,132 @@
+"""Modes of a Maud scene through phonopy and through ASE's VibrationsData.
+
+Conventions, fixed here once:
+
+- Force constants are phonopy's ``fc[i, j, a, b] = d2E / du_ia du_jb``
+  (shape (N, N, 3, 3), units of ``Q``), i.e. the Hessian
+  ``H[3 i + a, 3 j + b]``; phonopy's own finite differences use the same
+  sign (``fc = -dF_j / du_i``), which :func:`finite_difference_force_constants`
+  lets the tests check.
+- Masses are 1 unless given: the potential has no inertia, and with unit masses
+  the squared frequencies are the Hessian's eigenvalues, the numbers
+  :func:`ase_maud.analysis.classify` counts. Pass ``masses=atoms.get_masses()``
+  for the dynamics of massive points.
+- Frequencies are angular, ``omega = sqrt(lambda / m)`` in units of
+  ``sqrt(Q / mass)`` (no ``2 pi``, no THz), negative for an imaginary one.
+- A ``dim=2`` scene is treated with the same potential in 3D: on a plane the
+  in-plane and out-of-plane motions decouple, so the in-plane block is exactly
+  the ``dim=2`` Hessian and the extra modes are those of points free to leave
+  the plane (their stability is what a 2D calculator cannot see).
+- Phonopy sees the scene centred in a cubic box with :data:`BOX_MARGIN`
+  extents of empty space on each side, with no symmetry and the box as its
+  own primitive cell; at Gamma every phase factor is 1, so no periodic image
+  enters. Constraints are not passed on.
+"""
+
+import numpy as np
+from ase.vibrations import VibrationsData
+from phonopy import Phonopy
+from phonopy.structure.atoms import PhonopyAtoms
+from scipy.spatial.distance import pdist
+
+from .calculator import MaudCalculator
+
+#: Empty space on each side of the scene in phonopy's box, in extents (the
+#: scene's largest width, at least ``a``).
+BOX_MARGIN = 4.0
+
+
+def calculator_3d(calc, **changes):
+    """A ``dim=3`` MaudCalculator with the parameters of ``calc``."""
+    return MaudCalculator(**{**calc.parameters, 'dim': 3, **changes})
+
+
+def force_constants(atoms):
+    """The analytic force constants of the 3D potential, shape (N, N, 3, 3)."""
+    n = len(atoms)
+    hessian = calculator_3d(atoms.calc).get_hessian(atoms)
+    return hessian.reshape(n, 3, n, 3).transpose(0, 2, 1, 3)
+
+
+def phonopy_cell(atoms, masses=None):
+    """Phonopy's unit cell: the scene centred in a large cubic box.
+
+    Every point is labelled 'H' (phonopy needs an element; ``masses``, default
+    1, is what counts).
+    """
+    positions = atoms.get_positions()
+    extent = max(np.ptp(positions, axis=0).max(), atoms.calc.parameters['a'])
+    side = (1 + 2 * BOX_MARGIN) * extent
+    centred = positions - positions.mean(axis=0) + side / 2
+    masses = np.ones(len(atoms)) if masses is None else masses
+    return PhonopyAtoms(symbols=['H'] * len(atoms), positions=centred,
+                        cell=side * np.eye(3), masses=masses)
+
+
+def make_phonopy(atoms, masses=None):
+    """A Phonopy object for the scene, without force constants.
+
+    Frequencies come out angular in ``sqrt(Q / mass)`` (unit conversion 1).
+    """
+    phonon = Phonopy(phonopy_cell(atoms, masses),
+                     supercell_matrix=np.eye(3, dtype=int),
+                     primitive_matrix='P', is_symmetry=False)
+    phonon.unit_conversion_factor = 1.0
+    return phonon
+
+
+def gamma_modes(atoms, masses=None):
+    """Phonopy's frequencies and modes from the analytic force constants.
+
+    Returns ``(frequencies, modes, phonon)``: frequencies (3N,) ascending,
+    signed (see the module docstring); modes (3N, N, 3), real, unit, the
+    eigenvectors of the mass-weighted Hessian; the Phonopy object, with its
+    force constants set, for anything else phonopy offers.
+    """
+    phonon = make_phonopy(atoms, masses)
+    phonon.force_constants = force_constants(atoms)
+    qpoints = phonon.run_qpoints([[0, 0, 0]], with_eigenvectors=True)
+    frequencies = qpoints.frequencies[0]
+    vectors = qpoints.eigenvectors[0].T
+    big = vectors[np.arange(len(vectors)), np.abs(vectors).argmax(axis=1)]
+    modes = (vectors * np.conj(big / np.abs(big))[:, None]).real
+    return frequencies, modes.reshape(len(modes), len(atoms), 3), phonon
+
+
+def finite_difference_force_constants(atoms, distance=None):
+    """Phonopy's own force constants, from forces of displaced copies.
+
+    Phonopy displaces every point by ``distance`` (default ``1e-4`` times the
+    shortest pair distance) along +-x, +-y, +-z; a ``dim=3`` MaudCalculator
+    with the exact direct sum (``backend='numba'``, whatever ``atoms`` uses)
+    gives the forces; phonopy fits the force constants (N, N, 3, 3). The
+    central differences leave errors of order ``distance**2``.
+    """
+    if distance is None:
+        distance = 1e-4 * pdist(atoms.positions).min()
+    phonon = make_phonopy(atoms)
+    phonon.generate_displacements(distance=distance, is_plusminus=True)
+    probe = atoms.copy()
+    probe.calc = calculator_3d(atoms.calc, backend='numba')
+    forces = []
+    for cell in phonon.supercells_with_displacements:
+        probe.positions = cell.positions  # the box shifts every point alike
+        forces.append(probe.get_forces(apply_constraint=False))
+    phonon.forces = forces
+    phonon.produce_force_constants(show_drift=False)
+    return phonon.force_constants
+
+
+def vibrations(atoms, masses=None):
+    """The same modes as an ASE :class:`~ase.vibrations.VibrationsData`.
+
+    Atoms left out follow ASE's rule (any atom under FixAtoms or
+    FixCartesian). ``masses`` (default 1) are set on the copy the object
+    keeps; its energies assume ASE's units (eV, Angstrom, amu).
+    """
+    copy = atoms.copy()
+    copy.set_masses(np.ones(len(atoms)) if masses is None else masses)
+    indices = VibrationsData.indices_from_constraints(atoms)
+    dofs = (3 * np.asarray(indices, dtype=int)[:, None] + np.arange(3)).ravel()
+    hessian = calculator_3d(atoms.calc).get_hessian(atoms)
+    return VibrationsData.from_2d(copy, hessian[np.ix_(dofs, dofs)], indices)

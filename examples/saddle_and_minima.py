@@ -1,0 +1,93 @@
+"""A saddle of six points, every pair sprung, and the two minima it joins.
+
+In the plane (``dim=2``) six such points have two minima: a pentagon round a
+centre point and, slightly higher, a hexagon with alternate corners at two
+radii (two interleaved triangles). This script finds the saddle between
+them from a guess near it, classifies it (index 1), steps off it both ways
+along its unstable mode, relaxes each side, prints the energies and indices,
+and draws the saddle's three lowest modes in ``saddle_and_minima.png``.
+
+Run: ``python examples/saddle_and_minima.py``
+"""
+
+import itertools
+
+import matplotlib
+import numpy as np
+from ase import Atoms
+from ase.optimize import BFGS
+from scipy.optimize import minimize
+
+from ase_maud.analysis import classify, displace_along_mode
+from ase_maud.calculator import MaudCalculator
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+
+
+def guess():
+    """A unit pentagon whose sixth point sits 0.6 of the way from the centre
+    to the middle of an edge; every pair sprung, in the plane."""
+    angles = 2 * np.pi * np.arange(5) / 5
+    positions = np.zeros((6, 3))
+    positions[:5, 0], positions[:5, 1] = np.cos(angles), np.sin(angles)
+    positions[5, :2] = 0.6 * np.cos(np.pi / 5), 0.6 * np.sin(np.pi / 5)
+    atoms = Atoms('X6', positions=positions)
+    springs = list(itertools.combinations(range(6), 2))
+    atoms.calc = MaudCalculator(springs=springs, dim=2)
+    return atoms
+
+
+def find_stationary(atoms):
+    """Move ``atoms`` to a nearby stationary point of any index.
+
+    STAND-IN until Maud(target='stationary') finds this saddle; then use
+    ``Maud(atoms, target='stationary', logfile=None).run(fmax=1e-10)``.
+    Here scipy minimises |f|**2, whose gradient is -2 H f.
+    """
+    dim = atoms.calc.parameters['dim']
+
+    def residual(x):
+        atoms.positions[:, :dim] = x.reshape(-1, dim)
+        forces = atoms.get_forces()[:, :dim].ravel()
+        return forces @ forces, -2 * atoms.calc.get_hessian(atoms) @ forces
+
+    minimize(residual, atoms.positions[:, :dim].ravel(), jac=True,
+             method='BFGS', options={'gtol': 1e-14, 'maxiter': 2000})
+
+
+def plot_modes(atoms, point, count, path):
+    """Draw the ``count`` lowest modes of ``point`` as arrows on the points."""
+    fig, axes = plt.subplots(1, count, figsize=(3.2 * count, 3.4))
+    x, y = atoms.positions[:, 0], atoms.positions[:, 1]
+    for k, ax in enumerate(axes):
+        mode = point.modes[k]
+        ax.quiver(x, y, mode[:, 0], mode[:, 1], color='C3', angles='xy',
+                  scale_units='xy', scale=1.5)
+        ax.plot(x, y, 'o', color='C0')
+        ax.set_title(f'mode {k}: $\\lambda$ = {point.eigenvalues[k]:.3f}')
+        ax.set_aspect('equal')
+        ax.margins(0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main():
+    saddle = guess()
+    find_stationary(saddle)
+    point = classify(saddle)
+    print(f'saddle  E = {saddle.get_potential_energy():.6f}  index '
+          f'{point.index} ({point.verdict}, fmax {point.fmax:.1e})')
+    assert point.verdict == 'saddle' and point.index == 1
+    sides = displace_along_mode(saddle, point, step=0.3)
+    for name, side in zip(('plus', 'minus'), sides):
+        BFGS(side, logfile=None).run(fmax=1e-9)
+        end = classify(side)
+        print(f'{name:6s}  E = {side.get_potential_energy():.6f}  index '
+              f'{end.index} ({end.verdict})')
+    plot_modes(saddle, point, 3, 'saddle_and_minima.png')
+    print('the saddle\'s lowest modes are in saddle_and_minima.png')
+
+
+if __name__ == '__main__':
+    main()

@@ -16,6 +16,7 @@ from numbers import Integral, Real
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
+from .fmm import check_eps, repulsion_fmm
 from .hessian import dense_hessian
 from .kernels import repulsion_numba, repulsion_numpy, voigt_to_blocks
 from .springs import check_springs, spring_degrees, spring_terms
@@ -23,7 +24,8 @@ from .springs import check_springs, spring_degrees, spring_terms
 #: Relative tolerance on the spread of z for a ``dim=2`` scene.
 PLANE_TOLERANCE = 1e-10
 
-BACKENDS = {'numba': repulsion_numba, 'numpy': repulsion_numpy}
+BACKENDS = {'numba': repulsion_numba, 'numpy': repulsion_numpy,
+            'fmm': repulsion_fmm}
 
 
 class MaudCalculator(Calculator):
@@ -43,9 +45,16 @@ class MaudCalculator(Calculator):
         ``2``: every point lies on one plane ``z = const`` (checked to a
         relative :data:`PLANE_TOLERANCE`), forces have ``z = 0`` exactly and
         the blocks are 2x2. ``3`` (default): 3x3 blocks.
-    backend : 'numba' or 'numpy'
-        The direct-sum kernel: ``numba`` (default, compiled, parallel over
-        ``NUMBA_NUM_THREADS``) or ``numpy`` (the slow reference).
+    backend : 'numba', 'numpy' or 'fmm'
+        The repulsion kernel: the direct sums ``numba`` (default, compiled,
+        parallel over ``NUMBA_NUM_THREADS``) and ``numpy`` (the slow
+        reference), or ``fmm``, FMM3D's fast multipole method (O(N), faster
+        from a few thousand points, approximate to ``fmm_eps``; needs
+        ``pip install 'ase-maud[fmm]'``, parallel over ``OMP_NUM_THREADS``).
+    fmm_eps : float in (0, 1)
+        Requested relative precision of the multipole sums of the ``fmm``
+        backend (default 1e-6); ignored by the direct sums. Forces cannot be
+        relaxed much below ``fmm_eps`` times the typical repulsive force.
 
     Only what is asked is computed: ``energy``/``forces`` never build the
     blocks; asking for ``stiffness`` computes all three in one pass.
@@ -55,7 +64,7 @@ class MaudCalculator(Calculator):
     # springs default to a tuple: Calculator.todict compares each parameter
     # with its default by ``!=``, which fails on an ndarray default.
     default_parameters = {'springs': (), 'a': 1.0, 'Q': 1.0, 'dim': 3,
-                          'backend': 'numba'}
+                          'backend': 'numba', 'fmm_eps': 1e-6}
     discard_results_on_any_change = True
     nolabel = True
 
@@ -64,9 +73,9 @@ class MaudCalculator(Calculator):
     max_hessian_atoms = 3000
 
     def __init__(self, springs=(), a=1.0, Q=1.0, dim=3, backend='numba',
-                 **kwargs):
+                 fmm_eps=1e-6, **kwargs):
         super().__init__(springs=springs, a=a, Q=Q, dim=dim, backend=backend,
-                         **kwargs)
+                         fmm_eps=fmm_eps, **kwargs)
 
     def set(self, **kwargs):
         """Set parameters; invalid values raise ValueError and are not kept."""
@@ -119,7 +128,9 @@ class MaudCalculator(Calculator):
         flat = positions.copy()
         if dim == 2:
             flat[:, 2] = 0.0
-        e_rep, f_rep, block6 = BACKENDS[p['backend']](flat, want_blocks)
+        options = {'eps': p['fmm_eps']} if p['backend'] == 'fmm' else {}
+        e_rep, f_rep, block6 = BACKENDS[p['backend']](flat, want_blocks,
+                                                      **options)
         if not np.isfinite(e_rep):
             raise_on_coincident(flat)
         e_spr, f_spr = spring_terms(flat, self.springs, p['Q'])
@@ -158,7 +169,8 @@ class MaudCalculator(Calculator):
 
 
 def _check_parameters(p):
-    """Raise ValueError unless a, Q, dim and backend in ``p`` are valid."""
+    """Raise ValueError unless a, Q, dim, backend and fmm_eps in ``p`` are
+    valid."""
     for name in ('a', 'Q'):
         value = p[name]
         if not (isinstance(value, Real) and np.isfinite(value)
@@ -170,6 +182,7 @@ def _check_parameters(p):
     if p['backend'] not in BACKENDS:
         raise ValueError(f"backend must be one of {sorted(BACKENDS)}, "
                          f"got {p['backend']!r}")
+    check_eps(p['fmm_eps'])
 
 
 def raise_on_coincident(positions):

@@ -80,11 +80,11 @@ class Maud(Optimizer):
     gamma : float
         Initial step factor (default 1: the full nodal Newton step).
     gamma_max : float
-        Largest step factor gamma may grow to (default 1).
+        Largest step factor gamma may grow to (default 1.5).
     gamma_growth : float
         Factor gamma grows by after each accepted step (default 1.1).
     overshoot_shrink : float
-        Factor gamma shrinks by at a kinetic-damping restart (default 0.8).
+        Factor gamma shrinks by at a kinetic-damping restart (default 0.6).
     beta_max : float
         Largest momentum weight (default 0.98).
     floor : float
@@ -111,9 +111,9 @@ class Maud(Optimizer):
 
     def __init__(self, atoms, restart=None, logfile='-', trajectory=None,
                  append_trajectory=False, method='tensor', target='minimum',
-                 gamma=1.0, gamma_max=1.0, gamma_growth=1.1, beta_max=0.98,
+                 gamma=1.0, gamma_max=1.5, gamma_growth=1.1, beta_max=0.98,
                  floor=1e-2, maxstep_nn=0.5, maxstep=None, kappa0=70.0,
-                 overshoot_shrink=0.8, divergence_factor=1e3, patience=2000,
+                 overshoot_shrink=0.6, divergence_factor=1e3, patience=2000,
                  **kwargs):
         if method not in _METHODS:
             raise ValueError(f'method must be one of {_METHODS}, got {method!r}')

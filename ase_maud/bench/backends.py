@@ -6,7 +6,8 @@ every backend, for energy and forces and for energy, forces and the nodal
 stiffness blocks. Time per call is the best of ``repeats`` calls after one
 warm-up (numba compiles on first use); the relative error is the Frobenius
 norm of the difference from the reference backend's forces (or blocks) over
-the reference's norm.
+the reference's norm. The ``fmm`` backend is measured at every requested
+precision ``fmm_eps``, each a backend of its own named ``fmm eps=...``.
 """
 
 import time
@@ -33,10 +34,19 @@ def _time_per_call(calc, atoms, properties, repeats):
 
 
 def measure_backends(natoms=(100, 300, 1000), backends=tuple(BACKENDS),
-                     reference='numpy', repeats=3, seed=0):
+                     reference='numpy', repeats=3, seed=0,
+                     fmm_eps=(1e-3, 1e-6)):
     """One dict per (N, property set, backend): ``time_per_call_s``, the
     throughput ``pairs_per_s`` (N (N - 1) / 2 pairs per call) and
     ``rel_error`` (0 for the reference itself), with numba's thread count."""
+    variants = {}  # backend name in the rows: calculator parameters
+    for backend in dict.fromkeys([reference, *backends]):
+        if backend == 'fmm':
+            variants.update({f'fmm eps={eps:g}': {'backend': 'fmm',
+                                                  'fmm_eps': eps}
+                             for eps in fmm_eps})
+        else:
+            variants[backend] = {'backend': backend}
     rows = []
     rng = np.random.default_rng(seed)
     for n in natoms:
@@ -44,8 +54,8 @@ def measure_backends(natoms=(100, 300, 1000), backends=tuple(BACKENDS),
         atoms = Atoms(f'X{n}', positions=rng.uniform(0, side, (n, 3)))
         for what, properties in PROPERTIES.items():
             value = {}
-            for backend in dict.fromkeys([reference, *backends]):
-                calc = MaudCalculator(backend=backend)
+            for backend, parameters in variants.items():
+                calc = MaudCalculator(**parameters)
                 seconds = _time_per_call(calc, atoms, properties, repeats)
                 value[backend] = calc.results[what]
                 error = (np.linalg.norm(value[backend] - value[reference])

@@ -1,0 +1,148 @@
+"""The fast multipole backend against the direct sums, and in the calculator."""
+
+import sys
+
+import numpy as np
+import pytest
+from ase import Atoms
+
+from ase_maud import Maud
+from ase_maud.bench.backends import measure_backends
+from ase_maud.calculator import MaudCalculator
+from ase_maud.fmm import repulsion_fmm
+from ase_maud.kernels import repulsion_numba, repulsion_numpy
+from ase_maud.scenes import build
+
+pytest.importorskip('fmm3dpy')
+
+
+def rel_err(actual, expected):
+    """Largest deviation relative to the largest entry of ``expected``."""
+    return np.abs(actual - expected).max() / np.abs(expected).max()
+
+
+def test_conventions_match_the_reference_kernel(random_points):
+    # Few points: FMM3D sums them directly, so scale, sign and the order of
+    # the Hessian entries must agree to rounding.
+    points = random_points(60, 3, seed=3)
+    energy, forces, block6 = repulsion_fmm(points, blocks=True, eps=1e-12)
+    e_ref, f_ref, b_ref = repulsion_numpy(points, blocks=True)
+    assert energy == pytest.approx(e_ref, rel=1e-13)
+    assert rel_err(forces, f_ref) < 1e-13
+    assert rel_err(block6, b_ref) < 1e-13
+    assert forces.shape == (60, 3) and block6.shape == (60, 6)
+
+
+@pytest.mark.parametrize('eps', [1e-3, 1e-6, 1e-9])
+@pytest.mark.parametrize('dim, n', [(2, 1200), (3, 2500)])
+@pytest.mark.parametrize('seed', [0, 1])
+def test_error_is_bounded_by_eps(random_points, eps, dim, n, seed):
+    # Enough points that FMM3D uses multipole expansions (at eps = 1e-3 the
+    # error is far above rounding), on a plane z = 0 for dim = 2.
+    points = random_points(n, dim, seed) + [0.5, -2.0, 3.0 * (dim == 3)]
+    energy, forces, block6 = repulsion_fmm(points, blocks=True, eps=eps)
+    e_ref, f_ref, b_ref = repulsion_numba(points, blocks=True)
+    norm = np.linalg.norm
+    force_err = (norm(forces - f_ref, axis=1).max()
+                 / norm(f_ref, axis=1).max())
+    assert abs(energy / e_ref - 1) < 10 * eps
+    assert force_err < 10 * eps
+    assert rel_err(block6, b_ref) < 10 * eps
+    if eps == 1e-3:
+        assert force_err > 1e-12
+    e2, f2, none = repulsion_fmm(points, blocks=False, eps=eps)
+    assert none is None
+    assert e2 == pytest.approx(energy, rel=10 * eps)
+    assert rel_err(f2, f_ref) < 10 * eps
+
+
+@pytest.mark.parametrize('n', [0, 1])
+def test_fewer_than_two_points(n):
+    energy, forces, block6 = repulsion_fmm(np.ones((n, 3)), blocks=True)
+    assert energy == 0.0
+    assert forces.shape == (n, 3) and block6.shape == (n, 6)
+    assert not forces.any() and not block6.any()
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('seed', [0, 4])
+def test_calculator_matches_numba(random_points, dim, seed):
+    n = 1500
+    ring = np.random.default_rng(seed).permutation(n)
+    springs = np.c_[ring, np.roll(ring, 1)]  # one random closed loop
+    points = random_points(n, dim, seed)
+    points[:, 2] += 0.7  # any plane z = const
+    results = {}
+    for backend in ('numba', 'fmm'):
+        atoms = Atoms(f'H{n}', points)
+        atoms.calc = MaudCalculator(springs, a=1.3, Q=0.7, dim=dim,
+                                    backend=backend, fmm_eps=1e-8)
+        results[backend] = (atoms.get_potential_energy(), atoms.get_forces(),
+                            atoms.calc.get_stiffness(atoms))
+    (e_fmm, f_fmm, k_fmm), (e_ref, f_ref, k_ref) = (results['fmm'],
+                                                    results['numba'])
+    assert e_fmm == pytest.approx(e_ref, rel=1e-7)
+    assert rel_err(f_fmm, f_ref) < 1e-7
+    assert rel_err(k_fmm, k_ref) < 1e-7
+    assert k_fmm.shape == (n, dim, dim)
+    if dim == 2:
+        assert not f_fmm[:, 2].any()
+
+
+@pytest.mark.parametrize('scene, size', [('net2d', 6), ('hanging_net', 6),
+                                         ('random_graph', 24)])
+def test_relaxation_finds_the_same_minimum(scene, size):
+    # fmax 1e-8 needs a tight eps: forces are only good to about eps times
+    # the repulsive forces, so a looser eps stalls above such an fmax.
+    final = {}
+    for backend in ('numba', 'fmm'):
+        atoms = build(scene, size, seed=2)
+        atoms.calc.set(backend=backend, fmm_eps=1e-10)
+        with Maud(atoms, logfile=None) as opt:
+            assert opt.run(fmax=1e-8, steps=2000)
+        final[backend] = atoms.get_potential_energy(), atoms.get_positions()
+    assert final['fmm'][0] == pytest.approx(final['numba'][0], rel=1e-12)
+    np.testing.assert_allclose(final['fmm'][1], final['numba'][1], rtol=0,
+                               atol=1e-8)
+
+
+@pytest.mark.parametrize('eps', [0, 0.0, -1e-6, 1.0, 2.0, np.nan, np.inf,
+                                 '1e-6', None])
+def test_bad_eps(eps):
+    match = 'fmm_eps must be a number in \\(0, 1\\)'
+    with pytest.raises(ValueError, match=match):
+        MaudCalculator(backend='fmm', fmm_eps=eps)
+    calc = MaudCalculator(backend='fmm')
+    with pytest.raises(ValueError, match=match):
+        calc.set(fmm_eps=eps)
+    assert calc.parameters['fmm_eps'] == 1e-6
+    with pytest.raises(ValueError, match=match):
+        repulsion_fmm(np.eye(3), eps=eps)
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+def test_coincident_points_name_both(random_points, dim):
+    # FMM3D silently drops a pair at distance zero; the backend must not.
+    atoms = Atoms('H900', random_points(900, dim, seed=1))
+    atoms.positions[700] = atoms.positions[123]
+    atoms.calc = MaudCalculator(dim=dim, backend='fmm')
+    with pytest.raises(ValueError, match='atoms 123 and 700 are at the same'):
+        atoms.get_forces()
+
+
+def test_missing_fmm3dpy_says_how_to_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, 'fmm3dpy', None)  # import fails
+    atoms = Atoms('H3', np.eye(3))
+    atoms.calc = MaudCalculator(backend='fmm')
+    with pytest.raises(ImportError, match=r"pip install 'ase-maud\[fmm\]'"):
+        atoms.get_potential_energy()
+
+
+def test_measure_backends_reports_each_eps():
+    rows = measure_backends(natoms=[1000], backends=['numba', 'fmm'],
+                            repeats=1, fmm_eps=(1e-3, 1e-9))
+    names = {r['backend'] for r in rows}
+    assert names == {'numpy', 'numba', 'fmm eps=0.001', 'fmm eps=1e-09'}
+    for row in rows:
+        if row['backend'].startswith('fmm'):
+            assert row['rel_error'] < 10 * float(row['backend'][8:])

@@ -1,11 +1,19 @@
-"""A saddle of six points, every pair sprung, and the two minima it joins.
+"""Saddles and the minima they join, found and classified.
 
-In the plane (``dim=2``) six such points have two minima: a pentagon round a
-centre point and, slightly higher, a hexagon with alternate corners at two
-radii (two interleaved triangles). This script finds the saddle between
-them from a guess near it, classifies it (index 1), steps off it both ways
-along its unstable mode, relaxes each side, prints the energies and indices,
-and draws the saddle's three lowest modes in ``saddle_and_minima.png``.
+1. The ``cage`` scene: a point inside a fixed ring sits on a saddle whose
+   unstable direction shows in its own nodal block, so
+   ``Maud(target='stationary')`` finds it. Stepping off along the unstable
+   mode and relaxing with Maud gives the two minima on either side.
+2. Six points in the plane, every pair sprung: two minima, a pentagon round a
+   centre point and, slightly higher, a hexagon with alternate corners at two
+   radii. The saddle between them is collective (every nodal block is
+   positive along its unstable mode), which the nodal Newton step of
+   ``target='stationary'`` cannot see: it stops with a StagnationError. So it
+   is found by minimising ``|f|**2`` (gradient ``-2 H f``) with SciPy, then
+   classified (index 1), left both ways and the sides relaxed with Maud.
+
+It prints energies and indices and draws the six-point saddle's three lowest
+modes in ``saddle_and_minima.png``.
 
 Run: ``python examples/saddle_and_minima.py``
 """
@@ -15,11 +23,11 @@ import itertools
 import matplotlib
 import numpy as np
 from ase import Atoms
-from ase.optimize import BFGS
 from scipy.optimize import minimize
 
+from ase_maud import Maud, MaudCalculator
 from ase_maud.analysis import classify, displace_along_mode
-from ase_maud.calculator import MaudCalculator
+from ase_maud.scenes import build
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
@@ -38,13 +46,9 @@ def guess():
     return atoms
 
 
-def find_stationary(atoms):
-    """Move ``atoms`` to a nearby stationary point of any index.
-
-    STAND-IN until Maud(target='stationary') finds this saddle; then use
-    ``Maud(atoms, target='stationary', logfile=None).run(fmax=1e-10)``.
-    Here scipy minimises |f|**2, whose gradient is -2 H f.
-    """
+def minimise_force_norm(atoms):
+    """Move ``atoms`` to a nearby stationary point of any index by
+    minimising ``|f|**2`` (gradient ``-2 H f``) with SciPy's BFGS."""
     dim = atoms.calc.parameters['dim']
 
     def residual(x):
@@ -72,21 +76,32 @@ def plot_modes(atoms, point, count, path):
     fig.savefig(path, dpi=120)
 
 
-def main():
-    saddle = guess()
-    find_stationary(saddle)
+def saddle_and_sides(saddle, name):
+    """Classify ``saddle``, leave it both ways along its unstable mode,
+    relax each side with Maud and print all three."""
     point = classify(saddle)
-    print(f'saddle  E = {saddle.get_potential_energy():.6f}  index '
+    print(f'{name}: saddle  E = {saddle.get_potential_energy():.6f}  index '
           f'{point.index} ({point.verdict}, fmax {point.fmax:.1e})')
     assert point.verdict == 'saddle' and point.index == 1
-    sides = displace_along_mode(saddle, point, step=0.3)
-    for name, side in zip(('plus', 'minus'), sides):
-        BFGS(side, logfile=None).run(fmax=1e-9)
+    for side_name, side in zip(('plus', 'minus'),
+                               displace_along_mode(saddle, point, step=0.3)):
+        Maud(side, logfile=None).run(fmax=1e-9)
         end = classify(side)
-        print(f'{name:6s}  E = {side.get_potential_energy():.6f}  index '
-              f'{end.index} ({end.verdict})')
-    plot_modes(saddle, point, 3, 'saddle_and_minima.png')
-    print('the saddle\'s lowest modes are in saddle_and_minima.png')
+        print(f'{name}: {side_name:6s} E = {side.get_potential_energy():.6f}'
+              f'  index {end.index} ({end.verdict})')
+    return point
+
+
+def main():
+    cage = build('cage', 8, seed=0)
+    Maud(cage, target='stationary', logfile=None).run(fmax=1e-10)
+    saddle_and_sides(cage, 'cage')
+
+    six = guess()
+    minimise_force_norm(six)
+    point = saddle_and_sides(six, 'six points')
+    plot_modes(six, point, 3, 'saddle_and_minima.png')
+    print('the six-point saddle\'s lowest modes are in saddle_and_minima.png')
 
 
 if __name__ == '__main__':

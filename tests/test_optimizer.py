@@ -228,3 +228,12 @@ def test_todict_reports_the_method():
     d = opt.todict()
     assert d['optimizer'] == 'Maud'
     assert (d['method'], d['target']) == ('scalar', 'stationary')
+
+
+@pytest.mark.parametrize('seed', [11, 12])
+def test_stationary_result_is_an_index_one_saddle(seed):
+    from ase_maud.analysis import classify
+    atoms = build('cage', 6, seed=seed)
+    relax(atoms, Maud, fmax=1e-10, target='stationary')
+    point = classify(atoms)
+    assert (point.verdict, point.index) == ('saddle', 1)

@@ -15,6 +15,7 @@ Each command imports what it needs when it runs (relax needs no matplotlib).
 """
 
 import argparse
+import importlib.util
 import inspect
 import os
 import sys
@@ -233,9 +234,12 @@ def build_parser():
     p.add_argument('--natoms', nargs='+', type=int,
                    default=[100, 300, 1000, 3000], metavar='N',
                    help='numbers of points (default: 100 300 1000 3000)')
+    installed = [name for name in BACKENDS
+                 if name != 'fmm' or importlib.util.find_spec('fmm3dpy')]
     p.add_argument('--backends', nargs='+', choices=BACKENDS,
-                   default=list(BACKENDS), metavar='NAME',
-                   help=f'of: {", ".join(BACKENDS)} (default: all)')
+                   default=installed, metavar='NAME',
+                   help=f'of: {", ".join(BACKENDS)} (default: all that are '
+                   'installed; fmm needs fmm3dpy)')
     p.add_argument('--repeats', type=int, default=3,
                    help='timed calls per point, the best kept '
                    '(default: %(default)s)')

@@ -1,10 +1,13 @@
 """Every chosen optimiser on every start, each run written as soon as it ends.
 
 For each start (scene, size, seed) a tight reference run (``reference``
-optimiser to ``ref_fmax``) fixes the reference energy ``e_ref``, the lowest
-energy it reached; every compared run then starts from the same positions and
-its samples are appended to ``samples.csv`` and flushed. ``runs.csv`` holds
-one line per run (the reference runs with status ``'reference'``). Before
+optimiser to ``ref_fmax``) and every compared run start from the same
+positions. The reference energy ``e_ref`` of the start is the best minimum
+found for it: the lowest final energy of the runs that reached their fmax
+(the reference run's is the tightest; a reference run that stopped on a
+saddle or failed does not count). Then every run's samples are appended to
+``samples.csv`` and flushed. ``runs.csv`` holds one line per run (the
+reference runs with status ``'reference'``). Before
 the first start, every optimiser makes a few untimed steps, so that one-off
 costs (numba loading its compiled kernels) stay out of the timings.
 """
@@ -51,6 +54,37 @@ def _run_row(run):
                                   *last[1:], run.e_ref, run.error)))
 
 
+def _write_start(key, finished, reference, energy_rtol, samples_csv,
+                 runs_csv):
+    """Fix ``e_ref`` for one start, classify and write its runs; return the
+    compared ones. ``finished`` maps (optimiser, fmax) to run_optimizer's
+    result; the first entry is the reference run."""
+    if not finished:
+        return []
+    finals = [samples[-1, 3] for samples, converged, _ in finished.values()
+              if converged]
+    first = next(iter(finished.values()))[0]
+    e_ref = min(finals) if finals else first[:, 3].min()
+    if not finals:
+        print(f'\nwarning: no run reached its fmax on {key}; e_ref is the '
+              'lowest energy seen', file=sys.stderr)
+    compared = []
+    for k, ((name, _), (samples, converged, error)) in enumerate(
+            finished.items()):
+        if k == 0:
+            runs_csv.writerow(_run_row(Run(
+                **key, optimiser=reference, samples=samples,
+                status='reference', e_ref=e_ref, error=error)))
+            continue
+        status = classify(samples, converged, error, e_ref, energy_rtol)
+        run = Run(**key, optimiser=name, samples=samples, status=status,
+                  e_ref=e_ref, error=error)
+        samples_csv.writerows(run.rows())
+        runs_csv.writerow(_run_row(run))
+        compared.append(run)
+    return compared
+
+
 def run_suite(starts, optimisers, outdir, *, fmax=1e-6, steps=10000,
               reference='LBFGS', ref_fmax=1e-9, energy_rtol=1e-6,
               progress=False):
@@ -77,31 +111,18 @@ def run_suite(starts, optimisers, outdir, *, fmax=1e-6, steps=10000,
                 start = build(scene, size, seed=seed)
                 key = dict(scene=scene, size=size, seed=seed,
                            natoms=len(start))
-                bar(f'{scene} {size} seed {seed}: reference {reference}')
-                samples, converged, error = run_optimizer(
-                    start, reference, ref_fmax, steps)
-                e_ref = samples[:, 3].min()
-                if not converged:
-                    print(f'\nwarning: reference {reference} did not reach '
-                          f'fmax {ref_fmax:g} on {scene} {size} seed {seed}; '
-                          f'e_ref is its lowest energy. {error}',
-                          file=sys.stderr)
-                runs_csv.writerow(_run_row(Run(
-                    **key, optimiser=reference, samples=samples,
-                    status='reference', e_ref=e_ref, error=error)))
-                for name in optimisers:
-                    bar(f'{scene} {size} seed {seed}: {name}')
-                    samples, converged, error = run_optimizer(
-                        start, name, fmax, steps)
-                    status = classify(samples, converged, error, e_ref,
-                                      energy_rtol)
-                    run = Run(**key, optimiser=name, samples=samples,
-                              status=status, e_ref=e_ref, error=error)
-                    samples_csv.writerows(run.rows())
-                    runs_csv.writerow(_run_row(run))
+                finished = {}   # optimiser: (samples, converged, error)
+                try:
+                    for name, target in ((reference, ref_fmax),
+                                         *((o, fmax) for o in optimisers)):
+                        bar(f'{scene} {size} seed {seed}: {name}')
+                        finished[name, target] = run_optimizer(
+                            start, name, target, steps)
+                finally:   # an interrupt keeps the runs that finished
+                    runs += _write_start(key, finished, reference,
+                                         energy_rtol, samples_csv, runs_csv)
                     fs.flush()
                     fr.flush()
-                    runs.append(run)
         except KeyboardInterrupt:
             interrupted = True
     bar.close()

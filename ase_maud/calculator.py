@@ -19,7 +19,7 @@ from ase.calculators.calculator import Calculator, all_changes
 from .fmm import check_eps, repulsion_fmm
 from .hessian import dense_hessian
 from .kernels import repulsion_numba, repulsion_numpy, voigt_to_blocks
-from .springs import check_springs, spring_degrees, spring_terms
+from .springs import check_range, check_springs, spring_degrees, spring_terms
 
 #: Relative tolerance on the spread of z for a ``dim=2`` scene.
 PLANE_TOLERANCE = 1e-10
@@ -101,7 +101,7 @@ class MaudCalculator(Calculator):
                              f'{atoms.pbc.tolist()}): 1/L needs an Ewald sum;'
                              ' set atoms.pbc = False')
         natoms = len(atoms)
-        check_springs(self.springs, natoms)
+        check_range(self.springs, natoms)   # the rest was checked by set
         positions = atoms.get_positions()
         bad = np.flatnonzero(~np.isfinite(positions).all(axis=1))
         if bad.size:

@@ -26,14 +26,10 @@ def check_springs(springs, natoms=None):
             raise ValueError(f'spring {k} {raw[k].tolist()} is not a pair of '
                              'integer atom indices')
     pairs = raw.astype(int)
-    for k, (i, j) in enumerate(pairs):
-        if i < 0 or j < 0:
-            raise ValueError(f'spring {k} ({i}, {j}) has a negative atom index')
-        if natoms is not None and max(i, j) >= natoms:
-            raise ValueError(f'spring {k} ({i}, {j}) names an atom beyond the '
-                             f'last one (index {natoms - 1})')
-        if i == j:
-            raise ValueError(f'spring {k} ties atom {i} to itself')
+    _refuse_first(pairs.min(axis=1) < 0, pairs, 'has a negative atom index')
+    if natoms is not None:
+        check_range(pairs, natoms)
+    _refuse_first(pairs[:, 0] == pairs[:, 1], pairs, 'ties an atom to itself')
     ordered = np.sort(pairs, axis=1)
     _, first, counts = np.unique(ordered, axis=0, return_index=True,
                                  return_counts=True)
@@ -44,6 +40,21 @@ def check_springs(springs, natoms=None):
         raise ValueError(f'springs {dup} all tie atoms {i} and {j}: '
                          'list each pair once')
     return pairs
+
+
+def check_range(pairs, natoms):
+    """Raise ValueError naming the first spring of ``pairs`` (an int array of
+    shape (K, 2)) with an index ``>= natoms``."""
+    _refuse_first(pairs.max(axis=1, initial=-1) >= natoms, pairs,
+                  f'names an atom beyond the last one (index {natoms - 1})')
+
+
+def _refuse_first(bad, pairs, what):
+    """Raise ValueError for the first spring marked in ``bad``, if any."""
+    if bad.any():
+        k = int(np.argmax(bad))
+        i, j = pairs[k]
+        raise ValueError(f'spring {k} ({i}, {j}) {what}')
 
 
 def spring_degrees(springs, natoms):

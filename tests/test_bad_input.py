@@ -15,7 +15,7 @@ def points(n=5, seed=0):
 
 @pytest.mark.parametrize('springs, match', [
     ([[0, 1], [-1, 2]], r'spring 1 \(-1, 2\).*negative'),
-    ([[0, 1], [1, 2], [2, 2]], r'spring 2 ties atom 2 to itself'),
+    ([[0, 1], [1, 2], [2, 2]], r'spring 2 \(2, 2\) ties an atom to itself'),
     ([[0, 1, 2]], r'shape \(K, 2\), got \(1, 3\)'),
     ([0, 1], r'shape \(K, 2\), got \(2,\)'),
     ([[0, 1], [1, 2.5]], r'spring 1 \[1.0, 2.5\] is not .*integer'),

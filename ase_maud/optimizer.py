@@ -29,15 +29,19 @@ robust optimiser (chosen on the scene suite, see docs/optimizer.md):
   Gamma grows by ``gamma_growth`` after each accepted step, up to ``gamma_max``.
 - The momentum weight grows with the steps since the last restart,
   ``beta_k = min(k / (k + 3), beta_max)`` (Nesterov's schedule).
-- No point moves further in one step than ``maxstep_nn`` times its distance to
-  its nearest other point (nor than ``maxstep`` if given).
-- A run never goes on for ever: a scene whose spring graph has a free
+- No point moves further in one step than ``maxstep_nn`` (< 1/2) times its
+  distance to its nearest other point (nor than ``maxstep`` if given): two
+  points stepping towards each other keep at least ``1 - 2 maxstep_nn`` of
+  their distance, so no step can make two points meet.
+- A run never goes on for ever: a 3D scene whose spring graph has a free
   component beside others (no finite minimum) is reported in the log before
   the first step; :class:`DivergenceError` stops a run whose points spread
   beyond ``divergence_factor`` times their start size (or ``a N``), or, on a
   scene known to have no finite minimum, beyond twice their start size; and
-  :class:`StagnationError` one whose gamma underflows or whose fmax has not
-  improved for ``patience`` steps. The trajectory written so far stays valid.
+  :class:`StagnationError` one whose gamma underflows or that has made no
+  progress for ``patience`` steps (neither fmax fell by 0.1 % nor, for
+  ``'minimum'``, the energy below its lowest beyond rounding). The
+  trajectory written so far stays valid.
 """
 
 import numpy as np
@@ -91,7 +95,8 @@ class Maud(Optimizer):
         Relative eigenvalue floor of a nodal block (default 1e-2).
     maxstep_nn : float
         Largest move of a point in one step, as a fraction of its distance to
-        its nearest other point (default 0.5).
+        its nearest other point, in (0, 0.5) (default 0.45: a distance keeps
+        at least a tenth of itself per step).
     maxstep : float or None
         Largest move of a point in one step, in length units (default None:
         only ``maxstep_nn`` applies).
@@ -101,10 +106,13 @@ class Maud(Optimizer):
     divergence_factor : float
         Growth of the scene's size (largest distance from the centroid) over
         its reference, ``max(start size, a N)``, that counts as divergence
-        (default 1e3).
+        (default 3: a relaxed scene is smaller than ``a N``; a free chain's
+        half-length is about 0.85 a N at N = 100, a ring's radius 0.3 a N).
+        Free components in 2D drift apart ever more slowly (force ~ 1/L**2),
+        so the steps to reach the limit grow as its cube.
     patience : int
-        Steps without a 0.1 % improvement of fmax after which the run stops
-        as stagnant (default 2000).
+        Steps without progress (fmax down by 0.1 %, or for ``'minimum'`` a new
+        lowest energy) after which the run stops as stagnant (default 2000).
     restart, logfile, trajectory, append_trajectory, **kwargs
         As for every ASE optimizer.
     """
@@ -112,8 +120,8 @@ class Maud(Optimizer):
     def __init__(self, atoms, restart=None, logfile='-', trajectory=None,
                  append_trajectory=False, method='tensor', target='minimum',
                  gamma=1.0, gamma_max=1.5, gamma_growth=1.1, beta_max=0.98,
-                 floor=1e-2, maxstep_nn=0.5, maxstep=None, kappa0=70.0,
-                 overshoot_shrink=0.6, divergence_factor=1e3, patience=2000,
+                 floor=1e-2, maxstep_nn=0.45, maxstep=None, kappa0=70.0,
+                 overshoot_shrink=0.6, divergence_factor=3.0, patience=2000,
                  **kwargs):
         if method not in _METHODS:
             raise ValueError(f'method must be one of {_METHODS}, got {method!r}')
@@ -124,6 +132,12 @@ class Maud(Optimizer):
                             ('kappa0', kappa0)):
             if not value > 0:
                 raise ValueError(f'{name} must be positive, got {value!r}')
+        if not divergence_factor > 1:
+            raise ValueError('divergence_factor must exceed 1, got '
+                             f'{divergence_factor!r}')
+        if not maxstep_nn < 0.5:
+            raise ValueError('maxstep_nn must be below 0.5 (two points could '
+                             f'meet), got {maxstep_nn!r}')
         if not 0 <= beta_max < 1:
             raise ValueError(f'beta_max must be in [0, 1), got {beta_max!r}')
         if not 0 < overshoot_shrink <= 1:
@@ -166,12 +180,14 @@ class Maud(Optimizer):
         self.size0 = None       # reference size for the divergence test
         self.unbounded = []     # spring components that make E unbounded
         self.best = (np.inf, 0)  # best fmax so far, and the step it was seen
+        self.lowest = (np.inf, 0)  # lowest merit so far ('minimum'), and step
 
     def read(self):
         state = self.load()
         self.initialize()
         self.gamma, self.k, self.kappa = state['gamma'], state['k'], state['kappa']
         self.size0, self.best = state['size0'], tuple(state['best'])
+        self.lowest = tuple(state['lowest'])
         if state['v'] is not None:
             self.v = np.asarray(state['v'], dtype=float)
         if state['last'] is not None:
@@ -182,7 +198,7 @@ class Maud(Optimizer):
     def _dump_state(self):
         self.dump({'gamma': self.gamma, 'k': self.k, 'kappa': self.kappa,
                    'v': self.v, 'last': self.last, 'size0': self.size0,
-                   'best': list(self.best)})
+                   'best': list(self.best), 'lowest': list(self.lowest)})
 
     # -- the pieces of a step -------------------------------------------------
 
@@ -240,7 +256,8 @@ class Maud(Optimizer):
             limit = self.maxstep_nn * nn
         if self.maxstep is not None:
             limit = np.minimum(limit, self.maxstep)
-        scale = np.minimum(1.0, limit / np.maximum(length, np.finfo(float).tiny))
+        scale = np.divide(limit, length, out=np.ones_like(length),
+                          where=length > limit)
         return step * scale[:, None]
 
     def step(self):
@@ -251,7 +268,7 @@ class Maud(Optimizer):
         merit = self._merit(forces)
 
         last = self.last
-        if last is not None and merit > last['merit'] + _merit_tol(last['merit']):
+        if last is not None and self._uphill(last, x, merit, forces):
             # Uphill: go back to where the last step began, gently.
             x, merit = last['x'], last['merit']
             forces, blocks = last['forces'], last['blocks']
@@ -262,7 +279,7 @@ class Maud(Optimizer):
             if blocks is None:
                 self._update_kappa(x, forces)
             self.gamma = min(self.gamma * self.gamma_growth, self.gamma_max)
-        self._check_progress(x, forces)
+        self._check_progress(x, merit, forces)
         direction = self._direction(forces, blocks)
         if self.v is not None and np.vdot(self.v, direction) < 0:
             # Overshoot: kinetic-damping restart, and a smaller gamma.
@@ -295,9 +312,11 @@ class Maud(Optimizer):
     def _preflight(self):
         """Say in the log if the scene has no finite minimum; get blocks."""
         atoms = self._atoms()
-        springs = getattr(getattr(atoms, 'calc', None), 'springs', None)
+        calc = getattr(atoms, 'calc', None)
+        springs = getattr(calc, 'springs', None)
         if springs is not None and self.target == 'minimum':
-            self.unbounded = unbounded_components(atoms, springs)
+            self.unbounded = unbounded_components(
+                atoms, springs, calc.parameters.get('dim', 3))
             if self.unbounded:
                 self.logfile.write('Maud: warning: '
                                    f'{describe_unbounded(self.unbounded)}\n')
@@ -307,7 +326,19 @@ class Maud(Optimizer):
         self.logfile.write(f'Maud: stopped: {message}\n')
         raise error(message)
 
-    def _check_progress(self, x, forces):
+    def _uphill(self, last, x, merit, forces):
+        """Whether the step from ``last`` raised the merit.
+
+        Energies that agree within rounding (:func:`_merit_tol`) are told
+        apart by the trapezoid estimate ``-(f_last + f) . dx / 2`` of the
+        energy change, which has no cancellation error.
+        """
+        change, tol = merit - last['merit'], _merit_tol(last['merit'])
+        if self.target != 'minimum' or abs(change) > tol:
+            return change > tol
+        return -0.5 * np.vdot(last['forces'] + forces, x - last['x']) > 0
+
+    def _check_progress(self, x, merit, forces):
         """Raise DivergenceError or StagnationError; see the module docstring."""
         size = np.linalg.norm(x - x.mean(axis=0), axis=1).max()
         if self.size0 is None:
@@ -326,18 +357,27 @@ class Maud(Optimizer):
         fmax = np.linalg.norm(forces, axis=1).max()
         if fmax < (1 - 1e-3) * self.best[0]:
             self.best = (fmax, self.nsteps)
-        elif self.nsteps - self.best[1] > self.patience:
+        if (self.target == 'minimum'
+                and merit < self.lowest[0] - _merit_tol(merit)):
+            self.lowest = (merit, self.nsteps)
+        if self.nsteps - max(self.best[1], self.lowest[1]) > self.patience:
             self._stop(StagnationError,
-                       f'stagnant at step {self.nsteps}: fmax {fmax:.3g} has '
-                       f'not improved on {self.best[0]:.3g} for '
-                       f'{self.patience} steps (a requested fmax below the '
-                       'rounding noise of the forces, or an oscillation)')
+                       f'stagnant at step {self.nsteps}: no progress for '
+                       f'{self.patience} steps (fmax {fmax:.3g}, best '
+                       f'{self.best[0]:.3g}{self._lowest_text()}; a requested '
+                       'fmax below the rounding noise of the forces, or an '
+                       'oscillation)')
         if self.gamma < 1e-12 * self.gamma0:
             self._stop(StagnationError,
                        f'stagnant at step {self.nsteps}: gamma fell to '
                        f'{self.gamma:.3g}; every step raised the '
                        f'{"energy" if self.target == "minimum" else "|f|^2"}'
                        ' (energy and forces may disagree)')
+
+    def _lowest_text(self):
+        if self.target != 'minimum':
+            return ''
+        return f', energy {self.lowest[0]:.12g} lowest since step {self.lowest[1]}'
 
     def _update_kappa(self, x, forces):
         """Secant curvature of the last step, for calculators with no blocks."""

@@ -1,10 +1,13 @@
 """Whether a scene can have a finite minimum at all, from its spring graph.
 
-Repulsion between two spring components decays like 1/L, so a component with
-no fixed atom is pushed away from every other component for ever: the scene
-then has no finite minimum (stationary points such as saddles may remain).
-A single free component, alone, is bounded (up to rigid motion), and so is
-every component that holds a fixed atom.
+A spring component free to translate in 3D beside other components feels
+their repulsion as a sum of 1/L terms, a harmonic function of its translation:
+it has no local minimum there (Earnshaw's theorem), so the scene has no finite
+minimum (stationary points such as saddles may remain). This is proved only
+for points free in 3D: in a ``dim=2`` scene, or for a component with any atom
+held by a constraint (to a plane or a line, say), 1/L is not harmonic in the
+directions left free and repulsion can hold it (a 2D ring about a point). A
+single free component, alone, is bounded up to rigid motion.
 """
 
 import numpy as np
@@ -32,18 +35,33 @@ def fixed_atoms(atoms):
     return held.all(axis=1)
 
 
-def unbounded_components(atoms, springs):
-    """Components (lists of atom indices) that would fly away for ever.
+def constrained_atoms(atoms):
+    """Boolean mask of atoms touched by any constraint, in any direction.
 
-    Empty when the scene can have a finite minimum: one free component alone,
-    or every component anchored by a fixed atom.
+    A constraint of a kind other than FixAtoms and FixCartesian marks the
+    atoms its ``get_indices()`` names, or all atoms if it has no such method.
+    """
+    touched = np.zeros(len(atoms), dtype=bool)
+    for c in atoms.constraints:
+        try:
+            touched[c.get_indices()] = True
+        except (AttributeError, NotImplementedError):
+            touched[:] = True
+    return touched
+
+
+def unbounded_components(atoms, springs, dim=3):
+    """Components (lists of atom indices) proved to fly away for ever.
+
+    Empty unless ``dim == 3`` and there are several spring components: then
+    the components with no constrained atom (:func:`constrained_atoms`).
     """
     labels = spring_components(len(atoms), springs)
-    fixed = fixed_atoms(atoms)
-    groups = [np.flatnonzero(labels == k) for k in range(labels.max() + 1)]
-    if len(groups) < 2:
+    if dim != 3 or labels.max(initial=0) < 1:
         return []
-    return [g.tolist() for g in groups if not fixed[g].any()]
+    held = constrained_atoms(atoms)
+    groups = [np.flatnonzero(labels == k) for k in range(labels.max() + 1)]
+    return [g.tolist() for g in groups if not held[g].any()]
 
 
 def describe_unbounded(components, limit=3):

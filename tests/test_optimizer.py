@@ -216,7 +216,8 @@ def test_estimated_blocks_are_announced(tmp_path):
 
 @pytest.mark.parametrize('bad', [{'method': 'vector'}, {'target': 'max'},
                                  {'gamma': 0}, {'beta_max': 1.0},
-                                 {'floor': -1}, {'overshoot_shrink': 0}])
+                                 {'floor': -1}, {'overshoot_shrink': 0},
+                                 {'maxstep_nn': 0.5}, {'divergence_factor': 1}])
 def test_bad_parameters_are_refused(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         Maud(build('dimer'), logfile=None, **bad)

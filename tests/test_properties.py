@@ -3,6 +3,7 @@ and springs: the calculator stays finite and matches the finite-difference
 gradient, and Maud either converges or stops with a MaudError that says why."""
 
 import io
+import os
 from itertools import combinations
 
 import numpy as np
@@ -16,7 +17,9 @@ from hypothesis import strategies as st
 from ase_maud import Maud, MaudCalculator, MaudError
 
 #: A fixed example budget: the same examples on every run, no deadline.
-BUDGET = settings(max_examples=150, deadline=None, derandomize=True)
+#: ASE_MAUD_EXAMPLES raises it for a longer search.
+BUDGET = settings(max_examples=int(os.environ.get('ASE_MAUD_EXAMPLES', 150)),
+                  deadline=None, derandomize=True)
 
 #: Bound on the steps of one Maud run.
 STEPS = 3000

@@ -11,33 +11,46 @@ import time
 import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms
+from ase.optimize import BFGS, FIRE
 
 from ase_maud import Maud, MaudCalculator, MaudError
 from ase_maud import hardcases as hc
 from ase_maud.scenes import build
+from ase_maud.topology import fixed_atoms
 
 SEEDS = (0, 1, 2)
 
 
-def relax(atoms, fmax=1e-8, steps=30000, **kwargs):
-    """(outcome, steps, seconds, energy) of a Maud run; outcome is 'converged'
-    or the name of the MaudError raised."""
+def relax(atoms, fmax=1e-8, steps=30000, opt=Maud, **kwargs):
+    """(outcome, steps, seconds, energy) of a run of ``opt`` (Maud); outcome
+    is 'converged' or the name of the MaudError raised."""
     log = io.StringIO()
     start = time.perf_counter()
-    with Maud(atoms, logfile=log, **kwargs) as opt:
+    with opt(atoms, logfile=log, **kwargs) as dyn:
         try:
-            outcome = 'converged' if opt.run(fmax=fmax, steps=steps) else 'not converged'
+            outcome = 'converged' if dyn.run(fmax=fmax, steps=steps) else 'not converged'
         except MaudError as error:
             outcome = type(error).__name__
     warned = 'no finite minimum' in log.getvalue()
-    return (outcome + (' (warned)' if warned else ''), opt.nsteps,
+    return (outcome + (' (warned)' if warned else ''), dyn.nsteps,
             time.perf_counter() - start, atoms.get_potential_energy())
 
 
-def show(case, atoms, **kwargs):
+def show(case, atoms, hessian=False, **kwargs):
+    """Print one run; with ``hessian``, the lowest eigenvalues of the Hessian
+    over the free atoms at its end."""
     outcome, steps, seconds, energy = relax(atoms, **kwargs)
-    print(f'{case:40s} {outcome:30s} {steps:6d} steps {seconds:7.2f} s '
-          f'E = {energy:.10f}', flush=True)
+    name = kwargs.get('opt', Maud).__name__
+    lowest = ''
+    if hessian:
+        free = np.repeat(~fixed_atoms(atoms), 3)
+        h = atoms.calc.get_hessian(atoms)[np.ix_(free, free)]
+        eig = np.linalg.eigvalsh(h)
+        lowest = (f' negative {np.sum(eig < -1e-6)}, lowest {eig[0]:.3g}, '
+                  f'lowest above 1e-9 {eig[eig > 1e-9][0]:.3g}, '
+                  f'highest {eig[-1]:.3g}')
+    print(f'{case:40s} {name:5s} {outcome:30s} {steps:6d} steps '
+          f'{seconds:7.2f} s E = {energy:.10f}{lowest}', flush=True)
 
 
 def shrink(atoms, factor):
@@ -87,9 +100,12 @@ def main():
     for gap in (3, 10, 30, 100):
         show(f'two islands {gap} a apart', islands_apart(gap))
     for s in SEEDS:
-        show(f'anchored_islands(3) seed {s}', hc.anchored_islands(3, seed=s))
+        for opt in (Maud, FIRE, BFGS):
+            show(f'anchored_islands(3) seed {s}', hc.anchored_islands(3, seed=s),
+                 opt=opt)
     for s in (3, 0):
-        show(f'singly anchored islands seed {s}', singly_anchored(s), fmax=1e-6)
+        show(f'singly anchored islands seed {s}', singly_anchored(s), fmax=1e-6,
+             hessian=True)
     for name, size in (('hanging_net', 5), ('ring', 12), ('random_graph', 12),
                        ('all_pairs', 8), ('chain', 12)):
         for a, q in ((1, 1), (1e-6, 1e-9), (1e-6, 1e9), (1e6, 1e-9), (1e6, 1e9)):
@@ -99,18 +115,25 @@ def main():
         show(f'stiff_soft({n})', hc.stiff_soft(n, seed=0), fmax=1e-6)
         show(f'stiff_soft({n}) scalar', hc.stiff_soft(n, seed=0), fmax=1e-6,
              method='scalar')
+        for opt in (FIRE, BFGS):
+            show(f'stiff_soft({n})', hc.stiff_soft(n, seed=0), fmax=1e-6,
+                 steps=20000, opt=opt)
     hc.DENSE = 20
     show('stiff_soft(20), 20-point cluster', hc.stiff_soft(20, seed=0), fmax=1e-6)
     hc.DENSE = 10
     for n in (25, 50, 100, 150, 200):
         show(f'chain({n}) seed 1', build('chain', n, seed=1), fmax=1e-6)
     for s in SEEDS:
-        show(f'flat_cluster(8) seed {s}', hc.flat_cluster(8, seed=s))
+        show(f'flat_cluster(8) seed {s}', hc.flat_cluster(8, seed=s),
+             hessian=True)
     for s in SEEDS:
         show(f'tangled_net(6) seed {s}', hc.tangled_net(6, seed=s))
         show(f'tangled_hanging_net(6) seed {s}', hc.tangled_hanging_net(6, seed=s))
     for s in (0, 1, 2, 3):
         show(f'tangled_hanging_net(10) seed {s}', hc.tangled_hanging_net(10, seed=s))
+    for opt in (FIRE, BFGS):
+        show('tangled_hanging_net(10) seed 3', hc.tangled_hanging_net(10, seed=3),
+             opt=opt)
     for name, size in (('ring', 16), ('all_pairs', 8)):
         for factor in (1, 1e-6, 1e6):
             for s in (4, 5):

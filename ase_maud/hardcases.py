@@ -134,30 +134,30 @@ def ring_with_centre(size=16, seed=0, a=1.0, Q=1.0):
     return atoms
 
 
-def stiff_soft(size=40, seed=0, a=1.0, Q=1.0):
+def stiff_soft(size=40, seed=0, a=1.0, Q=1.0, dense=DENSE):
     """A dense cluster on a long sparse chain: stiff and soft in one scene.
 
-    An all-pairs cluster of :data:`DENSE` points (spring degree 9, spacing
-    about 0.5 a) sits in the middle of a chain of ``size`` points (degree 2,
-    spacing about a) whose two ends are fixed. Starts: the cluster in a ball,
-    each half of the chain straight along x from it, every chain coordinate
-    moved by up to 0.3 a, the ends fixed where they start.
+    An all-pairs cluster of ``dense`` points (default :data:`DENSE`: spring
+    degree 9, spacing about 0.5 a) sits in the middle of a chain of ``size``
+    points (degree 2, spacing about a) whose two ends are fixed. Starts: the
+    cluster in a ball, each half of the chain straight along x from it, every
+    chain coordinate moved by up to 0.3 a, the ends fixed where they start.
     """
     n = _count(size, 2, 'stiff_soft')
     rng = np.random.default_rng(seed)
-    cluster = _ball(rng, DENSE)
+    cluster = _ball(rng, dense)
     left, right = n // 2, n - n // 2
     line = np.zeros((n, 3))
     line[:left, 0] = cluster[:, 0].min() - np.arange(1, left + 1)
     line[left:, 0] = cluster[:, 0].max() + np.arange(1, right + 1)
     line += rng.uniform(-0.3, 0.3, line.shape)
-    ends = [(int(np.argmin(cluster[:, 0])), DENSE),
-            (int(np.argmax(cluster[:, 0])), DENSE + left)]
-    springs = np.concatenate([np.column_stack(np.triu_indices(DENSE, 1)), ends,
-                              DENSE + _path(left),
-                              DENSE + left + _path(right)])
+    ends = [(int(np.argmin(cluster[:, 0])), dense),
+            (int(np.argmax(cluster[:, 0])), dense + left)]
+    springs = np.concatenate([np.column_stack(np.triu_indices(dense, 1)), ends,
+                              dense + _path(left),
+                              dense + left + _path(right)])
     return _scene(np.concatenate([cluster, line]), springs, a, Q,
-                  fixed=[DENSE + left - 1, DENSE + n - 1])
+                  fixed=[dense + left - 1, dense + n - 1])
 
 
 def tangled_net(size=6, seed=0, a=1.0, Q=1.0):

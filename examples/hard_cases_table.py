@@ -118,9 +118,8 @@ def main():
         for opt in (FIRE, BFGS):
             show(f'stiff_soft({n})', hc.stiff_soft(n, seed=0), fmax=1e-6,
                  steps=20000, opt=opt)
-    hc.DENSE = 20
-    show('stiff_soft(20), 20-point cluster', hc.stiff_soft(20, seed=0), fmax=1e-6)
-    hc.DENSE = 10
+    show('stiff_soft(20), 20-point cluster', hc.stiff_soft(20, seed=0, dense=20),
+         fmax=1e-6)
     for n in (25, 50, 100, 150, 200):
         show(f'chain({n}) seed 1', build('chain', n, seed=1), fmax=1e-6)
     for s in SEEDS:

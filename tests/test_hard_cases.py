@@ -309,11 +309,11 @@ def test_stiff_soft_agrees_with_bfgs(size):
         reference.get_potential_energy(), rel=1e-9)
 
 
-def test_stiff_soft_with_a_larger_cluster(monkeypatch):
+def test_stiff_soft_with_a_larger_cluster():
     # The energy falls steadily while fmax wanders: progress, not stagnation
     # (13425 steps measured).
-    monkeypatch.setattr(hardcases, 'DENSE', 20)
-    outcome, _, _ = relax(stiff_soft(20, seed=0), fmax=1e-6, steps=30000)
+    outcome, _, _ = relax(stiff_soft(20, seed=0, dense=20), fmax=1e-6,
+                          steps=30000)
     if isinstance(outcome, MaudError):
         raise outcome
     assert outcome is True

@@ -6,13 +6,13 @@ from pathlib import Path
 
 import pytest
 
-EXAMPLES = Path(__file__).parent.parent / 'examples'
+ROOT = Path(__file__).parent.parent
 
 
-def run_example(name, argv, monkeypatch, tmp_path):
+def run_example(name, argv, monkeypatch, tmp_path, folder='examples'):
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(sys, 'argv', [name, *argv])
-    runpy.run_path(str(EXAMPLES / name), run_name='__main__')
+    runpy.run_path(str(ROOT / folder / name), run_name='__main__')
 
 
 def test_saddle_and_minima(monkeypatch, tmp_path, capsys):
@@ -27,5 +27,5 @@ def test_kernel_throughput(monkeypatch, tmp_path, capsys):
     pytest.importorskip('numba')
     run_example('kernel_throughput.py', ['--sizes', '300', '--seconds',
                                          '0.05', '--out', 'k.csv'],
-                monkeypatch, tmp_path)
+                monkeypatch, tmp_path, folder='tools')
     assert (tmp_path / 'k.csv').read_text().count('\n') >= 3

@@ -5,7 +5,7 @@ as FIRE, BFGS and LBFGS; the table gives, per scene, the median over seeds of
 Maud's calls to fmax 1e-6 divided by the fewest calls of the three. This is
 how the defaults in docs/optimizer.md were chosen. Run with one thread:
 
-    NUMBA_NUM_THREADS=1 python examples/tune_maud.py '{}' '{"gamma_max": 1.5}'
+    NUMBA_NUM_THREADS=1 python tools/tune_maud.py '{}' '{"gamma_max": 1.5}'
 """
 
 import argparse

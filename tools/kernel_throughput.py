@@ -8,7 +8,7 @@ and ASE's bookkeeping), and for the numpy reference kernel at sizes up to
 ``--numpy-max``. Thread counts are printed with the table; raw numbers go to a
 CSV file.
 
-    python examples/kernel_throughput.py --sizes 1000 4000 --threads 2
+    python tools/kernel_throughput.py --sizes 1000 4000 --threads 2
 """
 
 import argparse

@@ -1,7 +1,7 @@
 """Measure the numbers of docs/hard_cases.md: Maud's outcome and steps on
 every hard case, several seeds each. One line per run; run with one thread:
 
-    NUMBA_NUM_THREADS=1 python examples/hard_cases_table.py [--dense 100 200 300]
+    NUMBA_NUM_THREADS=1 python tools/hard_cases_table.py [--dense 100 200 300]
 """
 
 import argparse

@@ -13,8 +13,7 @@ import numpy as np
 from ase.constraints import FixCartesian
 
 from .calculator import MaudCalculator
-from .scenes import (_ball, _count, _path, _scene, all_pairs, hanging_net,
-                     net3d, ring)
+from .scenes import _ball, _count, _path, _scene, all_pairs, hanging_net, net3d, ring
 from .topology import fixed_atoms
 
 #: Start distance of the close pair, in units of ``a``.

@@ -84,7 +84,7 @@ def saddle_and_sides(saddle, name):
           f'{point.index} ({point.verdict}, fmax {point.fmax:.1e})')
     assert point.verdict == 'saddle' and point.index == 1
     for side_name, side in zip(('plus', 'minus'),
-                               displace_along_mode(saddle, point, step=0.3)):
+                               displace_along_mode(saddle, point, step=0.3), strict=True):
         Maud(side, logfile=None).run(fmax=1e-9)
         end = classify(side)
         print(f'{name}: {side_name:6s} E = {side.get_potential_energy():.6f}'

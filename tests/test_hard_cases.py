@@ -8,13 +8,24 @@ from ase import Atoms
 from ase.constraints import FixAtoms
 from ase.optimize import BFGS, FIRE
 
-from ase_maud import (DivergenceError, Maud, MaudCalculator, MaudError,
-                      StagnationError, hardcases)
-from ase_maud.hardcases import (CLOSE, HARD_CASES, ISLAND, anchored_islands,
-                                bead, close_pair, flat_cluster, islands,
-                                loose_index, loose_point, no_springs,
-                                ring_with_centre, stiff_soft,
-                                tangled_hanging_net, tangled_net)
+from ase_maud import DivergenceError, Maud, MaudCalculator, MaudError, StagnationError, hardcases
+from ase_maud.hardcases import (
+    CLOSE,
+    HARD_CASES,
+    ISLAND,
+    anchored_islands,
+    bead,
+    close_pair,
+    flat_cluster,
+    islands,
+    loose_index,
+    loose_point,
+    no_springs,
+    ring_with_centre,
+    stiff_soft,
+    tangled_hanging_net,
+    tangled_net,
+)
 from ase_maud.scenes import all_pairs, build, net3d
 from ase_maud.topology import fixed_atoms
 

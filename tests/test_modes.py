@@ -6,8 +6,12 @@ from ase import Atoms, units
 from ase.constraints import FixAtoms
 
 from ase_maud.calculator import MaudCalculator
-from ase_maud.modes import (finite_difference_force_constants, force_constants,
-                            gamma_modes, vibrations)
+from ase_maud.modes import (
+    finite_difference_force_constants,
+    force_constants,
+    gamma_modes,
+    vibrations,
+)
 
 
 def scene(random_points, n, dim, seed):

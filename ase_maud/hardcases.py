@@ -9,7 +9,10 @@ are plain scenes at extreme sizes or scales (long chains, large all-pairs
 clusters, ``a`` and ``Q`` far from 1) are built with :func:`scenes.build`.
 """
 
+from __future__ import annotations
+
 import numpy as np
+from ase import Atoms
 from ase.constraints import FixCartesian
 
 from .calculator import MaudCalculator
@@ -29,7 +32,7 @@ ANCHORS = 3
 DENSE = 10
 
 
-def close_pair(size=8, seed=0, a=1.0, Q=1.0):
+def close_pair(size: int = 8, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """:func:`scenes.all_pairs` with atom 1 moved to ``CLOSE * a`` from atom 0.
 
     The repulsion between the two is ``1e8`` times its usual size, their
@@ -41,20 +44,20 @@ def close_pair(size=8, seed=0, a=1.0, Q=1.0):
     return atoms
 
 
-def no_springs(size=10, seed=0, a=1.0, Q=1.0):
+def no_springs(size: int = 10, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """``size`` free points in a ball, no springs: no finite minimum."""
     n = _count(size, 2, 'no_springs')
     return _scene(_ball(np.random.default_rng(seed), n), [], a, Q)
 
 
-def islands(size=3, seed=0, a=1.0, Q=1.0):
+def islands(size: int = 3, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """``size`` all-pairs clusters of :data:`ISLAND` points, 3 a apart along x,
     nothing fixed: the clusters repel each other for ever (no finite
     minimum)."""
     return _islands(size, seed, a, Q, anchored=False)
 
 
-def anchored_islands(size=3, seed=0, a=1.0, Q=1.0):
+def anchored_islands(size: int = 3, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """:func:`islands` with the first :data:`ANCHORS` points of each cluster
     fixed: bounded, and (three points holding each cluster) well conditioned.
     With one fixed point each, a cluster turns about it held only by the far
@@ -62,7 +65,7 @@ def anchored_islands(size=3, seed=0, a=1.0, Q=1.0):
     return _islands(size, seed, a, Q, anchored=True)
 
 
-def _islands(size, seed, a, Q, anchored):
+def _islands(size: int, seed: int, a: float, Q: float, anchored: bool) -> Atoms:
     n = _count(size, 2, 'islands')
     rng = np.random.default_rng(seed)
     positions = np.concatenate([_ball(rng, ISLAND) + [3.0 * k, 0, 0]
@@ -75,7 +78,7 @@ def _islands(size, seed, a, Q, anchored):
     return _scene(positions, springs, a, Q, fixed=fixed)
 
 
-def loose_point(size=6, seed=0, a=1.0, Q=1.0):
+def loose_point(size: int = 6, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """:func:`scenes.hanging_net` with the springs of one interior point cut.
 
     That point has no spring: in 3D its block is traceless
@@ -89,12 +92,12 @@ def loose_point(size=6, seed=0, a=1.0, Q=1.0):
     return atoms
 
 
-def loose_index(size):
+def loose_index(size: int) -> int:
     """Index of the cut point of :func:`loose_point`: the grid's middle."""
     return (size // 2) * size + size // 2
 
 
-def bead(size=8, seed=0, a=1.0, Q=1.0):
+def bead(size: int = 8, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """A point with no spring, confined to the plane of a fixed ring.
 
     ``size`` fixed points on a circle of radius a at z = 0 and one free point
@@ -114,7 +117,7 @@ def bead(size=8, seed=0, a=1.0, Q=1.0):
     return atoms
 
 
-def ring_with_centre(size=16, seed=0, a=1.0, Q=1.0):
+def ring_with_centre(size: int = 16, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """:func:`scenes.ring` (dim=2) plus a free point with no spring inside it.
 
     In the plane 1/L is not harmonic: the ring holds the point, and the
@@ -133,7 +136,8 @@ def ring_with_centre(size=16, seed=0, a=1.0, Q=1.0):
     return atoms
 
 
-def stiff_soft(size=40, seed=0, a=1.0, Q=1.0, dense=DENSE):
+def stiff_soft(size: int = 40, seed: int = 0, a: float = 1.0, Q: float = 1.0,
+               dense: int = DENSE) -> Atoms:
     """A dense cluster on a long sparse chain: stiff and soft in one scene.
 
     An all-pairs cluster of ``dense`` points (default :data:`DENSE`: spring
@@ -159,7 +163,7 @@ def stiff_soft(size=40, seed=0, a=1.0, Q=1.0, dense=DENSE):
                   fixed=[dense + left - 1, dense + n - 1])
 
 
-def tangled_net(size=6, seed=0, a=1.0, Q=1.0):
+def tangled_net(size: int = 6, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """:func:`scenes.net3d`'s springs with every point drawn in a ball of one
     point per a**3: a tangle with many local minima. Nothing fixed."""
     atoms = net3d(size, seed, a, Q)
@@ -168,7 +172,7 @@ def tangled_net(size=6, seed=0, a=1.0, Q=1.0):
     return atoms
 
 
-def tangled_hanging_net(size=6, seed=0, a=1.0, Q=1.0):
+def tangled_hanging_net(size: int = 6, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """:func:`scenes.hanging_net` with its interior points drawn in a ball of
     one point per a**3 about the centre (the boundary stays fixed)."""
     atoms = hanging_net(size, seed, a, Q)
@@ -177,7 +181,7 @@ def tangled_hanging_net(size=6, seed=0, a=1.0, Q=1.0):
     return atoms
 
 
-def flat_cluster(size=8, seed=0, a=1.0, Q=1.0):
+def flat_cluster(size: int = 8, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """:func:`scenes.all_pairs` pressed onto the plane z = 0, in 3D (dim=3).
 
     By symmetry every z force vanishes, so the points stay on the plane and

@@ -23,8 +23,14 @@ Conventions, fixed here once:
   enters. Constraints are not passed on.
 """
 
+from __future__ import annotations
+
+from typing import Any
+
 import numpy as np
+from ase import Atoms
 from ase.vibrations import VibrationsData
+from numpy.typing import ArrayLike
 from phonopy import Phonopy
 from phonopy.structure.atoms import PhonopyAtoms
 from scipy.spatial.distance import pdist
@@ -36,19 +42,19 @@ from .calculator import MaudCalculator
 BOX_MARGIN = 4.0
 
 
-def calculator_3d(calc, **changes):
+def calculator_3d(calc: MaudCalculator, **changes: Any) -> MaudCalculator:
     """A ``dim=3`` MaudCalculator with the parameters of ``calc``."""
     return MaudCalculator(**{**calc.parameters, 'dim': 3, **changes})
 
 
-def force_constants(atoms):
+def force_constants(atoms: Atoms) -> np.ndarray:
     """The analytic force constants of the 3D potential, shape (N, N, 3, 3)."""
     n = len(atoms)
     hessian = calculator_3d(atoms.calc).get_hessian(atoms)
     return hessian.reshape(n, 3, n, 3).transpose(0, 2, 1, 3)
 
 
-def phonopy_cell(atoms, masses=None):
+def phonopy_cell(atoms: Atoms, masses: ArrayLike | None = None) -> PhonopyAtoms:
     """Phonopy's unit cell: the scene centred in a large cubic box.
 
     Every point is labelled 'H' (phonopy needs an element; ``masses``, default
@@ -63,7 +69,7 @@ def phonopy_cell(atoms, masses=None):
                         cell=side * np.eye(3), masses=masses)
 
 
-def make_phonopy(atoms, masses=None):
+def make_phonopy(atoms: Atoms, masses: ArrayLike | None = None) -> Phonopy:
     """A Phonopy object for the scene, without force constants.
 
     Frequencies come out angular in ``sqrt(Q / mass)`` (unit conversion 1).
@@ -75,7 +81,8 @@ def make_phonopy(atoms, masses=None):
     return phonon
 
 
-def gamma_modes(atoms, masses=None):
+def gamma_modes(atoms: Atoms, masses: ArrayLike | None = None,
+                ) -> tuple[np.ndarray, np.ndarray, Phonopy]:
     """Phonopy's frequencies and modes from the analytic force constants.
 
     Returns ``(frequencies, modes, phonon)``: frequencies (3N,) ascending,
@@ -93,7 +100,8 @@ def gamma_modes(atoms, masses=None):
     return frequencies, modes.reshape(len(modes), len(atoms), 3), phonon
 
 
-def finite_difference_force_constants(atoms, distance=None):
+def finite_difference_force_constants(atoms: Atoms,
+                                      distance: float | None = None) -> np.ndarray:
     """Phonopy's own force constants, from forces of displaced copies.
 
     Phonopy displaces every point by ``distance`` (default ``1e-4`` times the
@@ -117,7 +125,7 @@ def finite_difference_force_constants(atoms, distance=None):
     return phonon.force_constants
 
 
-def vibrations(atoms, masses=None):
+def vibrations(atoms: Atoms, masses: ArrayLike | None = None) -> VibrationsData:
     """The same modes as an ASE :class:`~ase.vibrations.VibrationsData`.
 
     Atoms left out follow ASE's rule (any atom under FixAtoms or

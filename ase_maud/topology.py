@@ -10,13 +10,19 @@ directions left free and repulsion can hold it (a 2D ring about a point). A
 single free component, alone, is bounded up to rigid motion.
 """
 
+from __future__ import annotations
+
+from collections.abc import Sequence
+
 import numpy as np
+from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian
+from numpy.typing import ArrayLike
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 
-def spring_components(natoms, springs):
+def spring_components(natoms: int, springs: ArrayLike) -> np.ndarray:
     """Label of the spring-graph component of every atom, shape (natoms,)."""
     springs = np.asarray(springs, dtype=int).reshape(-1, 2)
     graph = coo_matrix((np.ones(len(springs)), springs.T),
@@ -24,7 +30,7 @@ def spring_components(natoms, springs):
     return connected_components(graph, directed=False)[1]
 
 
-def fixed_atoms(atoms):
+def fixed_atoms(atoms: Atoms) -> np.ndarray:
     """Boolean mask of atoms held in all three directions by a constraint."""
     held = np.zeros((len(atoms), 3), dtype=bool)
     for c in atoms.constraints:
@@ -35,7 +41,7 @@ def fixed_atoms(atoms):
     return held.all(axis=1)
 
 
-def constrained_atoms(atoms):
+def constrained_atoms(atoms: Atoms) -> np.ndarray:
     """Boolean mask of atoms touched by any constraint, in any direction.
 
     A constraint of a kind other than FixAtoms and FixCartesian marks the
@@ -50,7 +56,8 @@ def constrained_atoms(atoms):
     return touched
 
 
-def unbounded_components(atoms, springs, dim=3):
+def unbounded_components(atoms: Atoms, springs: ArrayLike,
+                         dim: int = 3) -> list[list[int]]:
     """Components (lists of atom indices) proved to fly away for ever.
 
     Empty unless ``dim == 3`` and there are several spring components: then
@@ -64,7 +71,7 @@ def unbounded_components(atoms, springs, dim=3):
     return [g.tolist() for g in groups if not held[g].any()]
 
 
-def describe_unbounded(components, limit=3):
+def describe_unbounded(components: Sequence[Sequence[int]], limit: int = 3) -> str:
     """One sentence naming the free components (the first few atoms each)."""
     shown = ['[' + ', '.join(map(str, g[:limit])) + (', ...' if len(g) > limit
                                                      else '') + ']'

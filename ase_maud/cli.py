@@ -70,10 +70,14 @@ def _pairs(scenes, sizes, suite):
 
 def relax(args):
     """``ase-maud relax``: exit status 0 if converged, else 1."""
+    from . import kernels_cached
     from .bench.runner import CallRecorder
     from .optimizer import Maud
     from .scenes import build
 
+    if not kernels_cached():
+        print('compiling the kernels (first run only, ~20 s)...', file=sys.stderr,
+              flush=True)
     atoms = build(args.scene, args.size, seed=args.seed)
     with CallRecorder(atoms.calc) as recorder, \
             Maud(atoms, method=args.method, logfile='-',

@@ -39,16 +39,20 @@ point: every nodal block has trace ``3 Q deg(m) >= 0`` in 3D (``1/L`` is
 harmonic) and more in 2D, and a maximum needs a negative trace.
 """
 
+from __future__ import annotations
+
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
+from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian
 from scipy.sparse.linalg import LinearOperator, eigsh, lobpcg, splu
 from scipy.spatial import cKDTree
 
+from . import physics
 from .hessian import hessian_vector_product
 
 #: Eigenvalues with ``|lambda| <= RTOL * max|lambda|`` count as zero.
@@ -89,12 +93,12 @@ class StationaryPoint:
     method: str
 
     @property
-    def n_modes(self):
+    def n_modes(self) -> int:
         """Free, non-rigid modes counted by the verdict."""
         return self.n_negative + self.n_zero + self.n_positive
 
 
-def free_mask(atoms, dim):
+def free_mask(atoms: Atoms, dim: int) -> np.ndarray:
     """Boolean (N, dim) mask of the free degrees of freedom.
 
     Only :class:`FixAtoms` and :class:`FixCartesian` are understood; any other
@@ -109,7 +113,8 @@ def free_mask(atoms, dim):
     return free[:, :dim] != 0
 
 
-def rigid_body_modes(positions, free, dim, rcond=1e-8):
+def rigid_body_modes(positions: np.ndarray, free: np.ndarray, dim: int,
+                     rcond: float = 1e-8) -> np.ndarray:
     """Orthonormal rigid-body modes on the free degrees of freedom.
 
     The translations and rotations about the centroid that leave every fixed
@@ -134,7 +139,8 @@ def rigid_body_modes(positions, free, dim, rcond=1e-8):
     return scipy.linalg.orth(modes[flat], rcond=rcond)
 
 
-def hessian_operator(atoms, free=None, rigid=None):
+def hessian_operator(atoms: Atoms, free: np.ndarray | None = None,
+                     rigid: np.ndarray | None = None) -> LinearOperator:
     """``H`` on the free degrees of freedom as a LinearOperator, never dense.
 
     ``free`` (N, dim) and ``rigid`` (orthonormal columns) default to
@@ -165,7 +171,8 @@ def hessian_operator(atoms, free=None, rigid=None):
                           matmat=matmat, dtype=float)
 
 
-def classify(atoms, method='auto', k=6, rtol=RTOL, ftol=None):
+def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
+             rtol: float = RTOL, ftol: float | None = None) -> StationaryPoint:
     """Classify ``atoms`` (with a MaudCalculator) by its Hessian.
 
     Parameters
@@ -273,7 +280,7 @@ def _lowest_spectrum(atoms, free, rigid, k, rtol):
     return values, vectors, max(abs(values[0]), abs(top))
 
 
-def near_field_stiffness(atoms, cutoff=1.5):
+def near_field_stiffness(atoms: Atoms, cutoff: float = 1.5) -> sp.csr_matrix:
     """Positive semi-definite sparse model of ``H``, shape (dim N, dim N).
 
     The Hessian of the near field (every sprung pair and every pair closer
@@ -298,11 +305,9 @@ def near_field_stiffness(atoms, cutoff=1.5):
                              axis=0, return_inverse=True)
     i, j = pairs.T
     d = x[i] - x[j]
-    inv2 = 1.0 / np.einsum('ij,ij->i', d, d)
-    dd = d[:, :, None] * d[:, None, :]
-    blocks = c * (inv2 * np.sqrt(inv2))[:, None, None] * (
-        3.0 * inv2[:, None, None] * dd - np.eye(dim))
-    blocks[where[:len(springs)]] += p['Q'] * np.eye(dim)
+    blocks = c * physics.repulsion_block(d)
+    sprung = where[:len(springs)]
+    blocks[sprung] += physics.spring_block(d[sprung], p['Q'])
     values, vectors = np.linalg.eigh(blocks)
     blocks = np.einsum('pak,pk,pbk->pab', vectors, np.abs(values), vectors)
     axis = np.arange(dim)
@@ -314,7 +319,8 @@ def near_field_stiffness(atoms, cutoff=1.5):
                          shape=(dim * n, dim * n))
 
 
-def displace_along_mode(atoms, point, mode=0, step=None):
+def displace_along_mode(atoms: Atoms, point: StationaryPoint, mode: int = 0,
+                        step: float | None = None) -> tuple[Atoms, Atoms]:
     """Two copies of ``atoms`` pushed both ways along an unstable mode.
 
     ``mode`` counts the negative eigenvalues of ``point`` (a

@@ -11,21 +11,24 @@ nodal blocks ``K_mm = d2E/dr_m2`` (N, dim, dim), the Hessian's diagonal blocks:
 the stiffness at point m with every other point held fixed.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
 from numbers import Integral, Real
+from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
+from ase import Atoms
 from ase.calculators.calculator import Calculator, all_changes
+from numpy.typing import ArrayLike
 
-from .fmm import check_eps, repulsion_fmm
+from . import backends, physics, topology
 from .hessian import dense_hessian
-from .kernels import repulsion_numba, repulsion_numpy, voigt_to_blocks
-from .springs import check_range, check_springs, spring_degrees, spring_terms
+from .springs import check_range, check_springs
 
 #: Relative tolerance on the spread of z for a ``dim=2`` scene.
 PLANE_TOLERANCE = 1e-10
-
-BACKENDS = {'numba': repulsion_numba, 'numpy': repulsion_numpy,
-            'fmm': repulsion_fmm}
 
 
 class MaudCalculator(Calculator):
@@ -45,11 +48,12 @@ class MaudCalculator(Calculator):
         ``2``: every point lies on one plane ``z = const`` (checked to a
         relative :data:`PLANE_TOLERANCE`), forces have ``z = 0`` exactly and
         the blocks are 2x2. ``3`` (default): 3x3 blocks.
-    backend : 'numba', 'numpy' or 'fmm'
-        The repulsion kernel: the direct sums ``numba`` (default, compiled,
-        parallel over ``NUMBA_NUM_THREADS``) and ``numpy`` (the slow
-        reference), or ``fmm``, FMM3D's fast multipole method (O(N), faster
-        from a few thousand points, approximate to ``fmm_eps``; needs
+    backend : str
+        The repulsion kernel, a name in the registry :mod:`.backends`: the
+        direct sums ``numba`` (default, compiled, parallel over
+        ``NUMBA_NUM_THREADS``) and ``numpy`` (the slow reference), or
+        ``fmm``, FMM3D's fast multipole method (O(N), faster from a few
+        thousand points, approximate to ``fmm_eps``; needs
         ``pip install 'ase-maud[fmm]'``, parallel over ``OMP_NUM_THREADS``).
     fmm_eps : float in (0, 1)
         Requested relative precision of the multipole sums of the ``fmm``
@@ -72,12 +76,14 @@ class MaudCalculator(Calculator):
     #: (dim N)**2 matrix: 3000 atoms in 3D is an 81e6-entry, 648 MB array.
     max_hessian_atoms = 3000
 
-    def __init__(self, springs=(), a=1.0, Q=1.0, dim=3, backend='numba',
-                 fmm_eps=1e-6, **kwargs):
+    def __init__(self, springs: ArrayLike = (), a: float = 1.0,
+                 Q: float = 1.0, dim: int = 3, backend: str = 'numba',
+                 fmm_eps: float = 1e-6, **kwargs: Any) -> None:
+        self._spring_hessian: tuple[tuple, sp.csr_matrix] | None = None
         super().__init__(springs=springs, a=a, Q=Q, dim=dim, backend=backend,
                          fmm_eps=fmm_eps, **kwargs)
 
-    def set(self, **kwargs):
+    def set(self, **kwargs: Any) -> dict[str, Any]:
         """Set parameters; invalid values raise ValueError and are not kept."""
         if 'springs' in kwargs:
             kwargs['springs'] = check_springs(kwargs['springs'])
@@ -85,11 +91,22 @@ class MaudCalculator(Calculator):
         return super().set(**kwargs)
 
     @property
-    def springs(self):
+    def springs(self) -> np.ndarray:
         """The (K, 2) int array of sprung pairs."""
         return self.parameters['springs']
 
-    def check_atoms(self, atoms):
+    @property
+    def dim(self) -> int:
+        """2 (points on a plane z = const, 2x2 blocks) or 3."""
+        return self.parameters['dim']
+
+    @property
+    def length_scale(self) -> float:
+        """The length ``a`` of the repulsion ``a**3 Q / L`` (a dimer with
+        one spring rests at ``L = a``)."""
+        return self.parameters['a']
+
+    def check_atoms(self, atoms: Atoms) -> np.ndarray:
         """Validate ``atoms`` for this potential; return its positions.
 
         Raises ValueError naming the problem: periodic boundaries, a spring
@@ -118,8 +135,9 @@ class MaudCalculator(Calculator):
                                  f'has z = {z[0]}')
         return positions
 
-    def calculate(self, atoms=None, properties=('energy',),
-                  system_changes=all_changes):
+    def calculate(self, atoms: Atoms | None = None,
+                  properties: Sequence[str] = ('energy',),
+                  system_changes: Sequence[str] = all_changes) -> None:
         super().calculate(atoms, properties, system_changes)
         positions = self.check_atoms(self.atoms)
         p = self.parameters
@@ -128,12 +146,12 @@ class MaudCalculator(Calculator):
         flat = positions.copy()
         if dim == 2:
             flat[:, 2] = 0.0
-        options = {'eps': p['fmm_eps']} if p['backend'] == 'fmm' else {}
-        e_rep, f_rep, block6 = BACKENDS[p['backend']](flat, want_blocks,
-                                                      **options)
+        backend = backends.get(p['backend'])
+        e_rep, f_rep, block6 = backend.evaluate(flat, want_blocks,
+                                                **backend.options(p))
         if not np.isfinite(e_rep):
             raise_on_coincident(flat)
-        e_spr, f_spr = spring_terms(flat, self.springs, p['Q'])
+        e_spr, f_spr = physics.spring_terms(flat, self.springs, p['Q'])
         energy = c * e_rep + e_spr
         forces = c * f_rep + f_spr
         if dim == 2:
@@ -141,16 +159,16 @@ class MaudCalculator(Calculator):
         self.results['energy'] = self.results['free_energy'] = energy
         self.results['forces'] = forces
         if want_blocks:
-            blocks = c * voigt_to_blocks(block6, dim)
-            deg = spring_degrees(self.springs, len(flat))
-            blocks += p['Q'] * deg[:, None, None] * np.eye(dim)
+            blocks = c * backends.voigt_to_blocks(block6, dim)
+            blocks += physics.spring_nodal_blocks(self.springs, len(flat),
+                                                  p['Q'], dim)
             self.results['stiffness'] = blocks
 
-    def get_stiffness(self, atoms=None):
+    def get_stiffness(self, atoms: Atoms | None = None) -> np.ndarray:
         """Nodal blocks ``K_mm``, shape (N, dim, dim), units of ``Q``."""
         return self.get_property('stiffness', atoms)
 
-    def get_hessian(self, atoms=None):
+    def get_hessian(self, atoms: Atoms | None = None) -> np.ndarray:
         """The full analytic Hessian ``d2E/dr dr``, shape (dim N, dim N).
 
         For analysis of small scenes only; refuses more than
@@ -167,10 +185,35 @@ class MaudCalculator(Calculator):
         p = self.parameters
         return dense_hessian(positions, self.springs, p['a'], p['Q'], p['dim'])
 
+    def get_spring_hessian(self, atoms: Atoms | None = None) -> sp.csr_matrix:
+        """The springs' exact, constant Hessian ``Q (L (x) I_dim)``, shape
+        (dim N, dim N) (:func:`.physics.spring_hessian`).
 
-def _check_parameters(p):
-    """Raise ValueError unless a, Q, dim, backend and fmm_eps in ``p`` are
-    valid."""
+        It depends on the springs, the number of atoms, ``Q`` and ``dim``
+        only, not on the positions: it is built once and kept until one of
+        them changes. A spring index beyond the last atom is a ValueError.
+        """
+        atoms = atoms if atoms is not None else self.atoms
+        natoms = len(atoms)
+        check_range(self.springs, natoms)
+        p = self.parameters
+        key = (self.springs.tobytes(), self.springs.shape, natoms, p['Q'],
+               p['dim'])
+        if self._spring_hessian is None or self._spring_hessian[0] != key:
+            matrix = physics.spring_hessian(self.springs, natoms, p['Q'],
+                                            p['dim'])
+            self._spring_hessian = key, matrix
+        return self._spring_hessian[1]
+
+    def unbounded_components(self, atoms: Atoms) -> list[list[int]]:
+        """Spring components of ``atoms`` proved to fly away for ever
+        (:func:`.topology.unbounded_components`); empty if there are none."""
+        return topology.unbounded_components(atoms, self.springs, self.dim)
+
+
+def _check_parameters(p: Mapping[str, Any]) -> None:
+    """Raise ValueError unless a, Q, dim, the backend and the backends'
+    parameters (:func:`.backends.check_parameters`) in ``p`` are valid."""
     for name in ('a', 'Q'):
         value = p[name]
         if not (isinstance(value, Real) and np.isfinite(value)
@@ -179,13 +222,10 @@ def _check_parameters(p):
                              f'got {value!r}')
     if not (isinstance(p['dim'], Integral) and p['dim'] in (2, 3)):
         raise ValueError(f"dim must be 2 or 3, got {p['dim']!r}")
-    if p['backend'] not in BACKENDS:
-        raise ValueError(f"backend must be one of {sorted(BACKENDS)}, "
-                         f"got {p['backend']!r}")
-    check_eps(p['fmm_eps'])
+    backends.check_parameters(p)
 
 
-def raise_on_coincident(positions):
+def raise_on_coincident(positions: np.ndarray) -> None:
     """Raise ValueError naming two points at the same position."""
     order = np.lexsort(positions.T[::-1])
     same = np.all(positions[order[1:]] == positions[order[:-1]], axis=1)

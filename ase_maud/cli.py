@@ -4,46 +4,26 @@
   and a trajectory for ``ase gui``.
 - ``ase-maud bench``: every chosen optimiser from the same starts, force
   calls and wall time against the error; CSV, markdown and PNG in ``--out``.
-- ``ase-maud backends``: time per call against accuracy of the kernels.
+- ``ase-maud backends``: time per call against accuracy of the registered
+  backends (:mod:`ase_maud.backends`).
 
-``--threads N`` sets OMP_NUM_THREADS, OPENBLAS_NUM_THREADS, MKL_NUM_THREADS
-and NUMBA_NUM_THREADS to N and calls ``numba.set_num_threads(N)``. BLAS reads
-its variables when numpy is first imported, which importing ase_maud already
-does; so if they were not N in the environment, the command starts itself
-again with them set (or, when ``main(argv)`` is called from Python, warns).
-Each command imports what it needs when it runs (relax needs no matplotlib).
+``--threads N`` pins OpenMP, BLAS and numba to N threads
+(:func:`ase_maud.threads.pin_threads`); if BLAS may already run with another
+count, the command starts itself again with them set (or, when
+``main(argv)`` is called from Python, warns). This module only parses
+arguments and calls the library; each command imports what it needs when it
+runs (relax needs no matplotlib).
 """
 
+from __future__ import annotations
+
 import argparse
-import importlib.util
 import inspect
-import os
 import sys
-import warnings
+from collections.abc import Sequence
 from pathlib import Path
 
-THREAD_VARIABLES = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS',
-                    'MKL_NUM_THREADS', 'NUMBA_NUM_THREADS')
-
-
-def pin_threads(n, restart):
-    """Pin every thread pool to ``n`` threads; see the module docstring.
-
-    ``restart``: re-execute ``python -m ase_maud <sys.argv[1:]>`` if BLAS may
-    already run with another count (only right when run as a program).
-    """
-    value = str(n)
-    in_force = all(os.environ.get(v) == value for v in THREAD_VARIABLES)
-    os.environ.update(dict.fromkeys(THREAD_VARIABLES, value))
-    if not in_force and 'numpy' in sys.modules:
-        if restart:
-            os.execv(sys.executable,
-                     [sys.executable, '-m', 'ase_maud', *sys.argv[1:]])
-        warnings.warn(f'--threads {n}: numpy was imported before the thread '
-                      'variables were set, so BLAS may use another count; '
-                      'set them in the environment to pin BLAS too')
-    import numba
-    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+from .threads import pin_threads
 
 
 def _size(text):
@@ -68,7 +48,7 @@ def _pairs(scenes, sizes, suite):
             for size in [s for m, s in suite if m == name] or [default[name]]]
 
 
-def relax(args):
+def relax(args: argparse.Namespace) -> int:
     """``ase-maud relax``: exit status 0 if converged, else 1."""
     from . import kernels_cached
     from .bench.runner import CallRecorder
@@ -92,7 +72,7 @@ def relax(args):
     return 0 if converged else 1
 
 
-def bench(args):
+def bench(args: argparse.Namespace) -> int:
     """``ase-maud bench``: exit status 0, or 130 if interrupted."""
     from .bench import report
     from .bench.suite import run_suite
@@ -129,21 +109,14 @@ def bench(args):
     return 130 if interrupted else 0
 
 
-def backends(args):
+def backends(args: argparse.Namespace) -> int:
     """``ase-maud backends``: exit status 0."""
-    from .bench import report
-    from .bench.backends import measure_backends
+    from .bench.backends import write_backends_report
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    rows = measure_backends(args.natoms, args.backends, repeats=args.repeats,
-                            seed=args.seed)
-    report.write_csv(out / 'backends.csv', rows)
-    (out / 'backends.md').write_text(report.backends_markdown(
-        rows, report.environment(args.argv)))
-    report.plot_backends(rows, out / 'backends.png')
-    print((out / 'backends.md').read_text())
-    print(f'results in {out}/')
+    print(write_backends_report(Path(args.out), args.natoms, args.backends,
+                                repeats=args.repeats, seed=args.seed,
+                                argv=args.argv))
+    print(f'results in {args.out}/')
     return 0
 
 
@@ -153,10 +126,10 @@ def _add_threads(parser, default, default_text):
                         f'(default: {default_text})')
 
 
-def build_parser():
+def build_parser() -> argparse.ArgumentParser:
     """The argparse parser of ``ase-maud`` and its three commands."""
+    from . import backends as registry
     from .bench.optimizers import OPTIMIZERS
-    from .calculator import BACKENDS
     from .scenes import SCENES
 
     parser = argparse.ArgumentParser(
@@ -238,12 +211,13 @@ def build_parser():
     p.add_argument('--natoms', nargs='+', type=int,
                    default=[100, 300, 1000, 3000], metavar='N',
                    help='numbers of points (default: 100 300 1000 3000)')
-    installed = [name for name in BACKENDS
-                 if name != 'fmm' or importlib.util.find_spec('fmm3dpy')]
-    p.add_argument('--backends', nargs='+', choices=BACKENDS,
-                   default=installed, metavar='NAME',
-                   help=f'of: {", ".join(BACKENDS)} (default: all that are '
-                   'installed; fmm needs fmm3dpy)')
+    needs = '; '.join(f'{b.name} needs {", ".join(b.requires)}'
+                      for b in map(registry.get, registry.names())
+                      if b.requires)
+    p.add_argument('--backends', nargs='+', choices=registry.names(),
+                   default=registry.installed(), metavar='NAME',
+                   help=f'of: {", ".join(registry.names())} (default: all '
+                   f'that are installed; {needs})')
     p.add_argument('--repeats', type=int, default=3,
                    help='timed calls per point, the best kept '
                    '(default: %(default)s)')
@@ -256,7 +230,7 @@ def build_parser():
     return parser
 
 
-def main(argv=None):
+def main(argv: Sequence[str] | None = None) -> int:
     """Run ``ase-maud`` on ``argv`` (default ``sys.argv[1:]``); return the
     exit status. Without a command, print the help."""
     parser = build_parser()

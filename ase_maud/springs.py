@@ -1,9 +1,13 @@
-"""Zero-length linear springs ``Q L**2 / 2`` on listed pairs: checks and terms."""
+"""Checks of the spring list; the springs' terms are in :mod:`.physics`."""
+
+from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 
-def check_springs(springs, natoms=None):
+def check_springs(springs: ArrayLike | None,
+                  natoms: int | None = None) -> np.ndarray:
     """Return ``springs`` as an int array of shape (K, 2), or raise ValueError.
 
     Refused, each with the offending spring named by its row: a wrong shape,
@@ -42,7 +46,7 @@ def check_springs(springs, natoms=None):
     return pairs
 
 
-def check_range(pairs, natoms):
+def check_range(pairs: np.ndarray, natoms: int) -> None:
     """Raise ValueError naming the first spring of ``pairs`` (an int array of
     shape (K, 2)) with an index ``>= natoms``."""
     _refuse_first(pairs.max(axis=1, initial=-1) >= natoms, pairs,
@@ -56,22 +60,3 @@ def _refuse_first(bad, pairs, what):
         i, j = pairs[k]
         raise ValueError(f'spring {k} ({i}, {j}) {what}')
 
-
-def spring_degrees(springs, natoms):
-    """Number of springs at each point, shape (natoms,)."""
-    return np.bincount(springs.ravel(), minlength=natoms)
-
-
-def spring_terms(positions, springs, Q):
-    """Energy and forces of the springs alone.
-
-    Energy ``sum Q L**2 / 2``; force on ``i`` of spring (i, j) is ``-Q d``
-    with ``d = r_i - r_j`` (and ``+Q d`` on ``j``). The nodal block of a spring
-    is ``Q I`` at both ends, added by the caller from :func:`spring_degrees`.
-    """
-    d = positions[springs[:, 0]] - positions[springs[:, 1]]
-    energy = 0.5 * Q * np.einsum('ij,ij->', d, d)
-    forces = np.zeros_like(positions)
-    np.add.at(forces, springs[:, 0], -Q * d)
-    np.add.at(forces, springs[:, 1], Q * d)
-    return energy, forces

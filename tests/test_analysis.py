@@ -9,8 +9,14 @@ from ase.constraints import FixAtoms, FixCartesian, FixedPlane
 from ase.optimize import BFGS
 from scipy.optimize import brentq
 
-from ase_maud.analysis import (classify, displace_along_mode, free_mask,
-                               rigid_body_modes)
+from ase_maud import physics
+from ase_maud.analysis import (
+    classify,
+    displace_along_mode,
+    free_mask,
+    near_field_stiffness,
+    rigid_body_modes,
+)
 from ase_maud.calculator import MaudCalculator
 from ase_maud.hessian import dense_hessian, hessian_vector_product
 
@@ -61,6 +67,45 @@ def test_hessian_vector_product_matches_dense(random_points, dim, seed):
                                atol=1e-12 * np.abs(hessian).max())
     single = hessian_vector_product(positions, springs, 1.3, 0.7, dim, v[0])
     np.testing.assert_allclose(single, hv[0], rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('seed', [0, 1])
+def test_hessian_vector_product_matches_physics(random_points, dim, seed):
+    """(H v)_i = sum_j B_ij (v_i - v_j), with the pair blocks of physics."""
+    n = 25
+    positions = random_points(n, dim, seed)[:, :dim]
+    springs = np.array([(i, (i + 4) % n) for i in range(n)])
+    v = np.random.default_rng(seed).standard_normal((3, n, dim))
+    hv = hessian_vector_product(positions, springs, 1.3, 0.7, dim, v)
+    i, j = np.nonzero(~np.eye(n, dtype=bool))
+    blocks = 1.3**3 * 0.7 * physics.repulsion_block(positions[i]
+                                                    - positions[j])
+    expected = np.zeros_like(v)
+    for k in range(len(v)):
+        np.add.at(expected[k], i,
+                  np.einsum('pab,pb->pa', blocks, v[k, i] - v[k, j]))
+    sprung = physics.spring_hessian(springs, n, 0.7, dim)
+    expected += (sprung @ v.reshape(3, -1).T).T.reshape(v.shape)
+    np.testing.assert_allclose(hv, expected, rtol=0,
+                               atol=1e-12 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+def test_near_field_is_the_hessian_when_every_block_is_positive(
+        random_points, dim):
+    """Every pair sprung and longer than a: each pair block
+    c (3 n n^T - I) / L^3 + Q I is positive, so |B| = B and the near field,
+    holding every pair, is the Hessian itself."""
+    n = 7
+    atoms = scene(3 * random_points(n, dim, seed=3),
+                  list(itertools.combinations(range(n), 2)), dim, a=1.1,
+                  Q=0.8)
+    near = near_field_stiffness(atoms, cutoff=100.0)
+    hessian = atoms.calc.get_hessian(atoms)
+    assert near.shape == hessian.shape
+    np.testing.assert_allclose(near.toarray(), hessian, rtol=0,
+                               atol=1e-13 * np.abs(hessian).max())
 
 
 @pytest.mark.parametrize('n', [5, 12, 30])

@@ -4,9 +4,11 @@ import numpy as np
 import pytest
 from ase import Atoms
 
+from ase_maud import backends
 from ase_maud.calculator import MaudCalculator
 
-BACKENDS = ['numba', 'numpy']
+#: The exact backends (the fmm one is tested in test_fmm.py).
+BACKENDS = [name for name in backends.names() if backends.get(name).exact]
 
 
 def points(n=5, seed=0):

@@ -11,8 +11,9 @@ from ase_maud.bench.optimizers import OPTIMIZERS
 from ase_maud.bench.report import summarize
 from ase_maud.bench.runner import CallRecorder, Run, classify, run_optimizer
 from ase_maud.bench.suite import SAMPLE_COLUMNS, run_suite
-from ase_maud.cli import THREAD_VARIABLES, main
+from ase_maud.cli import main
 from ase_maud.scenes import build
+from ase_maud.threads import THREAD_VARIABLES
 
 PLOTS = ('fmax_vs_calls', 'fmax_vs_time', 'energy_error_vs_calls',
          'energy_error_vs_time')

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from ase import Atoms
 from ase.calculators.fd import calculate_numerical_forces
+from ase.constraints import FixAtoms
 from ase.io import read, write
 from scipy.spatial.distance import pdist, squareform
 
@@ -325,3 +326,47 @@ def test_backends_agree(scene, shape, dim):
                        reference.calc.get_stiffness(reference))]:
         np.testing.assert_allclose(got, want, rtol=0,
                                    atol=1e-12 * np.abs(want).max())
+
+
+# -- what the optimiser asks of the calculator ---------------------------------
+
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('shape', ['chain', 'star', 'all_pairs'])
+def test_spring_hessian_is_constant_and_cached(scene, shape, dim):
+    atoms = scene(shape, n=7, dim=dim, seed=2)
+    calc = atoms.calc
+    spring = calc.get_spring_hessian(atoms)
+    assert spring.shape == (7 * dim, 7 * dim) and spring.format == 'csr'
+    # the spring part of the Hessian: the Hessian minus that with no springs
+    free = MaudCalculator(**{**calc.parameters, 'springs': ()})
+    np.testing.assert_allclose(
+        spring.toarray(), calc.get_hessian(atoms) - free.get_hessian(atoms),
+        rtol=0, atol=1e-12 * np.abs(calc.get_hessian(atoms)).max())
+    atoms.positions *= 1.7   # positions do not enter: the same matrix
+    assert calc.get_spring_hessian(atoms) is spring
+    atoms.get_potential_energy()
+    assert calc.get_spring_hessian() is spring   # the last atoms computed
+    calc.set(Q=2 * calc.parameters['Q'])
+    doubled = calc.get_spring_hessian(atoms)
+    np.testing.assert_allclose(doubled.toarray(), 2 * spring.toarray())
+    calc.set(springs=[[0, 1]])
+    assert calc.get_spring_hessian(atoms).nnz == 2 * 2 * dim
+    with pytest.raises(ValueError, match='spring 0 \\(0, 1\\).*index 0'):
+        calc.get_spring_hessian(atoms[:1])
+
+
+def test_length_scale_and_dim():
+    calc = MaudCalculator(a=2.5, Q=0.3, dim=2)
+    assert (calc.length_scale, calc.dim) == (2.5, 2)
+    calc.set(a=0.1, dim=3)
+    assert (calc.length_scale, calc.dim) == (0.1, 3)
+
+
+@pytest.mark.parametrize('dim, expected', [(3, [[2, 3], [4]]), (2, [])])
+def test_unbounded_components(random_points, dim, expected):
+    """Three spring components in 3D, the first held: the other two fly
+    away (topology.unbounded_components); in 2D nothing is proved."""
+    atoms = Atoms('H5', random_points(5, dim, seed=1))
+    atoms.set_constraint(FixAtoms([1]))
+    atoms.calc = MaudCalculator(springs=[[0, 1], [2, 3]], dim=dim)
+    assert atoms.calc.unbounded_components(atoms) == expected

@@ -10,8 +10,9 @@ import pytest
 from ase.io import read
 
 from ase_maud import cli
-from ase_maud.cli import THREAD_VARIABLES, main
+from ase_maud.cli import main
 from ase_maud.scenes import SUITE
+from ase_maud.threads import THREAD_VARIABLES
 
 
 def test_no_command_prints_help(capsys):

@@ -2,9 +2,9 @@
 
 The rate is ``N (N - 1) / t``, with ``t`` the best wall time of one call among
 the calls that fit in ``--seconds`` (at least one). Measured for energy and
-forces, and for energy, forces and nodal blocks, through the kernel functions
-(``ase_maud.kernels``) and through ``MaudCalculator`` (with a chain of springs
-and ASE's bookkeeping), and for the numpy reference kernel at sizes up to
+forces, and for energy, forces and nodal blocks, through the kernel
+(``ase_maud.backends.direct``) and through ``MaudCalculator`` (with a chain of
+springs and ASE's bookkeeping), and for the numpy reference at sizes up to
 ``--numpy-max``. Thread counts are printed with the table; raw numbers go to a
 CSV file.
 
@@ -55,8 +55,8 @@ def cases(n, numpy_max):
     """
     from ase import Atoms
 
+    from ase_maud.backends import direct, reference
     from ase_maud.calculator import MaudCalculator
-    from ase_maud.kernels import repulsion_numba, repulsion_numpy
 
     positions = np.random.default_rng(n).uniform(0, n ** (1 / 3), (n, 3))
     chain = np.c_[np.arange(n - 1), np.arange(1, n)]
@@ -68,10 +68,10 @@ def cases(n, numpy_max):
         return calc.get_stiffness(atoms) if blocks else atoms.get_forces()
 
     for blocks in (False, True):
-        yield 'kernel', blocks, partial(repulsion_numba, positions, blocks)
+        yield 'kernel', blocks, partial(direct.evaluate, positions, blocks)
         yield 'calculator', blocks, partial(through_calculator, blocks)
         if n <= numpy_max:
-            yield 'numpy', blocks, partial(repulsion_numpy, positions, blocks)
+            yield 'numpy', blocks, partial(reference.evaluate, positions, blocks)
 
 
 def main():
@@ -81,10 +81,10 @@ def main():
     os.environ.setdefault('OMP_NUM_THREADS', str(args.threads))
     import numba
 
-    from ase_maud.kernels import repulsion_numba
+    from ase_maud.backends import direct
 
     for blocks in (False, True):  # compile, or load the cached machine code
-        repulsion_numba(np.random.default_rng(0).normal(size=(64, 3)), blocks)
+        direct.evaluate(np.random.default_rng(0).normal(size=(64, 3)), blocks)
 
     print(f'NUMBA_NUM_THREADS={numba.get_num_threads()} '
           f'(threading layer {numba.threading_layer()}), '

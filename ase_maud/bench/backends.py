@@ -1,23 +1,30 @@
-"""Evaluation cost against accuracy for the calculator's kernels (backends).
+"""Evaluation cost against accuracy for the registered backends.
 
 For each N, ``N`` points uniform in a cube of one point per unit volume
 (``a = Q = 1``, no springs: the repulsion is the whole cost) are evaluated by
-every backend, for energy and forces and for energy, forces and the nodal
-stiffness blocks. Time per call is the best of ``repeats`` calls after one
-warm-up (numba compiles on first use); the relative error is the Frobenius
-norm of the difference from the reference backend's forces (or blocks) over
-the reference's norm. The ``fmm`` backend is measured at every requested
-precision ``fmm_eps``, each a backend of its own named ``fmm eps=...``.
+every backend of the registry :mod:`ase_maud.backends` asked for, for energy
+and forces and for energy, forces and the nodal stiffness blocks. Time per
+call is the best of ``repeats`` calls after one warm-up (numba compiles on
+first use); the relative error is the Frobenius norm of the difference from
+the reference backend's forces (or blocks) over the reference's norm. An
+approximate backend (``fmm``) is measured at every requested tolerance, each
+a backend of its own named ``<name> eps=<tolerance>``.
 """
 
+from __future__ import annotations
+
 import time
+from collections.abc import Sequence
+from pathlib import Path
 
 import numba
 import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import all_changes
 
-from ..calculator import BACKENDS, MaudCalculator
+from .. import backends as registry
+from ..calculator import MaudCalculator
+from . import report
 
 #: What one call computes, and the result compared with the reference.
 PROPERTIES = {'forces': ['energy', 'forces'], 'stiffness': ['stiffness']}
@@ -33,20 +40,28 @@ def _time_per_call(calc, atoms, properties, repeats):
     return best
 
 
-def measure_backends(natoms=(100, 300, 1000), backends=tuple(BACKENDS),
-                     reference='numpy', repeats=3, seed=0,
-                     fmm_eps=(1e-3, 1e-6)):
+def measure_backends(natoms: Sequence[int] = (100, 300, 1000),
+                     backends: Sequence[str] | None = None,
+                     reference: str = 'numpy', repeats: int = 3,
+                     seed: int = 0,
+                     tolerances: Sequence[float] = (1e-3, 1e-6)) -> list[dict]:
     """One dict per (N, property set, backend): ``time_per_call_s``, the
     throughput ``pairs_per_s`` (N (N - 1) / 2 pairs per call) and
-    ``rel_error`` (0 for the reference itself), with numba's thread count."""
+    ``rel_error`` (0 for the reference itself), with numba's thread count.
+
+    ``backends`` defaults to every installed one; an approximate backend is
+    run at each of ``tolerances``.
+    """
+    names = registry.installed() if backends is None else backends
     variants = {}  # backend name in the rows: calculator parameters
-    for backend in dict.fromkeys([reference, *backends]):
-        if backend == 'fmm':
-            variants.update({f'fmm eps={eps:g}': {'backend': 'fmm',
-                                                  'fmm_eps': eps}
-                             for eps in fmm_eps})
+    for name in dict.fromkeys([reference, *names]):
+        backend = registry.get(name)
+        if backend.exact:
+            variants[name] = {'backend': name}
         else:
-            variants[backend] = {'backend': backend}
+            variants.update({f'{name} eps={tol:g}': {'backend': name,
+                                                     backend.tolerance: tol}
+                             for tol in tolerances})
     rows = []
     rng = np.random.default_rng(seed)
     for n in natoms:
@@ -66,3 +81,25 @@ def measure_backends(natoms=(100, 300, 1000), backends=tuple(BACKENDS),
                              'pairs_per_s': n * (n - 1) / 2 / seconds,
                              'rel_error': float(error)})
     return rows
+
+
+def write_backends_report(out: Path, natoms: Sequence[int],
+                          backends: Sequence[str] | None = None,
+                          reference: str = 'numpy', repeats: int = 3,
+                          seed: int = 0,
+                          argv: Sequence[str] | None = None) -> str:
+    """Measure (:func:`measure_backends`) and write ``backends.csv``,
+    ``backends.md`` (with the registry's cost and accuracy of each backend)
+    and ``backends.png`` in ``out``; return the markdown."""
+    out.mkdir(parents=True, exist_ok=True)
+    rows = measure_backends(natoms, backends, reference, repeats, seed)
+    report.write_csv(out / 'backends.csv', rows)
+    info = report.environment(argv)
+    measured = registry.installed() if backends is None else backends
+    described = map(registry.get, dict.fromkeys([reference, *measured]))
+    info['backends'] = '; '.join(f'{b.name}: cost {b.cost}, {b.accuracy}, '
+                                 f'{b.summary}' for b in described)
+    text = report.backends_markdown(rows, info)
+    (out / 'backends.md').write_text(text)
+    report.plot_backends(rows, out / 'backends.png')
+    return text

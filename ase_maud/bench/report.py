@@ -19,7 +19,7 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.figure import Figure
 
-from ..cli import THREAD_VARIABLES
+from ..threads import THREAD_VARIABLES
 from .optimizers import ASE_BASELINES
 
 

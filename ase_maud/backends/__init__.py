@@ -1,0 +1,73 @@
+"""The registry of backends: every way to evaluate the repulsion, by name.
+
+A backend (:class:`~.base.Backend`) says what it computes, how exact it is,
+whether it is installed, how its cost grows, which calculator parameters it
+takes, and evaluates the unit-strength repulsion (:mod:`.base`). The
+calculator, the ``ase-maud backends`` command and the benchmark read this
+registry, and nothing else names a backend.
+
+Registered: ``numba`` (:mod:`.direct`, the default), ``numpy``
+(:mod:`.reference`) and ``fmm`` (:mod:`.fmm`). Adding one (a Barnes-Hut tree,
+a GPU kernel) is one new file here that defines ``BACKEND =
+Backend(name=..., evaluate=..., ...)``, plus one registration line at the end
+of this file, ``register(newmodule.BACKEND)`` (and its module in the import
+line). A parameter it takes that the calculator does not have yet goes into
+``MaudCalculator.default_parameters`` too.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from . import direct, fmm, reference
+from .base import VOIGT_PAIRS, Backend, Result, blocks_to_voigt, voigt_to_blocks
+
+__all__ = ['Backend', 'Result', 'VOIGT_PAIRS', 'blocks_to_voigt',
+           'check_parameters', 'get', 'installed', 'names', 'register',
+           'voigt_to_blocks']
+
+_REGISTRY: dict[str, Backend] = {}
+
+
+def register(backend: Backend) -> None:
+    """Add ``backend``; a second backend of the same name is a ValueError."""
+    if backend.name in _REGISTRY:
+        raise ValueError(f'a backend named {backend.name!r} is already '
+                         'registered')
+    _REGISTRY[backend.name] = backend
+
+
+def get(name: str) -> Backend:
+    """The backend called ``name``, or a ValueError listing them all."""
+    try:
+        return _REGISTRY[name]
+    except (KeyError, TypeError):
+        raise ValueError(f'backend must be one of {sorted(_REGISTRY)}, '
+                         f'got {name!r}') from None
+
+
+def names() -> list[str]:
+    """Every registered backend's name, in order of registration."""
+    return list(_REGISTRY)
+
+
+def installed() -> list[str]:
+    """The names of the backends whose modules can be imported."""
+    return [name for name, backend in _REGISTRY.items() if backend.installed]
+
+
+def check_parameters(parameters: Mapping[str, Any]) -> None:
+    """Raise ValueError unless ``parameters['backend']`` is registered and
+    every backend parameter in ``parameters`` is valid (checked whichever
+    backend is chosen, so a later switch of backend cannot fail)."""
+    get(parameters['backend'])
+    for backend in _REGISTRY.values():
+        for name, check in backend.parameters.items():
+            if name in parameters:
+                check(parameters[name])
+
+
+register(direct.BACKEND)
+register(reference.BACKEND)
+register(fmm.BACKEND)

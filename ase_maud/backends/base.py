@@ -1,0 +1,88 @@
+"""What a backend is: :class:`Backend`, and the layout of its nodal blocks.
+
+A backend evaluates the unit-strength repulsion ``sum_{i<j} 1 / L_ij`` of
+:mod:`ase_maud.physics` at every point of a scene; the calculator multiplies
+by ``c = a**3 Q`` and adds the springs. Its ``evaluate(positions,
+want_blocks, **options)`` takes positions of shape (N, 3) (a 2D scene has
+``z = 0``) and returns ``(energy, forces (N, 3), block6 (N, 6) or None)``:
+the energy counts each pair once, forces have ASE's sign, and ``block6``
+holds the nodal blocks ``sum_j (3 d d^T / L**5 - I / L**3)`` as the entries
+xx, yy, zz, xy, xz, yz (:data:`VOIGT_PAIRS`), computed only when
+``want_blocks``. Coincident points give a non-finite energy, never an error:
+the calculator names them.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+#: Order of the six independent entries of a symmetric 3x3 block.
+VOIGT_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+#: ``(energy, forces (N, 3), block6 (N, 6) or None)``, unit strength.
+Result = tuple[float, np.ndarray, np.ndarray | None]
+
+
+@dataclass(frozen=True)
+class Backend:
+    """A way to evaluate the repulsion, and what the registry says of it.
+
+    ``name``: the calculator's ``backend`` parameter. ``evaluate``: see the
+    module docstring. ``summary``: one line for help texts and reports.
+    ``cost``: how the time of a call grows with the number of points N
+    (``'N^2'`` or ``'N'``). ``computes``: of ``'energy'``, ``'forces'``,
+    ``'blocks'``. ``tolerance``: ``None`` if the result is exact to rounding,
+    else the name of the calculator parameter that sets its relative
+    tolerance. ``parameters``: the calculator parameters it takes, each with
+    a function that raises ValueError on a bad value; ``evaluate`` receives
+    them as keywords of the same names. ``requires``: modules it imports
+    that may be missing (it is :attr:`installed` when all are importable).
+    """
+
+    name: str
+    evaluate: Callable[..., Result]
+    summary: str
+    cost: str
+    computes: frozenset[str] = frozenset({'energy', 'forces', 'blocks'})
+    tolerance: str | None = None
+    parameters: Mapping[str, Callable[[Any], None]] = field(
+        default_factory=dict)
+    requires: tuple[str, ...] = ()
+
+    @property
+    def exact(self) -> bool:
+        """Whether results are exact to rounding (no tolerance parameter)."""
+        return self.tolerance is None
+
+    @property
+    def accuracy(self) -> str:
+        """``'exact'``, or ``'approximate (<tolerance parameter>)'``."""
+        return 'exact' if self.exact else f'approximate ({self.tolerance})'
+
+    @property
+    def installed(self) -> bool:
+        """Whether every module in ``requires`` can be imported."""
+        return all(importlib.util.find_spec(module) is not None
+                   for module in self.requires)
+
+    def options(self, parameters: Mapping[str, Any]) -> dict[str, Any]:
+        """The keywords of ``evaluate``, taken from calculator parameters."""
+        return {name: parameters[name] for name in self.parameters}
+
+
+def voigt_to_blocks(block6: np.ndarray, dim: int) -> np.ndarray:
+    """Expand (N, 6) xx, yy, zz, xy, xz, yz entries to (N, dim, dim) blocks."""
+    out = np.empty((len(block6), 3, 3))
+    for col, (a, b) in enumerate(VOIGT_PAIRS):
+        out[:, a, b] = out[:, b, a] = block6[:, col]
+    return out[:, :dim, :dim]
+
+
+def blocks_to_voigt(blocks: np.ndarray) -> np.ndarray:
+    """The (N, 6) xx, yy, zz, xy, xz, yz entries of (N, 3, 3) blocks."""
+    return np.stack([blocks[:, a, b] for a, b in VOIGT_PAIRS], axis=1)

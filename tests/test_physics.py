@@ -1,0 +1,166 @@
+"""The pair law of ase_maud.physics against its own finite differences."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from ase_maud import physics
+from ase_maud.hessian import dense_hessian
+
+#: Central-difference step and tolerance for pair vectors of length ~1.
+STEP = 1e-5
+FD_RTOL = 1e-8
+
+
+def pair_vectors(dim, seed, shape=(7,)):
+    """Random pair vectors, lengths between 0.5 and 2."""
+    rng = np.random.default_rng(seed)
+    d = rng.standard_normal(shape + (dim,))
+    length = rng.uniform(0.5, 2.0, shape)
+    return d * (length / np.linalg.norm(d, axis=-1))[..., None]
+
+
+def central_difference(f, d, h=STEP):
+    """Derivatives ``df/dd_k`` of ``f`` at every pair vector, stacked on a
+    new last axis: shape ``f(d).shape + (dim,)``."""
+    out = []
+    for k in range(d.shape[-1]):
+        step = np.zeros(d.shape[-1])
+        step[k] = h
+        out.append((f(d + step) - f(d - step)) / (2 * h))
+    return np.stack(out, axis=-1)
+
+
+def assert_close(actual, expected, rtol=FD_RTOL):
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(actual, expected, rtol=0, atol=rtol * scale)
+
+
+LAWS = {
+    'repulsion': (physics.repulsion_energy, physics.repulsion_force,
+                  physics.repulsion_block),
+    'spring': (lambda d: physics.spring_energy(d, 0.7),
+               lambda d: physics.spring_force(d, 0.7),
+               lambda d: physics.spring_block(d, 0.7)),
+}
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('law', LAWS)
+def test_force_and_block_are_derivatives(law, dim, seed):
+    """Force on i = -dE/dr_i = -dE/dd (d = r_i - r_j); block = -d force/dd,
+    symmetric and even in d."""
+    energy, force, block = LAWS[law]
+    d = pair_vectors(dim, seed)
+    assert_close(force(d), -central_difference(energy, d))
+    b = block(d)
+    assert b.shape == d.shape + (dim,)
+    assert_close(b, -central_difference(force, d))
+    np.testing.assert_array_equal(b, np.swapaxes(b, -1, -2))
+    np.testing.assert_allclose(block(-d), b, rtol=1e-15)
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+def test_any_leading_shape(dim):
+    """Pair vectors of shape (..., dim): each result is the per-pair one."""
+    d = pair_vectors(dim, 2, shape=(3, 4))
+    for energy, force, block in LAWS.values():
+        assert energy(d).shape == (3, 4)
+        assert force(d).shape == (3, 4, dim)
+        assert block(d).shape == (3, 4, dim, dim)
+        for idx in itertools.product(range(3), range(4)):
+            np.testing.assert_array_equal(energy(d)[idx], energy(d[idx]))
+            np.testing.assert_array_equal(force(d)[idx], force(d[idx]))
+            np.testing.assert_array_equal(block(d)[idx], block(d[idx]))
+
+
+def test_values_and_signs():
+    """d = (1, 2, 2), L = 3: the table of the module docstring."""
+    d = np.array([1.0, 2.0, 2.0])
+    assert physics.repulsion_energy(d) == pytest.approx(1 / 3)
+    np.testing.assert_allclose(physics.repulsion_force(d), d / 27)  # away
+    np.testing.assert_allclose(physics.repulsion_block(d),
+                               3 * np.outer(d, d) / 3**5 - np.eye(3) / 27)
+    assert physics.spring_energy(d, 2.0) == pytest.approx(9.0)
+    np.testing.assert_array_equal(physics.spring_force(d, 2.0), -2 * d)
+    np.testing.assert_array_equal(physics.spring_block(d, 2.0), 2 * np.eye(3))
+    # 1/L is harmonic in 3D: the repulsion block is traceless
+    assert np.trace(physics.repulsion_block(d)) == pytest.approx(0, abs=1e-16)
+
+
+def random_springs(n, k, seed):
+    """``k`` distinct random pairs of ``n`` points."""
+    pairs = np.array(list(itertools.combinations(range(n), 2)))
+    rng = np.random.default_rng(seed)
+    return pairs[rng.choice(len(pairs), k, replace=False)]
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+@pytest.mark.parametrize('dim', [2, 3])
+def test_spring_terms_are_the_summed_law(random_points, dim, seed):
+    n = 9
+    positions = random_points(n, dim, seed)
+    springs = random_springs(n, 12, seed)
+    energy, forces = physics.spring_terms(positions, springs, 0.7)
+
+    def total(p):
+        return physics.spring_terms(p, springs, 0.7)[0]
+
+    numerical = np.zeros_like(positions)
+    for i, k in itertools.product(range(n), range(3)):
+        step = np.zeros_like(positions)
+        step[i, k] = STEP
+        numerical[i, k] = -(total(positions + step)
+                            - total(positions - step)) / (2 * STEP)
+    assert_close(forces, numerical)
+    d = positions[springs[:, 0]] - positions[springs[:, 1]]
+    assert energy == pytest.approx(0.35 * np.sum(d * d), rel=1e-14)
+
+
+def test_spring_laplacian_is_degrees_minus_adjacency():
+    springs = random_springs(8, 10, 3)
+    laplacian = physics.spring_laplacian(springs, 8)
+    expected = np.zeros((8, 8))
+    for i, j in springs:
+        expected[[i, j], [i, j]] += 1
+        expected[i, j] = expected[j, i] = -1
+    np.testing.assert_array_equal(laplacian.toarray(), expected)
+    np.testing.assert_array_equal(physics.spring_degrees(springs, 8),
+                                  np.diag(expected))
+    assert physics.spring_laplacian(np.zeros((0, 2), int), 3).nnz == 0
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+@pytest.mark.parametrize('dim', [2, 3])
+def test_spring_hessian_is_the_spring_part_of_the_hessian(random_points, dim,
+                                                          seed):
+    n = 10
+    positions = random_points(n, dim, seed)
+    springs = random_springs(n, 15, seed)
+    full = dense_hessian(positions, springs, 1.3, 0.7, dim)
+    repulsion = dense_hessian(positions, np.zeros((0, 2), int), 1.3, 0.7, dim)
+    spring = physics.spring_hessian(springs, n, 0.7, dim)
+    assert spring.shape == (dim * n, dim * n)
+    np.testing.assert_allclose(spring.toarray(), full - repulsion, rtol=0,
+                               atol=1e-13 * np.abs(full).max())
+    np.testing.assert_array_equal(
+        spring.toarray(),
+        0.7 * np.kron(physics.spring_laplacian(springs, n).toarray(),
+                      np.eye(dim)))
+    diagonal = spring.toarray().reshape(n, dim, n, dim)[np.arange(n), :,
+                                                        np.arange(n)]
+    np.testing.assert_array_equal(
+        physics.spring_nodal_blocks(springs, n, 0.7, dim), diagonal)
+
+
+@pytest.mark.parametrize('n, chunk', [(0, 5), (1, 5), (2, 1), (7, 1), (7, 4),
+                                      (7, 100), (30, 50), (31, 7)])
+def test_pair_chunks_give_every_pair_once(n, chunk):
+    pairs = [np.c_[i, j] for i, j in physics.pair_chunks(n, chunk)]
+    longest_row = max(n - 1, 0)
+    assert all(len(p) <= max(chunk, longest_row) for p in pairs)
+    got = np.concatenate(pairs) if pairs else np.zeros((0, 2), int)
+    expected = np.array(list(itertools.combinations(range(n), 2)))
+    np.testing.assert_array_equal(got, expected.reshape(-1, 2))

@@ -18,6 +18,7 @@ def run_example(name, argv, monkeypatch, tmp_path, folder='examples'):
     runpy.run_path(str(ROOT / folder / name), run_name='__main__')
 
 
+@pytest.mark.slow
 def test_saddle_and_minima(monkeypatch, tmp_path, capsys):
     run_example('saddle_and_minima.py', [], monkeypatch, tmp_path)
     out = capsys.readouterr().out

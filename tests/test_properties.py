@@ -7,6 +7,7 @@ import os
 from itertools import combinations
 
 import numpy as np
+import pytest
 from ase import Atoms
 from ase.calculators.fd import calculate_numerical_forces
 from ase.constraints import FixAtoms
@@ -70,6 +71,7 @@ def test_calculator_is_finite(atoms):
         forces).max()
 
 
+@pytest.mark.slow
 @BUDGET
 @given(scenes())
 def test_forces_are_minus_the_energy_gradient(atoms):
@@ -87,6 +89,7 @@ def test_forces_are_minus_the_energy_gradient(atoms):
         assert np.all(forces[:, 2] == 0.0)
 
 
+@pytest.mark.slow
 @BUDGET
 @given(scenes(fixed=True), st.sampled_from(['tensor', 'scalar']))
 def test_maud_converges_or_says_why(atoms, method):

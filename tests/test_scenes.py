@@ -99,7 +99,10 @@ def test_build_names_sizes_and_errors():
     assert all(len(build(name, size)) < 60 for name, size in SUITE)
 
 
-@pytest.mark.parametrize('name, size', SUITE)
+# The chain takes FIRE longest by far: in the full run only.
+@pytest.mark.parametrize('name, size', [
+    pytest.param(name, size, marks=pytest.mark.slow) if name == 'chain' else (name, size)
+    for name, size in SUITE])
 def test_fire_reaches_a_minimum(name, size):
     atoms = build(name, size)
     opt = FIRE(atoms, logfile=None)

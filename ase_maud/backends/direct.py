@@ -21,7 +21,9 @@ from .base import Backend, Result
 
 
 @numba.njit(inline='always')
-def share(sx, sy, sz, ox, oy, oz, j, px, py, pz, sign):
+def share(sx: float, sy: float, sz: float, ox: np.ndarray, oy: np.ndarray,
+          oz: np.ndarray, j: int, px: float, py: float, pz: float,
+          sign: float) -> tuple[float, float, float]:
     """Pair (i, j)'s term ``p`` of a sum over pairs, given to both points.
 
     Returns row i's running sums ``s + p``; adds ``sign * p`` to entry ``j``
@@ -115,7 +117,7 @@ def evaluate(positions: np.ndarray, want_blocks: bool = False) -> Result:
 
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
-def repulsion_hvp(x, v, nchunks):
+def repulsion_hvp(x: np.ndarray, v: np.ndarray, nchunks: int) -> np.ndarray:
     """Unit repulsion part of ``H v``: ``sum_j B_ij (v_i - v_j)`` with c = 1.
 
     ``x`` (3, N) positions, ``v`` (m, 3, N) vectors, ``B_ij`` the pair block.

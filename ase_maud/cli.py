@@ -76,13 +76,14 @@ def bench(args: argparse.Namespace) -> int:
     """``ase-maud bench``: exit status 0, or 130 if interrupted."""
     from .bench import report
     from .bench.suite import run_suite
-    from .scenes import SUITE
+    from .scenes import SUITES
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     levels = sorted(args.fmax, reverse=True)
     starts = [(scene, size, seed)
-              for scene, size in _pairs(args.scenes, args.sizes, SUITE)
+              for scene, size in _pairs(args.scenes, args.sizes,
+                                        SUITES[args.suite])
               for seed in args.seeds]
     show = sys.stderr.isatty() if args.progress is None else args.progress
     runs, interrupted = run_suite(
@@ -95,6 +96,7 @@ def bench(args: argparse.Namespace) -> int:
     if runs:
         summary = report.summarize(runs, levels)
         report.write_csv(out / 'summary.csv', summary)
+        report.write_csv(out / 'overall.csv', report.overall(summary, levels))
         info = report.environment(args.argv)
         info['runs'] = (f'{len(runs)} of {len(starts) * len(args.optimizers)}'
                         + ' (interrupted)' * interrupted)
@@ -102,6 +104,8 @@ def bench(args: argparse.Namespace) -> int:
                              f'{args.ref_fmax:g}; another minimum beyond '
                              f'relative {args.energy_rtol:g}')
         info['step budget'] = args.steps
+        if skipped := report.skipped(runs):
+            info['skipped'] = skipped
         (out / 'summary.md').write_text(report.markdown(summary, levels, info))
         report.plot_convergence(runs, out, levels)
         print((out / 'summary.md').read_text())
@@ -130,7 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The argparse parser of ``ase-maud`` and its three commands."""
     from . import backends as registry
     from .bench.optimizers import OPTIMIZERS
-    from .scenes import SCENES
+    from .scenes import SCENES, SUITES
 
     parser = argparse.ArgumentParser(
         prog='ase-maud', description='The Maud algorithm for points that '
@@ -163,16 +167,21 @@ def build_parser() -> argparse.ArgumentParser:
     p = commands.add_parser(
         'bench', help='force calls and wall time against error, per optimiser',
         description='Run every optimiser from the same starts (scene, size, '
-        'seed), sampling fmax, energy, force calls and wall time at every '
-        'calculator call; the energy error is against the lowest energy of '
-        'a tight reference run. Writes samples.csv (one row per sample), '
-        'runs.csv, summary.csv and summary.md (calls and time to each fmax '
-        'level, and their ratio to the best ASE optimiser), and log-log PNGs '
+        'seed), sampling fmax, energy, force calls, wall and CPU time at '
+        'every calculator call; the energy error is against the lowest energy '
+        'of a tight reference run. Writes samples.csv (one row per sample), '
+        'runs.csv, summary.csv and summary.md (calls and times to each fmax '
+        'level, their ratio to the best ASE optimiser and, for CPU time, to '
+        'L-BFGS-B), overall.csv (median and worst ratios), and log-log PNGs '
         'of fmax and energy error against calls and time. Ctrl-C stops and '
         'reports what finished.')
     p.add_argument('--scenes', nargs='+', choices=SCENES, metavar='NAME',
                    help=f'of: {", ".join(SCENES)} (default: those of '
-                   'scenes.SUITE, at their suite sizes)')
+                   'the suite, at their suite sizes)')
+    p.add_argument('--suite', choices=SUITES, default='small',
+                   help='scenes.SUITE (small: under 60 points) or scenes.LARGE '
+                   '(large: collective modes, 40 to 2500 points) '
+                   '(default: %(default)s)')
     p.add_argument('--sizes', nargs='+', type=_size, metavar='SIZE',
                    help='sizes of every scene (default: suite sizes)')
     p.add_argument('--seeds', nargs='+', type=int, default=[0], metavar='K',

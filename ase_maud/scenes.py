@@ -47,6 +47,31 @@ def _path(n):
     return np.column_stack([np.arange(n - 1), np.arange(1, n)])
 
 
+def _cycle(points):
+    """Springs tying each of ``points`` to the next, the last to the first."""
+    return np.column_stack([points, np.roll(points, -1)])
+
+
+def _rim(rng, n, hub, dim):
+    """n points on a circle in the plane z = 0, each coordinate of the first
+    ``dim`` moved by up to a fifth of the spacing.
+
+    The radius is the equilibrium of the perfect circle with springs between
+    neighbours (and, if ``hub``, from each point to a hub at the centre),
+    ``a = Q = 1``: ``R**3 = (S / 4 + h) / (4 sin(pi/n)**2 + h)``,
+    ``S = sum_k 1 / sin(pi k / n)``, ``h = 1`` with the hub, else 0
+    (design.md, section 2, for the ring).
+    """
+    s = np.sin(np.pi * np.arange(1, n) / n)
+    h = float(hub)
+    radius = ((np.sum(1 / s) / 4 + h) / (4 * s[0]**2 + h)) ** (1 / 3)
+    phi = 2 * np.pi * np.arange(n) / n
+    positions = radius * np.column_stack([np.cos(phi), np.sin(phi),
+                                          np.zeros(n)])
+    positions[:, :dim] += rng.uniform(-0.2, 0.2, (n, dim)) * 2 * radius * s[0]
+    return positions
+
+
 def _grid(n):
     """Unit n x n grid centred on the origin at z = 0.
 
@@ -65,17 +90,26 @@ def _grid(n):
     return positions, springs, edge.ravel()
 
 
-def _ball(rng, n):
-    """n points uniform in the ball of one point per unit volume, redrawing
-    any point closer than MIN_DISTANCE to an earlier one."""
-    radius = (3 * n / (4 * np.pi)) ** (1 / 3)
+def _ball(rng, n, dim=3):
+    """n points uniform in the ball (dim 3) or disc (dim 2, z = 0) of one
+    point per unit volume (area), redrawing any point closer than
+    MIN_DISTANCE to an earlier one."""
+    radius = {2: n / np.pi, 3: 3 * n / (4 * np.pi)}[dim] ** (1 / dim)
 
     def draw(m):
-        v = rng.normal(size=(m, 3))
-        r = radius * rng.uniform(size=(m, 1)) ** (1 / 3)
-        return r * v / np.linalg.norm(v, axis=1, keepdims=True)
+        v = rng.normal(size=(m, dim))
+        r = radius * rng.uniform(size=(m, 1)) ** (1 / dim)
+        positions = np.zeros((m, 3))
+        positions[:, :dim] = r * v / np.linalg.norm(v, axis=1, keepdims=True)
+        return positions
 
     return _separated(draw(n), lambda p: draw(len(p)))
+
+
+def _jitter(rng):
+    """A redraw for :func:`_separated`: each coordinate moved by up to
+    MIN_DISTANCE."""
+    return lambda p: p + rng.uniform(-MIN_DISTANCE, MIN_DISTANCE, p.shape)
 
 
 def _separated(positions, redraw):
@@ -111,13 +145,8 @@ def ring(size=24, seed=0, a=1.0, Q=1.0):
     """
     n = _count(size, 3, 'ring')
     rng = np.random.default_rng(seed)
-    s = np.sin(np.pi * np.arange(1, n) / n)
-    radius = (np.sum(1 / s) / (16 * s[0]**2)) ** (1 / 3)
-    phi = 2 * np.pi * np.arange(n) / n
-    xy = radius * np.column_stack([np.cos(phi), np.sin(phi)])
-    xy += rng.uniform(-0.2, 0.2, (n, 2)) * 2 * radius * s[0]
-    springs = np.concatenate([_path(n), [(n - 1, 0)]])
-    return _scene(np.column_stack([xy, np.zeros(n)]), springs, a, Q, dim=2)
+    return _scene(_rim(rng, n, hub=False, dim=2), _cycle(np.arange(n)), a, Q,
+                  dim=2)
 
 
 def chain(size=30, seed=0, a=1.0, Q=1.0):
@@ -193,7 +222,7 @@ def random_graph(size=30, seed=0, a=1.0, Q=1.0):
     order = rng.permutation(n)
     parent = order[rng.integers(0, np.arange(1, n))]
     springs = {(min(i, j), max(i, j)) for i, j in zip(order[1:].tolist(),
-                                                      parent.tolist())}
+                                                      parent.tolist(), strict=True)}
     while len(springs) < min(round(1.5 * n), n * (n - 1) // 2):
         i, j = sorted(rng.choice(n, 2, replace=False).tolist())
         springs.add((i, j))
@@ -212,8 +241,7 @@ def _spectral_layout(springs, n, rng):
     edge = positions[springs[:, 0]] - positions[springs[:, 1]]
     positions /= np.linalg.norm(edge, axis=1).mean()
     positions += rng.uniform(-0.1, 0.1, positions.shape)
-    return _separated(positions, lambda p: p + rng.uniform(
-        -MIN_DISTANCE, MIN_DISTANCE, p.shape))
+    return _separated(positions, _jitter(rng))
 
 
 def all_pairs(size=10, seed=0, a=1.0, Q=1.0):
@@ -225,6 +253,61 @@ def all_pairs(size=10, seed=0, a=1.0, Q=1.0):
     rng = np.random.default_rng(seed)
     springs = np.column_stack(np.triu_indices(n, 1))
     return _scene(_ball(rng, n), springs, a, Q)
+
+
+def all_pairs2d(size=10, seed=0, a=1.0, Q=1.0):
+    """A cluster of ``size`` points on a plane (dim=2) with every pair sprung.
+
+    Starts uniform in a disc of one point per a**2. Nothing fixed.
+    """
+    n = _count(size, 2, 'all_pairs2d')
+    rng = np.random.default_rng(seed)
+    springs = np.column_stack(np.triu_indices(n, 1))
+    return _scene(_ball(rng, n, dim=2), springs, a, Q, dim=2)
+
+
+def tree(size=30, seed=0, a=1.0, Q=1.0):
+    """``size`` points in 3D on a random spring tree, the root (point 0)
+    fixed.
+
+    Point i > 0 hangs from point i - 1 with probability 1/2 (the branch
+    grows), else from a random earlier point (a new branch), so the tree has
+    long branches whose bending is collective. Each point starts a unit
+    distance from its parent in a random direction (points closer than
+    MIN_DISTANCE moved apart at random): a crumpled tree that the repulsion
+    unfolds.
+    """
+    n = _count(size, 2, 'tree')
+    rng = np.random.default_rng(seed)
+    parents = np.zeros(n, dtype=int)
+    positions = np.zeros((n, 3))
+    for i in range(1, n):
+        parents[i] = i - 1 if rng.uniform() < 0.5 else rng.integers(i)
+        step = rng.normal(size=3)
+        positions[i] = positions[parents[i]] + step / np.linalg.norm(step)
+    springs = np.column_stack([parents[1:], np.arange(1, n)])
+    return _scene(_separated(positions, _jitter(rng)), springs, a, Q,
+                  fixed=[0])
+
+
+def wheel(size=16, seed=0, a=1.0, Q=1.0):
+    """A hub (point 0) sprung to each of ``size`` rim points in 3D, each rim
+    point also sprung to its two rim neighbours.
+
+    The hub starts at the origin and the rim on the circle of the planar
+    equilibrium radius in z = 0 (see :func:`_rim`), every rim coordinate
+    moved by up to a fifth of the spacing. Nothing fixed. The spokes crowd
+    the rim (planar spacing 0.76 a at 16 rim points, 0.27 a at 100), which
+    buckles out of the plane: large wheels have many nearby minima.
+    """
+    n = _count(size, 3, 'wheel')
+    rng = np.random.default_rng(seed)
+    rim = np.arange(1, n + 1)
+    springs = np.concatenate([np.column_stack([np.zeros(n, dtype=int), rim]),
+                              _cycle(rim)])
+    positions = np.concatenate([np.zeros((1, 3)),
+                                _rim(rng, n, hub=True, dim=3)])
+    return _scene(positions, springs, a, Q)
 
 
 def molecule(size='C6H6', seed=0, a=1.0, Q=1.0):
@@ -274,12 +357,25 @@ def cage(size=8, seed=0, a=1.0, Q=1.0):
 
 SCENES = {f.__name__: f for f in (dimer, ring, chain, net2d, net3d,
                                   hanging_net, random_graph, all_pairs,
-                                  molecule, cage)}
+                                  all_pairs2d, tree, wheel, molecule, cage)}
 
 #: Small scenes (under 60 points each) for the optimiser tests and benchmark.
 SUITE = [('dimer', 2), ('ring', 16), ('chain', 20), ('net2d', 6),
          ('net3d', 5), ('hanging_net', 6), ('random_graph', 24),
-         ('all_pairs', 8), ('molecule', 'C6H6'), ('cage', 8)]
+         ('all_pairs', 8), ('all_pairs2d', 8), ('tree', 12), ('wheel', 8),
+         ('molecule', 'C6H6'), ('cage', 8)]
+
+#: Scenes whose slow modes move many points together (bending chains and
+#: trees, breathing rings, a wheel's buckling rim, a net sagging as a whole,
+#: a cluster's shells): 40 to 2500 points, for ``ase-maud bench --suite
+#: large``.
+LARGE = [('chain', 100), ('ring', 100), ('ring', 1000), ('tree', 60),
+         ('tree', 200), ('wheel', 100), ('hanging_net', 20),
+         ('hanging_net', 50), ('random_graph', 200), ('random_graph', 2000),
+         ('all_pairs', 40)]
+
+#: The named suites of ``ase-maud bench --suite``.
+SUITES = {'small': SUITE, 'large': LARGE}
 
 
 def build(name, size=None, seed=0, **kwargs):

@@ -4,13 +4,15 @@ import numpy as np
 import pytest
 from ase.collections import g2
 from ase.constraints import FixAtoms
-from ase.optimize import FIRE
+from ase.optimize import BFGS, FIRE
+from scipy.optimize import minimize_scalar
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial.distance import pdist
 
+from ase_maud import Maud
 from ase_maud.calculator import MaudCalculator
-from ase_maud.scenes import SCENES, SUITE, build
+from ase_maud.scenes import LARGE, SCENES, SUITE, SUITES, build
 
 CASES = [(name, None) for name in SCENES] + SUITE
 UNITS = [(0, 1.0, 1.0), (3, 2.5, 0.3), (11, 0.04, 7.0)]  # seed, a, Q
@@ -95,8 +97,9 @@ def test_build_names_sizes_and_errors():
         build('chain', 2)
     with pytest.raises(ValueError, match='single atom'):
         build('molecule', 'H')
-    assert {name for name, _ in SUITE} == set(SCENES)
+    assert {name for suite in SUITES.values() for name, _ in suite} == set(SCENES)
     assert all(len(build(name, size)) < 60 for name, size in SUITE)
+    assert SUITES['small'] is SUITE and SUITES['large'] is LARGE
 
 
 # The chain takes FIRE longest by far: in the full run only.
@@ -109,3 +112,76 @@ def test_fire_reaches_a_minimum(name, size):
     assert opt.run(fmax=1e-4, steps=5000), f'{name}: {opt.nsteps} steps'
     assert np.linalg.norm(atoms.get_forces(), axis=1).max() < 1e-4
     print(f'FIRE {name} {size}: {opt.nsteps} steps')
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('name, size', LARGE)
+def test_large_suite_scenes_are_large_and_valid(name, size):
+    atoms = build(name, size)
+    assert len(atoms) == {'hanging_net': size**2, 'wheel': size + 1}.get(name, size)
+    assert len(atoms) >= 40
+    forces = atoms.get_forces()
+    assert np.isfinite(atoms.get_potential_energy()) and np.isfinite(forces).all()
+    assert np.linalg.norm(forces, axis=1).max() > 1e-3
+    assert_held_together(atoms)
+
+
+@pytest.mark.parametrize('seed', [0, 4])
+def test_tree_is_a_tree_with_long_branches_and_a_fixed_root(seed):
+    atoms = build('tree', 200, seed=seed, a=2.0)
+    parent, child = atoms.calc.springs.T
+    assert len(parent) == 199 and np.array_equal(child, np.arange(1, 200))
+    assert np.all(parent < child)        # n - 1 springs, each to an earlier point
+    assert list(atoms.constraints[0].get_indices()) == [0]
+    extends = np.mean(parent == child - 1)   # 1/2 + (1/2) / i on average
+    assert 0.45 < extends < 0.65
+    lengths = np.linalg.norm(atoms.positions[child] - atoms.positions[parent], axis=1)
+    # A unit step from the parent, unless moved apart from a close point.
+    assert np.mean(np.isclose(lengths, 2.0, rtol=1e-12)) > 0.8
+    assert_held_together(atoms)
+
+
+def test_wheel_is_a_hub_with_spokes_and_a_rim_at_its_planar_radius():
+    n = 24
+    atoms = build('wheel', n, seed=1)
+    springs = np.sort(atoms.calc.springs, axis=1)
+    degree = np.bincount(springs.ravel(), minlength=n + 1)
+    assert len(atoms) == n + 1 and len(springs) == 2 * n
+    assert degree[0] == n and np.all(degree[1:] == 3)
+    assert {tuple(s) for s in springs[n:]} == (
+        {(i, i + 1) for i in range(1, n)} | {(1, n)})
+    assert np.array_equal(atoms.positions[0], np.zeros(3))
+    assert np.ptp(atoms.positions[1:, 2]) > 0        # off the plane
+    phi = 2 * np.pi * np.arange(n) / n
+    circle = np.column_stack([np.cos(phi), np.sin(phi), np.zeros(n)])
+
+    def energy(radius):
+        perfect = atoms.copy()
+        perfect.calc = MaudCalculator(atoms.calc.springs)
+        perfect.positions[1:] = radius * circle
+        return perfect.get_potential_energy()
+
+    best = minimize_scalar(energy, bracket=(1, 2, 4), tol=1e-10).x
+    radii = np.linalg.norm(atoms.positions[1:, :2], axis=1)
+    assert abs(radii.mean() / best - 1) < 0.03
+
+
+def test_all_pairs2d_is_a_planar_cluster():
+    atoms = build('all_pairs2d', 12, seed=2, a=0.5)
+    assert atoms.calc.parameters['dim'] == 2
+    assert len(atoms.calc.springs) == 66 and not atoms.constraints
+    assert np.all(atoms.positions[:, 2] == 0)
+    radius = np.linalg.norm(atoms.positions, axis=1).max()
+    assert radius <= 0.5 * np.sqrt(12 / np.pi) and radius > 0.5
+
+
+@pytest.mark.parametrize('name, size', [('tree', 12), ('wheel', 12), ('all_pairs2d', 8)])
+def test_maud_and_bfgs_reach_a_minimum(name, size):
+    energies = {}
+    for opt in (BFGS, Maud):
+        atoms = build(name, size, seed=0)
+        with opt(atoms, logfile=None) as dyn:
+            assert dyn.run(fmax=1e-6, steps=5000), f'{opt.__name__}: {dyn.nsteps}'
+        energies[opt.__name__] = atoms.get_potential_energy()
+    # The same minimum or, for Maud, a lower one.
+    assert energies['Maud'] <= energies['BFGS'] * (1 + 1e-8)

@@ -3,8 +3,12 @@
 Every entry builds a silent optimiser on ``atoms`` whose ``run(fmax, steps)``
 returns True on convergence (largest atomic force norm <= fmax, constraints
 applied). :data:`ASE_BASELINES` are the ones the Maud rows are measured
-against ("x best ASE" in the summary).
+against ("x best ASE" in the summary), :data:`SCIPY_BASELINE` the one their
+CPU seconds are also measured against; :data:`MAX_ATOMS` bounds the scenes
+an optimiser is run on (:func:`too_large`).
 """
+
+from __future__ import annotations
 
 import numpy as np
 from ase.optimize import BFGS, FIRE, LBFGS
@@ -79,3 +83,19 @@ OPTIMIZERS = {
 }
 
 ASE_BASELINES = ('FIRE', 'FIRE2', 'BFGS', 'LBFGS', 'PreconLBFGS')
+SCIPY_BASELINE = 'L-BFGS-B'
+
+#: Largest scene (points) each optimiser is run on. ASE's BFGS keeps a dense
+#: (3N)^2 Hessian and eigen-decomposes it at every step, O(N^3): 126 s for
+#: 673 steps on hanging_net 20 (400 points, docs/benchmarks.md); one
+#: eigen-decomposition at 2500 points (7500^2) takes minutes on one core.
+MAX_ATOMS = {'BFGS': 500}
+
+
+def too_large(optimiser: str, natoms: int) -> str:
+    """Why ``optimiser`` is not run on ``natoms`` points ('' if it is)."""
+    limit = MAX_ATOMS.get(optimiser, np.inf)
+    if natoms <= limit:
+        return ''
+    return f'{natoms} points, over the limit of {limit} for {optimiser}'
+

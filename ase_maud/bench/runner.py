@@ -1,22 +1,41 @@
 """Run one optimiser from one start, with a sample at every calculator call.
 
-A *sample* is ``(calls, time_s, fmax, energy)`` taken right after each call of
-``calc.calculate``: ``calls`` counts those calls (line-search trials and
-stiffness requests included, optimiser steps not), ``time_s`` is wall time
-since the run began (the optimiser's construction included, the sampling
-itself left out), ``fmax`` the largest atomic force norm after the atoms'
-constraints, ``energy`` the potential energy.
+A *sample* is ``(calls, time_s, cpu_s, fmax, energy)`` taken right after each
+call of ``calc.calculate``:
+
+- ``calls`` counts those calls: line-search trials included, optimiser steps
+  not. A call that also computes the nodal stiffness blocks or the dense
+  Hessian (``properties`` with ``'stiffness'`` or ``'hessian'``) counts as
+  one call like any other; its extra cost shows in the seconds. Work done
+  outside ``calculate`` (the constant spring Hessian, Hessian-vector
+  products, the optimiser's own linear algebra) is no call and shows only in
+  the seconds.
+- ``time_s`` is wall time and ``cpu_s`` the CPU time of the whole process
+  (``time.process_time``: every thread of it, so with numba or BLAS running
+  on k threads it can grow up to k times faster than the wall time), both
+  since the run began: the optimiser's construction included, the sampling
+  itself left out.
+- ``fmax`` is the largest atomic force norm after the atoms' constraints,
+  ``energy`` the potential energy.
 """
 
+from __future__ import annotations
+
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from ase import Atoms
+from ase.calculators.calculator import Calculator
 
 from .optimizers import OPTIMIZERS
 
 #: Fields of one sample, the columns of :attr:`Run.samples`.
-SAMPLE_FIELDS = ('calls', 'time_s', 'fmax', 'energy')
+SAMPLE_FIELDS = ('calls', 'time_s', 'cpu_s', 'fmax', 'energy')
+#: Column of each field in :attr:`Run.samples`.
+CALLS, TIME_S, CPU_S, FMAX, ENERGY = range(len(SAMPLE_FIELDS))
 
 
 class CallRecorder:
@@ -26,11 +45,16 @@ class CallRecorder:
     on exit. ``samples`` is the list of sample tuples so far.
     """
 
-    def __init__(self, calc):
+    def __init__(self, calc: Calculator):
         self.calc = calc
-        self.samples = []
-        self._overhead = 0.0
-        self._t0 = time.perf_counter()
+        self.samples: list[tuple[float, ...]] = []
+        self._overhead = np.zeros(2)           # wall, CPU seconds
+        self._t0 = self._clocks()
+
+    @staticmethod
+    def _clocks() -> np.ndarray:
+        """(wall, process CPU) seconds now."""
+        return np.array([time.perf_counter(), time.process_time()])
 
     def __enter__(self):
         self._calculate = self.calc.calculate
@@ -42,23 +66,23 @@ class CallRecorder:
 
     def _calculate_and_sample(self, *args, **kwargs):
         self._calculate(*args, **kwargs)
-        now = time.perf_counter()
+        now = self._clocks()
         atoms, results = self.calc.atoms, self.calc.results
         forces = results['forces'].copy()
         for constraint in atoms.constraints:
             constraint.adjust_forces(atoms, forces)
-        self.samples.append((len(self.samples) + 1,
-                             now - self._t0 - self._overhead,
+        wall, cpu = now - self._t0 - self._overhead
+        self.samples.append((len(self.samples) + 1, wall, cpu,
                              np.sqrt((forces**2).sum(axis=1).max()),
                              results['energy']))
-        self._overhead += time.perf_counter() - now
+        self._overhead += self._clocks() - now
 
 
 @dataclass
 class Run:
     """One optimiser's run from one start.
 
-    ``samples`` is an array (n, 4) of :data:`SAMPLE_FIELDS`; ``status`` is
+    ``samples`` is an array (n, 5) of :data:`SAMPLE_FIELDS`; ``status`` is
     ``'converged'``, ``'other_minimum'`` (converged to an energy off the
     reference), ``'not_converged'`` (step budget spent or the optimiser gave
     up) or ``'error'`` (raised; the message is ``error``). ``e_ref`` is the
@@ -75,25 +99,28 @@ class Run:
     e_ref: float = np.nan
     error: str = ''
 
-    def reached(self, fmax):
-        """(calls, time_s) of the first sample with fmax <= ``fmax``, or
-        (inf, inf) if none, or if the run ended in another minimum."""
-        hit = np.flatnonzero(self.samples[:, 2] <= fmax)
+    def reached(self, fmax: float) -> tuple[float, float, float]:
+        """(calls, time_s, cpu_s) of the first sample with fmax <= ``fmax``,
+        or (inf, inf, inf) if none, or if the run ended in another
+        minimum."""
+        hit = np.flatnonzero(self.samples[:, FMAX] <= fmax)
         if self.status == 'other_minimum' or not hit.size:
-            return np.inf, np.inf
-        calls, time_s = self.samples[hit[0], :2]
-        return calls, time_s
+            return np.inf, np.inf, np.inf
+        calls, time_s, cpu_s = self.samples[hit[0], [CALLS, TIME_S, CPU_S]]
+        return calls, time_s, cpu_s
 
-    def rows(self):
+    def rows(self) -> Iterator[dict[str, Any]]:
         """One dict per sample: the columns of the benchmark's samples CSV."""
-        for calls, time_s, fmax, energy in self.samples:
+        for sample in self.samples:
+            row = dict(zip(SAMPLE_FIELDS, sample, strict=True))
             yield {'scene': self.scene, 'size': self.size, 'seed': self.seed,
-                   'optimiser': self.optimiser, 'calls': int(calls),
-                   'time_s': time_s, 'fmax': fmax, 'energy': energy,
-                   'energy_error': energy - self.e_ref, 'status': self.status}
+                   'optimiser': self.optimiser, **row,
+                   'calls': int(row['calls']),
+                   'energy_error': row['energy'] - self.e_ref,
+                   'status': self.status}
 
 
-def fresh_copy(atoms):
+def fresh_copy(atoms: Atoms) -> Atoms:
     """A copy of ``atoms`` (constraints included) with a new calculator of
     the same class and parameters: the same start, no shared results."""
     copy = atoms.copy()
@@ -101,10 +128,11 @@ def fresh_copy(atoms):
     return copy
 
 
-def run_optimizer(start, optimiser, fmax, steps):
+def run_optimizer(start: Atoms, optimiser: str, fmax: float,
+                  steps: int) -> tuple[np.ndarray, bool, str]:
     """Relax a fresh copy of ``start`` with ``OPTIMIZERS[optimiser]``.
 
-    Returns ``(samples, converged, error)``: the (n, 4) sample array, whether
+    Returns ``(samples, converged, error)``: the (n, 5) sample array, whether
     the optimiser reported convergence, and the message of any exception it
     raised ('' if none). KeyboardInterrupt is not caught.
     """
@@ -116,11 +144,13 @@ def run_optimizer(start, optimiser, fmax, steps):
                                                               steps=steps))
         except Exception as exc:  # a failed run is a result, not a crash
             error = f'{type(exc).__name__}: {exc}'
-    samples = np.array(recorder.samples, dtype=float).reshape(-1, 4)
+    samples = np.array(recorder.samples, dtype=float).reshape(
+        -1, len(SAMPLE_FIELDS))
     return samples, converged, error
 
 
-def classify(samples, converged, error, e_ref, energy_rtol):
+def classify(samples: np.ndarray, converged: bool, error: str, e_ref: float,
+             energy_rtol: float) -> str:
     """The status of a run (see :class:`Run`): a converged run is in the
     reference minimum if its last energy is within ``energy_rtol`` (relative)
     of ``e_ref``."""
@@ -128,6 +158,6 @@ def classify(samples, converged, error, e_ref, energy_rtol):
         return 'error'
     if not converged:
         return 'not_converged'
-    if abs(samples[-1, 3] - e_ref) > energy_rtol * abs(e_ref):
+    if abs(samples[-1, ENERGY] - e_ref) > energy_rtol * abs(e_ref):
         return 'other_minimum'
     return 'converged'

@@ -7,23 +7,29 @@ found for it: the lowest final energy of the runs that reached their fmax
 (the reference run's is the tightest; a reference run that stopped on a
 saddle or failed does not count). Then every run's samples are appended to
 ``samples.csv`` and flushed. ``runs.csv`` holds one line per run (the
-reference runs with status ``'reference'``). Before
-the first start, every optimiser makes a few untimed steps, so that one-off
-costs (numba loading its compiled kernels) stay out of the timings.
+reference runs with status ``'reference'``; a compared optimiser not run on a
+scene over its size limit, :func:`.optimizers.too_large`, with status
+``'skipped'`` and the reason). Before the first start, every optimiser makes
+a few untimed steps, so that one-off costs (numba loading its compiled
+kernels) stay out of the timings.
 """
+
+from __future__ import annotations
 
 import csv
 import sys
+from pathlib import Path
 
 import numpy as np
 
 from ..scenes import build
-from .runner import Run, classify, run_optimizer
+from .optimizers import too_large
+from .runner import ENERGY, SAMPLE_FIELDS, Run, classify, run_optimizer
 
-SAMPLE_COLUMNS = ('scene', 'size', 'seed', 'optimiser', 'calls', 'time_s',
-                  'fmax', 'energy', 'energy_error', 'status')
+SAMPLE_COLUMNS = ('scene', 'size', 'seed', 'optimiser', *SAMPLE_FIELDS,
+                  'energy_error', 'status')
 RUN_COLUMNS = ('scene', 'size', 'seed', 'natoms', 'optimiser', 'status',
-               'calls', 'time_s', 'fmax', 'energy', 'e_ref', 'error')
+               *SAMPLE_FIELDS, 'e_ref', 'error')
 
 
 class Progress:
@@ -47,11 +53,14 @@ class Progress:
 
 
 def _run_row(run):
-    """The runs.csv line of ``run``: its last sample, status and error."""
-    last = run.samples[-1] if len(run.samples) else np.full(4, np.nan)
-    return dict(zip(RUN_COLUMNS, (run.scene, run.size, run.seed, run.natoms,
-                                  run.optimiser, run.status, len(run.samples),
-                                  *last[1:], run.e_ref, run.error)))
+    """The runs.csv line of ``run``: its last sample (the number of calls
+    for ``calls``), status and error."""
+    last = (run.samples[-1] if len(run.samples)
+            else np.full(len(SAMPLE_FIELDS), np.nan))
+    return {'scene': run.scene, 'size': run.size, 'seed': run.seed,
+            'natoms': run.natoms, 'optimiser': run.optimiser,
+            'status': run.status, **dict(zip(SAMPLE_FIELDS, last, strict=True)),
+            'calls': len(run.samples), 'e_ref': run.e_ref, 'error': run.error}
 
 
 def _write_start(key, finished, reference, energy_rtol, samples_csv,
@@ -61,10 +70,10 @@ def _write_start(key, finished, reference, energy_rtol, samples_csv,
     result; the first entry is the reference run."""
     if not finished:
         return []
-    finals = [samples[-1, 3] for samples, converged, _ in finished.values()
-              if converged]
+    finals = [samples[-1, ENERGY]
+              for samples, converged, _ in finished.values() if converged]
     first = next(iter(finished.values()))[0]
-    e_ref = min(finals) if finals else first[:, 3].min()
+    e_ref = min(finals) if finals else first[:, ENERGY].min()
     if not finals:
         print(f'\nwarning: no run reached its fmax on {key}; e_ref is the '
               'lowest energy seen', file=sys.stderr)
@@ -85,15 +94,18 @@ def _write_start(key, finished, reference, energy_rtol, samples_csv,
     return compared
 
 
-def run_suite(starts, optimisers, outdir, *, fmax=1e-6, steps=10000,
-              reference='LBFGS', ref_fmax=1e-9, energy_rtol=1e-6,
-              progress=False):
+def run_suite(starts: list[tuple[str, object, int]], optimisers: list[str],
+              outdir: Path, *, fmax: float = 1e-6, steps: int = 10000,
+              reference: str = 'LBFGS', ref_fmax: float = 1e-9,
+              energy_rtol: float = 1e-6,
+              progress: bool = False) -> tuple[list[Run], bool]:
     """Run ``optimisers`` (names) on ``starts``, a non-empty list of
     (scene, size, seed).
 
-    Writes ``samples.csv`` and ``runs.csv`` in ``outdir`` (a pathlib.Path)
-    and returns ``(runs, interrupted)``: the list of finished compared
-    :class:`Run` and whether a KeyboardInterrupt cut the suite short.
+    Writes ``samples.csv`` and ``runs.csv`` in ``outdir`` and returns
+    ``(runs, interrupted)``: the list of finished compared :class:`Run`
+    (the skipped ones included, with no samples) and whether a
+    KeyboardInterrupt cut the suite short.
     """
     runs, interrupted = [], False
     bar = Progress(len(starts) * (len(optimisers) + 1), progress)
@@ -106,21 +118,31 @@ def run_suite(starts, optimisers, outdir, *, fmax=1e-6, steps=10000,
         try:
             warm = build(*starts[0][:2], seed=starts[0][2])
             for name in dict.fromkeys([reference, *optimisers]):
-                run_optimizer(warm, name, fmax, 3)  # one-off costs, untimed
+                if not too_large(name, len(warm)):   # one-off costs, untimed
+                    run_optimizer(warm, name, fmax, 3)
             for scene, size, seed in starts:
                 start = build(scene, size, seed=seed)
                 key = dict(scene=scene, size=size, seed=seed,
                            natoms=len(start))
                 finished = {}   # optimiser: (samples, converged, error)
+                skipped = [Run(**key, optimiser=name, status='skipped',
+                               samples=np.empty((0, len(SAMPLE_FIELDS))),
+                               error=too_large(name, len(start)))
+                           for name in optimisers
+                           if too_large(name, len(start))]
                 try:
-                    for name, target in ((reference, ref_fmax),
-                                         *((o, fmax) for o in optimisers)):
+                    for k, (name, target) in enumerate(
+                            ((reference, ref_fmax),
+                             *((o, fmax) for o in optimisers))):
                         bar(f'{scene} {size} seed {seed}: {name}')
-                        finished[name, target] = run_optimizer(
-                            start, name, target, steps)
+                        if k == 0 or not too_large(name, len(start)):
+                            finished[name, target] = run_optimizer(
+                                start, name, target, steps)
                 finally:   # an interrupt keeps the runs that finished
                     runs += _write_start(key, finished, reference,
                                          energy_rtol, samples_csv, runs_csv)
+                    runs_csv.writerows(map(_run_row, skipped))
+                    runs += skipped
                     fs.flush()
                     fr.flush()
         except KeyboardInterrupt:

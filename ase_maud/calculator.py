@@ -61,10 +61,13 @@ class MaudCalculator(Calculator):
         relaxed much below ``fmm_eps`` times the typical repulsive force.
 
     Only what is asked is computed: ``energy``/``forces`` never build the
-    blocks; asking for ``stiffness`` computes all three in one pass.
+    blocks; asking for ``stiffness`` computes all three in one pass; asking
+    for ``hessian`` (the dense (dim N, dim N) matrix, small scenes only) adds
+    it to the energy and forces of the same call.
     """
 
-    implemented_properties = ['energy', 'free_energy', 'forces', 'stiffness']
+    implemented_properties = ['energy', 'free_energy', 'forces', 'stiffness',
+                              'hessian']
     # springs default to a tuple: Calculator.todict compares each parameter
     # with its default by ``!=``, which fails on an ndarray default.
     default_parameters = {'springs': (), 'a': 1.0, 'Q': 1.0, 'dim': 3,
@@ -105,6 +108,29 @@ class MaudCalculator(Calculator):
         """The length ``a`` of the repulsion ``a**3 Q / L`` (a dimer with
         one spring rests at ``L = a``)."""
         return self.parameters['a']
+
+    def check_state(self, atoms: Atoms, tol: float = 1e-15) -> list[str]:
+        """What changed since the last calculation, compared exactly.
+
+        ASE's default compares positions within an absolute ``tol``, which
+        misses every move of a scene whose ``a`` is below about 1e-10 and
+        costs several ``isclose`` calls per property request; the potential
+        depends only on the positions (and the number of points), so those,
+        the cell and pbc are compared exactly, whatever the scale.
+        """
+        old = self.atoms
+        if old is None or len(old) != len(atoms):
+            return list(all_changes)
+        changes = []
+        if not np.array_equal(old.positions, atoms.positions):
+            changes.append('positions')
+        if not np.array_equal(old.numbers, atoms.numbers):
+            changes.append('numbers')
+        if not np.array_equal(old.cell.array, atoms.cell.array):
+            changes.append('cell')
+        if not np.array_equal(old.pbc, atoms.pbc):
+            changes.append('pbc')
+        return changes
 
     def check_atoms(self, atoms: Atoms) -> np.ndarray:
         """Validate ``atoms`` for this potential; return its positions.
@@ -163,6 +189,10 @@ class MaudCalculator(Calculator):
             blocks += physics.spring_nodal_blocks(self.springs, len(flat),
                                                   p['Q'], dim)
             self.results['stiffness'] = blocks
+        if 'hessian' in properties:
+            self._check_hessian_size(len(flat))
+            self.results['hessian'] = dense_hessian(flat, self.springs, p['a'],
+                                                    p['Q'], dim)
 
     def get_stiffness(self, atoms: Atoms | None = None) -> np.ndarray:
         """Nodal blocks ``K_mm``, shape (N, dim, dim), units of ``Q``."""
@@ -174,16 +204,17 @@ class MaudCalculator(Calculator):
         For analysis of small scenes only; refuses more than
         :attr:`max_hessian_atoms` atoms with a ValueError.
         """
-        atoms = atoms if atoms is not None else self.atoms
-        if len(atoms) > self.max_hessian_atoms:
+        if atoms is not None:
+            self._check_hessian_size(len(atoms))
+        return self.get_property('hessian', atoms)
+
+    def _check_hessian_size(self, natoms: int) -> None:
+        if natoms > self.max_hessian_atoms:
             raise ValueError(
-                f'get_hessian: {len(atoms)} atoms exceed max_hessian_atoms = '
+                f'get_hessian: {natoms} atoms exceed max_hessian_atoms = '
                 f'{self.max_hessian_atoms} (the dense matrix would hold '
-                f'{(self.parameters["dim"] * len(atoms))**2:.2e} entries); use'
+                f'{(self.parameters["dim"] * natoms)**2:.2e} entries); use'
                 ' Hessian-vector products (ase_maud.hessian) instead')
-        positions = self.check_atoms(atoms)
-        p = self.parameters
-        return dense_hessian(positions, self.springs, p['a'], p['Q'], p['dim'])
 
     def get_spring_hessian(self, atoms: Atoms | None = None) -> sp.csr_matrix:
         """The springs' exact, constant Hessian ``Q (L (x) I_dim)``, shape

@@ -1,38 +1,20 @@
-"""Maud: nodal-Newton dynamic relaxation (the tensor and scalar Maud steps).
+"""Maud: the specification's step ``dr = gamma K^-1 f`` as an ASE optimizer.
 
-Each point m moves by its own out-of-balance force divided by its own
-stiffness, every other point held fixed (the specification's step, with ASE's
-force sign ``f = -dE/dr``)::
+``K`` is a stiffness model (:mod:`ase_maud.stiffness`) and the step rule
+around it (L-BFGS memory, Day's momentum, restarts, gamma, step bounds) is
+:class:`ase_maud.method.MaudMethod`; this module is ASE's plumbing: the
+optimizable, the log, the trajectory, the restart file, and the run's safety
+checks.
 
-    tensor:  dr_m = gamma * K_mm^-1 f_m
-    scalar:  dr_m = gamma * f_m / Tr(K_mm)
-
-and, after Day's dynamic relaxation, the previous move is carried over with a
-damping weight: ``v <- beta * v + dr; r <- r + v``. The rules that make this a
-robust optimiser (chosen on the scene suite, see docs/optimizer.md):
-
-- ``target='minimum'``: each block is replaced by its absolute value
-  ``V |Lambda| V^T`` (eigenvalues floored at ``floor * max|lambda|``), so no
-  point steps uphill along a negative principal direction and a singular block
-  (a point with no spring in 3D has ``Tr K_mm = 0``) stays invertible.
-  ``target='stationary'`` keeps the signs: the plain Newton-like step of the
-  specification, which can converge on saddles and maxima.
-- Kinetic-damping restarts: the carried velocity is dropped when it points
-  against the new Maud direction (``v . K^-1 f < 0``; with the absolute-value
-  blocks of ``'minimum'`` this is FIRE's and Barnes's ``v . f < 0`` measured
-  in the nodal metric),
-  and gamma shrinks by ``overshoot_shrink``: an overshoot means the step was
-  too long (the two-point problem, for one, needs gamma = 1/2).
-- A step that raises the merit (the energy for ``'minimum'``, ``|f|**2`` for
-  ``'stationary'``) is taken back at no extra force call: the optimiser returns
-  to the previous point, whose forces it kept, halves gamma and restarts.
-  Gamma grows by ``gamma_growth`` after each accepted step, up to ``gamma_max``.
-- The momentum weight grows with the steps since the last restart,
-  ``beta_k = min(k / (k + 3), beta_max)`` (Nesterov's schedule).
-- No point moves further in one step than ``maxstep_nn`` (< 1/2) times its
-  distance to its nearest other point (nor than ``maxstep`` if given): two
-  points stepping towards each other keep at least ``1 - 2 maxstep_nn`` of
-  their distance, so no step can make two points meet.
+- ``model='auto'`` (default): the whole scene's stiffness: the exact Hessian
+  (saddle-free Newton) for small scenes, the sparse global model
+  ``P = Q (L (x) I) + blockdiag(|K_mm - Q deg I|)`` with an L-BFGS memory for
+  large ones; the specification's nodal blocks (``model='nodal'``, with
+  ``method='tensor'`` or ``'scalar'``) and Day's momentum remain as options; a
+  calculator with no stiffness gets the secant model ``kappa I``.
+- ``target='minimum'`` makes every model positive definite (absolute
+  eigenvalues, floored), so no step is meant uphill; ``'stationary'`` keeps the
+  signs: saddles and maxima are fixed points too.
 - A run never goes on for ever: a 3D scene whose spring graph has a free
   component beside others (no finite minimum) is reported in the log before
   the first step; :class:`DivergenceError` stops a run whose points spread
@@ -44,11 +26,18 @@ robust optimiser (chosen on the scene suite, see docs/optimizer.md):
   trajectory written so far stays valid.
 """
 
-import numpy as np
-from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
-from scipy.spatial import cKDTree
+from __future__ import annotations
 
-from .topology import describe_unbounded, unbounded_components
+from typing import IO, Any
+
+import numpy as np
+from ase import Atoms
+from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
+
+from .method import MaudMethod, StepRule, _Point, merit_tolerance
+from .stiffness import StiffnessModel, choose_model
+from .topology import describe_unbounded
+
 
 class MaudError(RuntimeError):
     """A run that cannot go on; the message (also in the log) says why."""
@@ -62,288 +51,208 @@ class StagnationError(MaudError):
     """No progress: gamma underflowed or fmax stopped improving."""
 
 
-_METHODS = ('tensor', 'scalar')
 _TARGETS = ('minimum', 'stationary')
+_METHODS = ('tensor', 'scalar')
 
 
 class Maud(Optimizer):
-    """The Maud optimiser; see the module docstring for the step rules.
+    """The Maud optimiser; see the module docstring and docs/optimizer.md.
 
     Parameters
     ----------
     atoms : Atoms (or anything with ``__ase_optimizable__``)
-        The system to relax. Its calculator should offer the ``stiffness``
-        property (as :class:`ase_maud.MaudCalculator` does); otherwise the
-        nodal blocks are estimated as ``kappa I`` with ``kappa`` the secant
-        (Barzilai-Borwein) curvature ``s.y / s.s`` of the last step, starting
-        from ``kappa0``, and the log says so once.
+        The system to relax.
+    model : 'auto', 'exact', 'global', 'nodal', 'secant' or a StiffnessModel
+        The stiffness ``K`` of the step (default 'auto'; see
+        :func:`ase_maud.stiffness.choose_model`).
     method : 'tensor' (default) or 'scalar'
-        ``K_mm^-1 f_m`` or ``f_m / Tr K_mm``.
+        For ``model='nodal'``: ``K_mm^-1 f_m`` or ``f_m / Tr K_mm``.
     target : 'minimum' (default) or 'stationary'
-        Move only downhill, or seek any stationary point (see above).
+        Move only downhill, or seek any stationary point.
     gamma : float
-        Initial step factor (default 1: the full nodal Newton step).
-    gamma_max : float
-        Largest step factor gamma may grow to (default 1.5).
+        Initial step factor (default 1: the full Newton step of the model).
+    gamma_max : float or None
+        Largest step factor (default: the model's, 1 for exact and global,
+        1.5 for nodal and secant).
     gamma_growth : float
         Factor gamma grows by after each accepted step (default 1.1).
     overshoot_shrink : float
         Factor gamma shrinks by at a kinetic-damping restart (default 0.6).
-    beta_max : float
-        Largest momentum weight (default 0.98).
-    floor : float
-        Relative eigenvalue floor of a nodal block (default 1e-2).
+    beta_max : float or None
+        Largest momentum weight, in [0, 1) (default: the model's, 0 for exact
+        and global, 0.98 for nodal and secant).
+    memory : int or None
+        L-BFGS pairs kept over ``K^-1`` (default: the model's, 30 for global,
+        0 for the others).
+    floor : float or None
+        Relative eigenvalue floor of the model (default: the model's, 1e-8
+        for exact, 1e-2 for the others).
     maxstep_nn : float
         Largest move of a point in one step, as a fraction of its distance to
-        its nearest other point, in (0, 0.5) (default 0.45: a distance keeps
-        at least a tenth of itself per step).
+        its nearest other point, in (0, 0.5) (default 0.45).
     maxstep : float or None
-        Largest move of a point in one step, in length units (default None:
-        only ``maxstep_nn`` applies).
+        Largest move of a point in one step, in length units (default None).
     kappa0 : float
-        Initial stiffness estimate when the calculator has no ``stiffness``
-        (default 70, ASE's BFGS initial Hessian in eV/A**2).
+        Initial stiffness of the secant model (default 70, ASE's BFGS initial
+        Hessian in eV/A**2).
     divergence_factor : float
         Growth of the scene's size (largest distance from the centroid) over
         its reference, ``max(start size, a N)``, that counts as divergence
-        (default 3: a relaxed scene is smaller than ``a N``; a free chain's
-        half-length is about 0.85 a N at N = 100, a ring's radius 0.3 a N).
-        Free components in 2D drift apart ever more slowly (force ~ 1/L**2),
-        so the steps to reach the limit grow as its cube.
+        (default 3).
     patience : int
-        Steps without progress (fmax down by 0.1 %, or for ``'minimum'`` a new
-        lowest energy) after which the run stops as stagnant (default 2000).
+        Steps without progress after which the run stops as stagnant
+        (default 2000).
     restart, logfile, trajectory, append_trajectory, **kwargs
         As for every ASE optimizer.
     """
 
-    def __init__(self, atoms, restart=None, logfile='-', trajectory=None,
-                 append_trajectory=False, method='tensor', target='minimum',
-                 gamma=1.0, gamma_max=1.5, gamma_growth=1.1, beta_max=0.98,
-                 floor=1e-2, maxstep_nn=0.45, maxstep=None, kappa0=70.0,
-                 overshoot_shrink=0.6, divergence_factor=3.0, patience=2000,
-                 **kwargs):
-        if method not in _METHODS:
-            raise ValueError(f'method must be one of {_METHODS}, got {method!r}')
+    def __init__(self, atoms: Atoms, restart: str | None = None,
+                 logfile: IO | str | None = '-', trajectory: str | None = None,
+                 append_trajectory: bool = False,
+                 model: str | StiffnessModel = 'auto', method: str = 'tensor',
+                 target: str = 'minimum', gamma: float = 1.0,
+                 gamma_max: float | None = None, gamma_growth: float = 1.1,
+                 beta_max: float | None = None, memory: int | None = None,
+                 floor: float | None = None, maxstep_nn: float = 0.45,
+                 maxstep: float | None = None, kappa0: float = 70.0,
+                 overshoot_shrink: float = 0.6, divergence_factor: float = 3.0,
+                 patience: int = 2000, **kwargs: Any):
         if target not in _TARGETS:
             raise ValueError(f'target must be one of {_TARGETS}, got {target!r}')
-        for name, value in (('gamma', gamma), ('gamma_max', gamma_max),
-                            ('floor', floor), ('maxstep_nn', maxstep_nn),
-                            ('kappa0', kappa0)):
+        if method not in _METHODS:
+            raise ValueError(f'method must be one of {_METHODS}, got {method!r}')
+        if isinstance(model, StiffnessModel):
+            self.model = model
+        else:
+            system = atoms.__ase_optimizable__() if hasattr(
+                atoms, '__ase_optimizable__') else atoms
+            self.model = choose_model(getattr(system, 'atoms', atoms), model,
+                                      target, method=method, floor=floor,
+                                      kappa0=kappa0)
+        defaults = self.model.step_defaults
+        rule = StepRule(
+            target=target, gamma=gamma,
+            gamma_max=defaults['gamma_max'] if gamma_max is None else gamma_max,
+            gamma_growth=gamma_growth, overshoot_shrink=overshoot_shrink,
+            beta_max=defaults['beta_max'] if beta_max is None else beta_max,
+            memory=defaults['memory'] if memory is None else memory,
+            maxstep_nn=maxstep_nn, maxstep=maxstep,
+            trust_region=defaults['trust_region'])
+        if target == 'stationary':
+            rule.memory = 0  # L-BFGS assumes a positive-definite model
+        _check_rule(rule)
+        for name, value in (('kappa0', kappa0),):
             if not value > 0:
                 raise ValueError(f'{name} must be positive, got {value!r}')
         if not divergence_factor > 1:
             raise ValueError('divergence_factor must exceed 1, got '
                              f'{divergence_factor!r}')
-        if not maxstep_nn < 0.5:
-            raise ValueError('maxstep_nn must be below 0.5 (two points could '
-                             f'meet), got {maxstep_nn!r}')
-        if not 0 <= beta_max < 1:
-            raise ValueError(f'beta_max must be in [0, 1), got {beta_max!r}')
-        if not 0 < overshoot_shrink <= 1:
-            raise ValueError('overshoot_shrink must be in (0, 1], got '
-                             f'{overshoot_shrink!r}')
-        if gamma_growth < 1:
-            raise ValueError(f'gamma_growth must be >= 1, got {gamma_growth!r}')
+        self.rule = rule
         self.method = method
         self.target = target
-        self.gamma0 = gamma
-        self.gamma_max = gamma_max
-        self.gamma_growth = gamma_growth
-        self.overshoot_shrink = overshoot_shrink
-        self.beta_max = beta_max
-        self.floor = floor
-        self.maxstep_nn = maxstep_nn
-        self.maxstep = maxstep
-        self.kappa0 = kappa0
         self.divergence_factor = divergence_factor
         self.patience = patience
         super().__init__(atoms, restart, logfile, trajectory,
                          append_trajectory=append_trajectory, **kwargs)
-        self._said_estimate = False
+        if self.model.name == 'secant':
+            self.logfile.write('Maud: the calculator gives no stiffness; it is '
+                               'estimated as kappa I (secant curvature)\n')
 
-    def todict(self):
+    def todict(self) -> dict[str, Any]:
         d = super().todict()
-        d.update(method=self.method, target=self.target, gamma=self.gamma0,
-                 gamma_max=self.gamma_max, gamma_growth=self.gamma_growth,
-                 overshoot_shrink=self.overshoot_shrink,
-                 beta_max=self.beta_max, floor=self.floor,
-                 maxstep_nn=self.maxstep_nn)
+        d.update(model=self.model.name, method=self.method, target=self.target,
+                 gamma=self.rule.gamma, gamma_max=self.rule.gamma_max,
+                 gamma_growth=self.rule.gamma_growth,
+                 overshoot_shrink=self.rule.overshoot_shrink,
+                 beta_max=self.rule.beta_max, memory=self.rule.memory,
+                 floor=self.model.floor, maxstep_nn=self.rule.maxstep_nn)
         return d
 
-    def initialize(self):
-        self.v = None           # last move, (N, 3)
-        self.gamma = self.gamma0
-        self.k = 0              # accepted steps since the last restart
-        self.kappa = self.kappa0
-        self.last = None        # x, merit, forces, blocks where the last step began
+    def initialize(self) -> None:
+        self.maud = MaudMethod(self.model, self.rule)
         self.size0 = None       # reference size for the divergence test
         self.unbounded = []     # spring components that make E unbounded
         self.best = (np.inf, 0)  # best fmax so far, and the step it was seen
         self.lowest = (np.inf, 0)  # lowest merit so far ('minimum'), and step
 
-    def read(self):
+    def read(self) -> None:
         state = self.load()
         self.initialize()
-        self.gamma, self.k, self.kappa = state['gamma'], state['k'], state['kappa']
+        self.maud.load(state['method'])
         self.size0, self.best = state['size0'], tuple(state['best'])
         self.lowest = tuple(state['lowest'])
-        if state['v'] is not None:
-            self.v = np.asarray(state['v'], dtype=float)
-        if state['last'] is not None:
-            self.last = {key: value if key == 'merit' or value is None
-                         else np.asarray(value, dtype=float)
-                         for key, value in state['last'].items()}
 
-    def _dump_state(self):
-        self.dump({'gamma': self.gamma, 'k': self.k, 'kappa': self.kappa,
-                   'v': self.v, 'last': self.last, 'size0': self.size0,
+    def _dump_state(self) -> None:
+        self.dump({'method': self.maud.state(), 'size0': self.size0,
                    'best': list(self.best), 'lowest': list(self.lowest)})
 
-    # -- the pieces of a step -------------------------------------------------
+    # -- the step ---------------------------------------------------------------
 
-    def _atoms(self):
+    def _atoms(self) -> Atoms | None:
         """The Atoms behind the optimizable, or None (a filter, say)."""
         return getattr(self.optimizable, 'atoms', None)
 
-    def _stiffness(self):
-        """Nodal blocks (N, d, d) from the calculator, or None."""
+    def _evaluate(self) -> None:
+        """One calculator call for the energy, the forces and what the model
+        needs (the nodal blocks, say), computed together."""
         atoms = self._atoms()
-        calc = getattr(atoms, 'calc', None)
-        if calc is None or 'stiffness' not in calc.implemented_properties:
-            if not self._said_estimate:
-                self.logfile.write(
-                    'Maud: the calculator gives no stiffness; nodal blocks '
-                    'are estimated as kappa I (secant curvature)\n')
-                self._said_estimate = True
-            return None
-        return calc.get_property('stiffness', atoms)
+        if atoms is not None and (prop := self.model.needs(atoms)) is not None:
+            atoms.calc.get_property(prop, atoms)
 
-    def _merit(self, forces):
+    def _merit(self, forces: np.ndarray) -> float:
         if self.target == 'minimum':
             return self.optimizable.get_value()
         return float(np.vdot(forces, forces))
 
-    def _direction(self, forces, blocks):
-        """The Maud direction ``K_mm^-1 f_m`` (or ``f_m / Tr``) per point."""
-        if blocks is None:
-            return forces / self.kappa
-        d = blocks.shape[-1]
-        tiny = np.finfo(float).tiny
-        f = forces[:, :d]
-        step = np.zeros_like(forces)
-        lam, vec = np.linalg.eigh(blocks)
-        size = np.abs(lam)
-        floor = np.maximum(self.floor * size.max(axis=1), tiny)
-        if self.method == 'scalar':
-            trace = size.sum(axis=1) if self.target == 'minimum' else lam.sum(axis=1)
-            trace = np.where(trace < 0, -1.0, 1.0) * np.maximum(np.abs(trace), floor)
-            step[:, :d] = f / trace[:, None]
-            return step
-        safe = np.maximum(size, floor[:, None])
-        if self.target == 'stationary':
-            safe *= np.where(lam < 0, -1.0, 1.0)
-        proj = np.einsum('nij,ni->nj', vec, f) / safe
-        step[:, :d] = np.einsum('nij,nj->ni', vec, proj)
-        return step
-
-    def _bound(self, step, x):
-        """Scale each point's move down to its allowed length."""
-        length = np.linalg.norm(step, axis=1)
-        limit = np.full(len(x), np.inf)
-        if len(x) > 1:
-            nn = cKDTree(x).query(x, k=2)[0][:, 1]
-            limit = self.maxstep_nn * nn
-        if self.maxstep is not None:
-            limit = np.minimum(limit, self.maxstep)
-        scale = np.divide(limit, length, out=np.ones_like(length),
-                          where=length > limit)
-        return step * scale[:, None]
-
-    def step(self):
+    def step(self) -> None:
         opt = self.optimizable
         x = opt.get_x().reshape(-1, 3)
         forces = -opt.get_gradient().reshape(-1, 3)
-        blocks = self._stiffness()
         merit = self._merit(forces)
-
-        last = self.last
-        if last is not None and self._uphill(last, x, merit, forces):
-            # Uphill: go back to where the last step began, gently.
-            x, merit = last['x'], last['merit']
-            forces, blocks = last['forces'], last['blocks']
-            self.gamma *= 0.5
-            self.v = None
-            self.k = 0
-        elif last is not None:
-            if blocks is None:
-                self._update_kappa(x, forces)
-            self.gamma = min(self.gamma * self.gamma_growth, self.gamma_max)
-        self._check_progress(x, merit, forces)
-        direction = self._direction(forces, blocks)
-        if self.v is not None and np.vdot(self.v, direction) < 0:
-            # Overshoot: kinetic-damping restart, and a smaller gamma.
-            self.gamma *= self.overshoot_shrink
-            self.v = None
-            self.k = 0
-        direction *= self.gamma
-        if self.v is not None:
-            beta = min(self.k / (self.k + 3.0), self.beta_max)
-            direction += beta * self.v
-        self.k += 1
-        move = self._bound(direction, x)
-        self.last = {'x': x.copy(), 'merit': merit, 'forces': forces.copy(),
-                     'blocks': blocks}
-        opt.set_x((x + move).ravel())
-        self.v = opt.get_x().reshape(-1, 3) - x   # the move constraints allowed
+        maud = self.maud
+        if maud.uphill(x, merit, forces):
+            here = maud.revert()
+            if here.solver is None:  # resumed from a restart file
+                opt.set_x(here.x.ravel())
+                here.solver = self.model.at(self._atoms())
+        else:
+            maud.accept(x, forces)
+            here = _Point(x.copy(), merit, forces.copy(), self.model.at(self._atoms()))
+        self._check_progress(here.x, here.merit, here.forces)
+        move = maud.move(here)
+        opt.set_x((here.x + move).ravel())
+        maud.moved(opt.get_x().reshape(-1, 3))
         self._dump_state()
-        self._stiffness()   # blocks, energy and forces in one calculator call
+        self._evaluate()
 
-    # Both check the scene first and ask for the blocks, so that the
-    # calculator computes them together with the first forces, in one call.
-    def irun(self, fmax=0.05, steps=DEFAULT_MAX_STEPS):
+    def irun(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS):
         self._preflight()
         return super().irun(fmax, steps)
 
-    def run(self, fmax=0.05, steps=DEFAULT_MAX_STEPS):
+    def run(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS) -> bool:
         self._preflight()
         return super().run(fmax, steps)
 
-    def _preflight(self):
-        """Say in the log if the scene has no finite minimum; get blocks."""
+    def _preflight(self) -> None:
+        """Say in the log if the scene has no finite minimum; evaluate."""
         atoms = self._atoms()
         calc = getattr(atoms, 'calc', None)
-        springs = getattr(calc, 'springs', None)
-        if springs is not None and self.target == 'minimum':
-            self.unbounded = unbounded_components(
-                atoms, springs, calc.parameters.get('dim', 3))
+        if hasattr(calc, 'unbounded_components') and self.target == 'minimum':
+            self.unbounded = calc.unbounded_components(atoms)
             if self.unbounded:
                 self.logfile.write('Maud: warning: '
                                    f'{describe_unbounded(self.unbounded)}\n')
-        self._stiffness()
+        self._evaluate()
 
-    def _stop(self, error, message):
+    def _stop(self, error: type[MaudError], message: str) -> None:
         self.logfile.write(f'Maud: stopped: {message}\n')
         raise error(message)
-
-    def _uphill(self, last, x, merit, forces):
-        """Whether the step from ``last`` raised the merit.
-
-        Energies that agree within rounding (:func:`_merit_tol`) are told
-        apart by the trapezoid estimate ``-(f_last + f) . dx / 2`` of the
-        energy change, which has no cancellation error.
-        """
-        change, tol = merit - last['merit'], _merit_tol(last['merit'])
-        if self.target != 'minimum' or abs(change) > tol:
-            return change > tol
-        return -0.5 * np.vdot(last['forces'] + forces, x - last['x']) > 0
 
     def _check_progress(self, x, merit, forces):
         """Raise DivergenceError or StagnationError; see the module docstring."""
         size = np.linalg.norm(x - x.mean(axis=0), axis=1).max()
         if self.size0 is None:
-            calc = getattr(self._atoms(), 'calc', None)
-            a = getattr(calc, 'parameters', {}).get('a', 0.0)
+            a = getattr(getattr(self._atoms(), 'calc', None), 'length_scale', 0.0)
             reference = size if self.unbounded else max(size, a * len(x))
             self.size0 = max(reference, np.finfo(float).tiny)
         factor = 2.0 if self.unbounded else self.divergence_factor
@@ -358,7 +267,7 @@ class Maud(Optimizer):
         if fmax < (1 - 1e-3) * self.best[0]:
             self.best = (fmax, self.nsteps)
         if (self.target == 'minimum'
-                and merit < self.lowest[0] - _merit_tol(merit)):
+                and merit < self.lowest[0] - merit_tolerance(merit)):
             self.lowest = (merit, self.nsteps)
         if self.nsteps - max(self.best[1], self.lowest[1]) > self.patience:
             self._stop(StagnationError,
@@ -367,10 +276,10 @@ class Maud(Optimizer):
                        f'{self.best[0]:.3g}{self._lowest_text()}; a requested '
                        'fmax below the rounding noise of the forces, or an '
                        'oscillation)')
-        if self.gamma < 1e-12 * self.gamma0:
+        if self.maud.gamma < 1e-12 * self.rule.gamma:
             self._stop(StagnationError,
                        f'stagnant at step {self.nsteps}: gamma fell to '
-                       f'{self.gamma:.3g}; every step raised the '
+                       f'{self.maud.gamma:.3g}; every step raised the '
                        f'{"energy" if self.target == "minimum" else "|f|^2"}'
                        ' (energy and forces may disagree)')
 
@@ -379,15 +288,23 @@ class Maud(Optimizer):
             return ''
         return f', energy {self.lowest[0]:.12g} lowest since step {self.lowest[1]}'
 
-    def _update_kappa(self, x, forces):
-        """Secant curvature of the last step, for calculators with no blocks."""
-        s = (x - self.last['x']).ravel()
-        y = (self.last['forces'] - forces).ravel()
-        sy, ss = np.vdot(s, y), np.vdot(s, s)
-        if sy > 0 and ss > 0:
-            self.kappa = sy / ss
 
-
-def _merit_tol(merit):
-    """Rounding slack when comparing merits (energies sum N**2 terms)."""
-    return 1e-12 * max(abs(merit), 1e-300)
+def _check_rule(rule: StepRule) -> None:
+    """Raise ValueError naming the first step-rule keyword out of range."""
+    checks = (
+        ('gamma', rule.gamma, rule.gamma > 0, 'a positive number'),
+        ('gamma_max', rule.gamma_max, rule.gamma_max > 0, 'a positive number'),
+        ('gamma_growth', rule.gamma_growth, rule.gamma_growth >= 1, 'a number >= 1'),
+        ('overshoot_shrink', rule.overshoot_shrink, 0 < rule.overshoot_shrink <= 1,
+         'in (0, 1]'),
+        ('beta_max', rule.beta_max, 0 <= rule.beta_max < 1, 'in [0, 1)'),
+        ('memory', rule.memory, isinstance(rule.memory, (int, np.integer))
+         and rule.memory >= 0, 'a whole number >= 0'),
+        ('maxstep_nn', rule.maxstep_nn, 0 < rule.maxstep_nn < 0.5,
+         'in (0, 0.5) (at 0.5 two points could meet)'),
+        ('maxstep', rule.maxstep, rule.maxstep is None or rule.maxstep > 0,
+         'None or a positive length'),
+    )
+    for name, value, ok, what in checks:
+        if not ok:
+            raise ValueError(f'{name} must be {what}, got {value!r}')

@@ -1,0 +1,255 @@
+"""Stiffness models, the step rule with them, and MaudPrecon: against the
+analytic Hessian, Newton's step, and BFGS from the same start."""
+
+import numpy as np
+import pytest
+from ase import Atoms
+from ase.calculators.emt import EMT
+from ase.constraints import FixAtoms, FixCartesian
+from ase.optimize import BFGS
+from ase.optimize.precon import PreconFIRE, PreconLBFGS
+
+from ase_maud import Maud, MaudCalculator
+from ase_maud.precon import MaudPrecon
+from ase_maud.scenes import SCENES, build
+from ase_maud.stiffness import (
+    ExactModel,
+    GlobalModel,
+    NodalModel,
+    SecantModel,
+    choose_model,
+    free_dofs,
+)
+
+
+def random_scene(seed, dim=3, n=None, a=1.0, fixed=True):
+    """Random points with a random connected spring graph (a random tree plus
+    extra edges), some atoms held by FixAtoms and one by FixCartesian."""
+    rng = np.random.default_rng(seed)
+    n = n or int(rng.integers(6, 25))
+    positions = np.zeros((n, 3))
+    positions[:, :dim] = rng.uniform(0, 2 * n ** (1 / dim), (n, dim))
+    tree = [(int(rng.integers(0, k)), k) for k in range(1, n)]
+    extra = {tuple(sorted(rng.choice(n, 2, replace=False))) for _ in range(n // 2)}
+    springs = sorted(set(tree) | extra)
+    atoms = Atoms(positions=positions)
+    atoms.calc = MaudCalculator(springs, a=a, Q=float(rng.uniform(0.5, 2)), dim=dim)
+    if fixed:  # three points held: no rigid-body zero modes are left
+        held = rng.choice(n, 4, replace=False)
+        atoms.set_constraint([FixAtoms(indices=held[:3]),
+                              FixCartesian(int(held[3]), mask=[True, False, False])])
+    return atoms
+
+
+def near_minimum(atoms, seed):
+    """``atoms`` relaxed by BFGS, then nudged a little: a point where the free
+    Hessian is positive definite (checked) and the forces are not zero."""
+    with BFGS(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-8, steps=5000)
+    nudge = np.random.default_rng(seed).normal(0, 1e-3, atoms.positions.shape)
+    nudge[:, atoms.calc.dim:] = 0.0
+    atoms.set_positions(atoms.positions + nudge)
+    return atoms
+
+
+def free_hessian(atoms):
+    dim = atoms.calc.dim
+    keep = free_dofs(atoms, dim).ravel()
+    return atoms.calc.get_hessian(atoms)[np.ix_(keep, keep)], keep
+
+
+@pytest.mark.parametrize('seed', range(4))
+@pytest.mark.parametrize('dim', [2, 3])
+def test_exact_step_is_newtons_step(seed, dim):
+    atoms = near_minimum(random_scene(seed, dim), seed)
+    hessian, keep = free_hessian(atoms)
+    assert np.linalg.eigvalsh(hessian).min() > 0
+    forces = atoms.get_forces()
+    newton = np.linalg.solve(hessian, forces[:, :dim].ravel()[keep])
+    move = ExactModel().at(atoms).solve(forces)
+    assert np.allclose(move[:, :dim].ravel()[keep], newton, rtol=1e-8,
+                       atol=1e-12 * np.abs(newton).max())
+    assert not move[:, :dim].ravel()[~keep].any()
+    if dim == 2:
+        assert not move[:, 2].any()
+    # One Maud step with the exact model (gamma 1, no memory) is that move.
+    start = atoms.positions.copy()
+    with Maud(atoms, model='exact', logfile=None) as opt:
+        opt.run(fmax=0, steps=1)
+    assert np.allclose(atoms.positions - start, move, rtol=1e-8,
+                       atol=1e-12 * np.abs(move).max())
+
+
+@pytest.mark.parametrize('seed', range(6))
+@pytest.mark.parametrize('dim', [2, 3])
+def test_global_model_is_symmetric_positive_definite(seed, dim):
+    atoms = random_scene(seed, dim)
+    matrix, free, diagonal = GlobalModel().assemble(atoms)
+    assert matrix.shape == (free.sum(),) * 2
+    assert free.sum() < len(atoms) * dim  # the fixed DOFs are gone
+    dense = matrix.toarray()
+    assert np.allclose(dense, dense.T, rtol=0, atol=1e-14 * np.abs(dense).max())
+    assert np.linalg.eigvalsh(dense).min() > 0
+    # Its solver inverts it.
+    rng = np.random.default_rng(seed)
+    forces = rng.normal(size=(len(atoms), 3))
+    move = GlobalModel().at(atoms).solve(forces)
+    rhs = forces[:, :dim][free]
+    assert np.allclose(dense @ move[:, :dim][free], rhs, atol=1e-9 * np.abs(rhs).max())
+
+
+@pytest.mark.parametrize('seed', range(4))
+@pytest.mark.parametrize('dim', [2, 3])
+def test_global_model_is_the_hessian_without_repulsion(seed, dim):
+    # a -> 0: the repulsion a^3 Q / L vanishes and P is the exact Hessian.
+    atoms = random_scene(seed, dim, a=1e-7)
+    matrix, free, _ = GlobalModel().assemble(atoms)
+    hessian, keep = free_hessian(atoms)
+    assert np.allclose(matrix.toarray(), hessian, rtol=0,
+                       atol=1e-12 * np.abs(hessian).max())
+
+
+@pytest.mark.parametrize('seed', range(4))
+@pytest.mark.parametrize('dim', [2, 3])
+def test_global_model_spring_part_is_the_hessians(seed, dim):
+    atoms = random_scene(seed, dim, fixed=False)
+    calc = atoms.calc
+    springless = MaudCalculator(a=calc.length_scale, Q=calc.parameters['Q'], dim=dim)
+    spring_part = calc.get_hessian(atoms) - springless.get_hessian(atoms)
+    assert np.allclose(calc.get_spring_hessian(atoms).toarray(), spring_part,
+                       rtol=0, atol=1e-10 * np.abs(spring_part).max())
+
+
+def test_dense_spring_graph_is_solved_matrix_free():
+    # Every pair sprung: L is dense; the CG path must solve P d = f.
+    atoms = build('all_pairs', 120, seed=1)
+    model = GlobalModel()
+    solver = model.at(atoms)
+    assert type(solver).__name__ == '_MatrixFreeSolver'
+    forces = atoms.get_forces()
+    move = solver.solve(forces)
+    matrix, free, _ = model.assemble(atoms)
+    assert np.allclose(matrix @ move.ravel(), forces.ravel(),
+                       atol=1e-8 * np.abs(forces).max())
+
+
+def test_nodal_and_secant_models():
+    atoms = random_scene(3)
+    forces = atoms.get_forces()
+    blocks = atoms.calc.get_stiffness(atoms)
+    move = NodalModel().at(atoms).solve(forces)
+    # Where a block is positive definite, the tensor step is its inverse.
+    positive = np.linalg.eigvalsh(blocks).min(axis=1) > 1e-2 * np.abs(
+        np.linalg.eigvalsh(blocks)).max(axis=1)
+    expected = np.linalg.solve(blocks[positive], forces[positive][..., None])[..., 0]
+    assert np.allclose(move[positive], expected)
+    secant = SecantModel(kappa0=4.0)
+    assert np.allclose(secant.at(atoms).solve(forces), forces / 4.0)
+    secant.observe(np.ones((2, 3)), 3 * np.ones((2, 3)))
+    assert secant.kappa == 3.0
+
+
+def test_auto_picks_by_size_and_calculator():
+    assert choose_model(build('ring', 16)).name == 'exact'
+    assert choose_model(build('hanging_net', 20)).name == 'global'
+    bulk = Atoms('Cu4', positions=np.eye(4, 3) * 2.5)
+    bulk.calc = EMT()
+    assert choose_model(bulk).name == 'secant'
+    with pytest.raises(ValueError, match="property 'hessian'"):
+        choose_model(bulk, 'exact')
+    with pytest.raises(ValueError, match='model must be'):
+        choose_model(build('dimer'), 'newton')
+
+
+MULTI_BASIN = ('all_pairs', 'all_pairs2d')  # clusters with several minima
+
+
+@pytest.mark.parametrize('name', sorted(set(SCENES) - set(MULTI_BASIN)))
+def test_default_maud_reaches_bfgs_minimum(name):
+    seed = int(np.random.default_rng(sum(map(ord, name))).integers(1000))
+    size = {'molecule': 'C6H6', 'all_pairs': 10, 'hanging_net': 5}.get(name)
+    atoms, reference = build(name, size, seed=seed), build(name, size, seed=seed)
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-7, steps=5000)
+    with BFGS(reference, logfile=None) as opt:
+        assert opt.run(fmax=1e-7, steps=20000)
+    energy, ref = atoms.get_potential_energy(), reference.get_potential_energy()
+    assert energy <= ref * (1 + 1e-9), name
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('name', MULTI_BASIN)
+def test_default_maud_in_multi_basin_clusters(name):
+    # From a random start these clusters fall into one of a few minima, and
+    # BFGS and FIRE disagree on some starts. Over seeded starts, every Maud
+    # result must be a minimum that BFGS or FIRE also finds from some start,
+    # and Maud must reach the lowest one at least as often as BFGS.
+    from ase.optimize import FIRE
+
+    from ase_maud.analysis import classify
+    found = {'Maud': [], 'BFGS': [], 'FIRE': []}
+    for seed in range(8):
+        for label, opt in (('Maud', Maud), ('BFGS', BFGS), ('FIRE', FIRE)):
+            atoms = build(name, 10, seed=seed)
+            with opt(atoms, logfile=None) as dyn:
+                assert dyn.run(fmax=1e-7, steps=20000)
+            found[label].append(atoms.get_potential_energy())
+            if label == 'Maud':
+                assert classify(atoms).verdict == 'minimum'
+    known = np.array(found['BFGS'] + found['FIRE'])
+    for energy in found['Maud']:
+        assert np.isclose(known, energy, rtol=1e-8).any(), (energy, known)
+    lowest = known.min()
+    hits = {k: int(np.isclose(v, lowest, rtol=1e-8).sum()) for k, v in found.items()}
+    assert hits['Maud'] >= hits['BFGS'], hits
+
+
+def test_global_model_with_memory_relaxes_a_large_net_like_bfgs():
+    atoms, reference = build('hanging_net', 12, seed=4), build('hanging_net', 12, seed=4)
+    with Maud(atoms, model='global', logfile=None) as opt:
+        assert opt.run(fmax=1e-6, steps=2000)
+    with BFGS(reference, logfile=None) as opt:
+        assert opt.run(fmax=1e-6, steps=5000)
+    assert atoms.get_potential_energy() == pytest.approx(
+        reference.get_potential_energy(), rel=1e-10)
+    gap = (np.sort(atoms.get_all_distances(), axis=None)
+           - np.sort(reference.get_all_distances(), axis=None))
+    assert np.abs(gap).max() < 1e-4
+
+
+# -- MaudPrecon -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize('seed', range(3))
+@pytest.mark.parametrize('dim', [2, 3])
+def test_precon_matrix_and_solve_agree(seed, dim):
+    atoms = random_scene(seed, dim)
+    precon = MaudPrecon()
+    P = precon.make_precon(atoms)
+    dense = precon.asarray()
+    assert P.shape == (3 * len(atoms),) * 2
+    assert np.allclose(dense, dense.T)
+    assert np.linalg.eigvalsh(dense).min() > 0
+    x = np.random.default_rng(seed).normal(size=3 * len(atoms))
+    assert np.allclose(precon.Pdot(precon.solve(x)), x, atol=1e-9 * np.abs(x).max())
+    copy = precon.copy()
+    copy.make_precon(atoms)
+    assert np.allclose(copy.solve(x), precon.solve(x))
+
+
+@pytest.mark.parametrize('optimizer', [PreconLBFGS, PreconFIRE])
+@pytest.mark.parametrize('seed', range(2))
+def test_precon_drives_ase_optimizers_under_fixatoms(optimizer, seed):
+    atoms = build('hanging_net', 5, seed=seed)  # boundary held by FixAtoms
+    assert any(isinstance(c, FixAtoms) for c in atoms.constraints)
+    reference = build('hanging_net', 5, seed=seed)
+    start = atoms.positions.copy()
+    fixed = atoms.constraints[0].index
+    kwargs = {'maxstep': 1.0} if optimizer is PreconLBFGS else {}
+    with optimizer(atoms, precon=MaudPrecon(), logfile=None, **kwargs) as opt:
+        assert opt.run(fmax=1e-6, steps=3000)
+    with BFGS(reference, logfile=None) as opt:
+        assert opt.run(fmax=1e-6, steps=5000)
+    assert np.array_equal(atoms.positions[fixed], start[fixed])
+    assert atoms.get_potential_energy() == pytest.approx(
+        reference.get_potential_energy(), rel=1e-9)

@@ -1,7 +1,9 @@
 """The benchmark: samples, statuses, summary, plots, interrupts, backends."""
 
 import csv
+import runpy
 import time
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -334,3 +336,25 @@ def test_backends_smoke(tmp_path, pinned):
         assert error == 0 if row['backend'] == 'numpy' else error < 1e-12
     assert '| numba | forces | 50 | 1 |' in (out / 'backends.md').read_text()
     assert_png(out / 'backends.png')
+
+
+def test_basin_hopping_tool_same_hops_and_calls_to_best(tmp_path, capsys):
+    tool = runpy.run_path(str(Path(__file__).parent.parent / 'tools' / 'basin_hopping.py'))
+    once, again = (tool['hop'](2, 6, 1, 'BFGS', 3, 1e-3, 0.5, 0.1, 2000, 1e-6)
+                   for _ in range(2))
+    assert once == again     # the seed fixes BasinHopping's moves and acceptance
+    assert len(once['trace']) == 4 and once['calls'] == once['trace'][-1][0]
+    assert tool['main'](['--dims', '2', '3', '--sizes', '6', '--hops', '2',
+                         '--out', str(tmp_path)]) == 0
+    rows = read_csv(tmp_path / 'basin_hopping.csv')
+    assert [(r['dim'], r['optimiser']) for r in rows] == [
+        ('2', 'BFGS'), ('2', 'Maud'), ('3', 'BFGS'), ('3', 'Maud')]
+    for start in (rows[:2], rows[2:]):
+        best = min(float(r['lowest_energy']) for r in start)
+        for r in start:
+            assert float(r['best_energy']) == best and not r['error']
+            assert 0 < int(r['calls_to_own_lowest']) <= int(r['calls'])
+            if r['calls_to_best'] != 'inf':
+                assert int(r['calls_to_own_lowest']) <= int(r['calls_to_best'])
+        assert float(start[0]['calls_to_best_x_BFGS']) == 1.0
+    assert '| 3 | 6 | 0 | Maud |' in capsys.readouterr().out

@@ -55,7 +55,7 @@ def environment(argv=None):
             'numba': numba.__version__}
 
 
-#: The quantities of the summary, with their runs' :meth:`.Run.reached`.
+#: The quantities of the summary, in the order :meth:`.Run.reached` gives them.
 QUANTITIES = ('calls', 'time_s', 'cpu_s')
 
 

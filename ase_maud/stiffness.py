@@ -59,7 +59,7 @@ from scipy.spatial import cKDTree
 #: ``model='auto'`` takes the exact model up to this many free degrees of
 #: freedom (dense eigen-decomposition cost against a calculator call; see
 #: docs/optimizer.md for the measurement), the global model above.
-EXACT_MAX_DOFS = 600
+EXACT_MAX_DOFS = 300
 #: The global model uses algebraic multigrid above this many free DOFs.
 AMG_MIN_DOFS = 200_000
 #: The global model goes matrix-free when the spring graph holds more than
@@ -359,7 +359,7 @@ class GlobalModel(StiffnessModel):
                      'trust_region': False}
 
     def __init__(self, target: str = 'minimum', floor: float | None = None,
-                 refresh: float = 0.1):
+                 refresh: float = 0.5):
         super().__init__(target, floor)
         if not (isinstance(refresh, (int, float)) and refresh >= 0):
             raise ValueError(f'refresh must be a number >= 0, got {refresh!r}')

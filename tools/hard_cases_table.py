@@ -23,7 +23,11 @@ SEEDS = (0, 1, 2)
 
 def relax(atoms, fmax=1e-8, steps=30000, opt=Maud, **kwargs):
     """(outcome, steps, seconds, energy) of a run of ``opt`` (Maud); outcome
-    is 'converged' or the name of the MaudError raised."""
+    is 'converged' or the name of the MaudError raised. Maud runs the
+    specification's nodal step (the catalogue's subject) unless ``model`` is
+    given."""
+    if opt is Maud:
+        kwargs.setdefault('model', 'nodal')
     log = io.StringIO()
     start = time.perf_counter()
     with opt(atoms, logfile=log, **kwargs) as dyn:

@@ -13,10 +13,11 @@ from __future__ import annotations
 import numpy as np
 from ase.optimize import BFGS, FIRE, LBFGS
 from ase.optimize.fire2 import FIRE2
-from ase.optimize.precon import Exp, PreconLBFGS
+from ase.optimize.precon import Exp, PreconFIRE, PreconLBFGS
 from scipy.optimize import minimize
 
 from ..optimizer import Maud
+from ..precon import MaudPrecon
 
 #: Exp's cut-off radius in units of its r_NN (ASE's own default is 2).
 EXP_R_CUT = 2.0
@@ -71,9 +72,24 @@ class ScipyLBFGSB:
         return False
 
 
+def precon_maud(optimizer):
+    """``optimizer`` (PreconLBFGS or PreconFIRE) with :class:`MaudPrecon`;
+    PreconLBFGS with ``maxstep=1.0`` (its default 0.04 caps every step)."""
+    options = {'maxstep': 1.0} if optimizer is PreconLBFGS else {}
+    return lambda atoms: optimizer(atoms, precon=MaudPrecon(), logfile=None,
+                                   **options)
+
+
 OPTIMIZERS = {
-    'Maud-tensor': lambda atoms: Maud(atoms, method='tensor', logfile=None),
-    'Maud-scalar': lambda atoms: Maud(atoms, method='scalar', logfile=None),
+    'Maud': lambda atoms: Maud(atoms, logfile=None),
+    'Maud-exact': lambda atoms: Maud(atoms, model='exact', logfile=None),
+    'Maud-global': lambda atoms: Maud(atoms, model='global', logfile=None),
+    'Maud-tensor': lambda atoms: Maud(atoms, model='nodal', method='tensor',
+                                      logfile=None),
+    'Maud-scalar': lambda atoms: Maud(atoms, model='nodal', method='scalar',
+                                      logfile=None),
+    'PreconLBFGS-Maud': precon_maud(PreconLBFGS),
+    'PreconFIRE-Maud': precon_maud(PreconFIRE),
     'FIRE': lambda atoms: FIRE(atoms, logfile=None),
     'FIRE2': lambda atoms: FIRE2(atoms, logfile=None),
     'BFGS': lambda atoms: BFGS(atoms, logfile=None),
@@ -89,7 +105,7 @@ SCIPY_BASELINE = 'L-BFGS-B'
 #: (3N)^2 Hessian and eigen-decomposes it at every step, O(N^3): 126 s for
 #: 673 steps on hanging_net 20 (400 points, docs/benchmarks.md); one
 #: eigen-decomposition at 2500 points (7500^2) takes minutes on one core.
-MAX_ATOMS = {'BFGS': 500}
+MAX_ATOMS = {'BFGS': 500, 'Maud-exact': 200}
 
 
 def too_large(optimiser: str, natoms: int) -> str:

@@ -1,0 +1,58 @@
+"""Where the exact model stops paying: Maud with model='exact' against
+model='global' on scenes of growing size, calculator calls and CPU seconds to
+an fmax. The crossover sets ``ase_maud.stiffness.EXACT_MAX_DOFS`` (the
+``model='auto'`` switch); docs/optimizer.md quotes the output.
+
+    NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \
+        python tools/model_crossover.py --out docs/bench/crossover.md
+"""
+
+import argparse
+import time
+from pathlib import Path
+
+from ase_maud import Maud
+from ase_maud.bench.runner import CallRecorder
+from ase_maud.scenes import build
+from ase_maud.stiffness import free_dofs
+
+SCENES = [('ring', n) for n in (50, 100, 200, 300)] + [
+    ('hanging_net', n) for n in (8, 10, 12, 14)] + [
+    ('random_graph', n) for n in (50, 100, 200, 300)]
+
+
+def measure(name, size, model, fmax, seed):
+    """(calls, CPU seconds, converged) of one run."""
+    atoms = build(name, size, seed=seed)
+    start = time.process_time()
+    with CallRecorder(atoms.calc) as recorder:
+        converged = Maud(atoms, model=model, logfile=None).run(fmax=fmax, steps=3000)
+    return len(recorder.samples), time.process_time() - start, converged, len(atoms)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--fmax', type=float, default=1e-6)
+    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--out', type=Path, help='markdown table to write')
+    args = parser.parse_args()
+    lines = ['| scene | N | free DOFs | exact calls | exact CPU s | global calls '
+             '| global CPU s | CPU exact / global |', '|---|---|---|---|---|---|---|---|']
+    for name, size in SCENES:
+        exact = measure(name, size, 'exact', args.fmax, args.seed)
+        glob = measure(name, size, 'global', args.fmax, args.seed)
+        atoms = build(name, size, seed=args.seed)
+        dofs = int(free_dofs(atoms, atoms.calc.dim).sum())
+        row = (f'| {name} | {exact[3]} | {dofs} | {exact[0]}{"" if exact[2] else " (not conv.)"} '
+               f'| {exact[1]:.2f} | {glob[0]}{"" if glob[2] else " (not conv.)"} | {glob[1]:.2f} '
+               f'| {exact[1] / glob[1]:.2f} |')
+        print(row, flush=True)
+        lines.append(row)
+    if args.out:
+        header = (f'Measured {time.strftime("%Y-%m-%d")}, fmax {args.fmax:g}, seed {args.seed}, '
+                  'one thread: `python tools/model_crossover.py`\n\n')
+        args.out.write_text(header + '\n'.join(lines) + '\n')
+
+
+if __name__ == '__main__':
+    main()

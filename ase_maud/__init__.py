@@ -2,8 +2,9 @@
 
 - :class:`MaudCalculator`: the potential ``a^3 Q / L`` between every pair plus
   zero-length springs ``Q L^2 / 2`` on listed pairs, with nodal stiffness blocks.
-- :class:`Maud`: the tensor/scalar Maud step with dynamic relaxation, an ASE
-  optimizer.
+- :class:`Maud`: the Maud step ``dr = gamma K^-1 f`` with the stiffness of the
+  whole scene (or the specification's nodal blocks), an ASE optimizer.
+- :class:`MaudPrecon`: the sparse whole-scene stiffness as an ASE ``Precon``.
 
 Numba compiles the kernels on their first call and caches the machine code
 (``cache=True``). The cache goes to ``NUMBA_CACHE_DIR`` if the user set it,
@@ -61,7 +62,8 @@ _use_numba_cache_dir()
 
 from .calculator import MaudCalculator  # noqa: E402  (after the cache is set)
 from .optimizer import DivergenceError, Maud, MaudError, StagnationError  # noqa: E402
+from .precon import MaudPrecon  # noqa: E402
 
-__all__ = ['MaudCalculator', 'Maud', 'MaudError', 'DivergenceError',
+__all__ = ['MaudCalculator', 'Maud', 'MaudPrecon', 'MaudError', 'DivergenceError',
            'StagnationError', 'kernels_cached', 'numba_cache_dir']
 __version__ = '0.1.0'

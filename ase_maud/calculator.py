@@ -191,8 +191,9 @@ class MaudCalculator(Calculator):
             self.results['stiffness'] = blocks
         if 'hessian' in properties:
             self._check_hessian_size(len(flat))
-            self.results['hessian'] = dense_hessian(flat, self.springs, p['a'],
-                                                    p['Q'], dim)
+            self.results['hessian'] = dense_hessian(
+                flat, self.springs, p['a'], p['Q'], dim,
+                spring_part=self.get_spring_hessian(self.atoms))
 
     def get_stiffness(self, atoms: Atoms | None = None) -> np.ndarray:
         """Nodal blocks ``K_mm``, shape (N, dim, dim), units of ``Q``."""

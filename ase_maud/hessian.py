@@ -12,18 +12,20 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+import scipy.sparse as sp
 
 from . import physics
 from .backends.direct import repulsion_hvp
 
 
 def dense_hessian(positions: np.ndarray, springs: np.ndarray, a: float,
-                  Q: float, dim: int,
-                  chunk_pairs: int = 1_000_000) -> np.ndarray:
+                  Q: float, dim: int, chunk_pairs: int = 1_000_000,
+                  spring_part: sp.spmatrix | None = None) -> np.ndarray:
     """Dense Hessian, shape (dim N, dim N), in units of ``Q``.
 
     Built ``chunk_pairs`` pairs at a time; memory is the output plus
-    O(chunk_pairs).
+    O(chunk_pairs). ``spring_part``: the springs' Hessian
+    (:func:`.physics.spring_hessian`) if the caller keeps it already.
     """
     x = np.asarray(positions, dtype=float)[:, :dim]
     n = len(x)
@@ -34,7 +36,9 @@ def dense_hessian(positions: np.ndarray, springs: np.ndarray, a: float,
     diagonal = np.arange(n)
     hess[diagonal, :, diagonal, :] = -hess.sum(axis=2)   # K_ii = sum_j B_ij
     hess = hess.reshape(n * dim, n * dim)
-    spring = physics.spring_hessian(springs, n, Q, dim).tocoo()
+    if spring_part is None:
+        spring_part = physics.spring_hessian(springs, n, Q, dim)
+    spring = spring_part.tocoo()
     hess[spring.row, spring.col] += spring.data
     return hess
 

@@ -39,9 +39,10 @@ def main():
             print(row, flush=True)
             lines.append(row)
     if args.out:
+        sizes = ' '.join(map(str, args.sizes))
         args.out.write_text(
             f'Measured {time.strftime("%Y-%m-%d")}, fmax {args.fmax:g}, seed {args.seed}, one '
-            f'thread: `python tools/hanging_net_scaling.py --sizes {" ".join(map(str, args.sizes))}`'
+            f'thread: `python tools/hanging_net_scaling.py --sizes {sizes}`'
             '\n\n' + '\n'.join(lines) + '\n')
 
 

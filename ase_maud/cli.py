@@ -18,7 +18,6 @@ runs (relax needs no matplotlib).
 from __future__ import annotations
 
 import argparse
-import inspect
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -32,20 +31,6 @@ def _size(text):
         return int(text)
     except ValueError:
         return text
-
-
-def _pairs(scenes, sizes, suite):
-    """(scene, size) pairs: the suite's by default, ``scenes`` x ``sizes`` if
-    both are given; a scene without a size takes its suite sizes, or its
-    builder's default."""
-    from .scenes import SCENES
-    names = scenes or list(dict.fromkeys(name for name, _ in suite))
-    if sizes:
-        return [(name, size) for name in names for size in sizes]
-    default = {name: inspect.signature(build).parameters['size'].default
-               for name, build in SCENES.items()}
-    return [(name, size) for name in names
-            for size in [s for m, s in suite if m == name] or [default[name]]]
 
 
 def relax(args: argparse.Namespace) -> int:
@@ -74,42 +59,18 @@ def relax(args: argparse.Namespace) -> int:
 
 def bench(args: argparse.Namespace) -> int:
     """``ase-maud bench``: exit status 0, or 130 if interrupted."""
-    from .bench import report
-    from .bench.suite import run_suite
-    from .scenes import SUITES
+    from .bench.suite import benchmark
+    from .scenes import SUITES, scene_sizes
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    levels = sorted(args.fmax, reverse=True)
     starts = [(scene, size, seed)
-              for scene, size in _pairs(args.scenes, args.sizes,
-                                        SUITES[args.suite])
+              for scene, size in scene_sizes(args.scenes, args.sizes, SUITES[args.suite])
               for seed in args.seeds]
     show = sys.stderr.isatty() if args.progress is None else args.progress
-    runs, interrupted = run_suite(
-        starts, args.optimizers, out, fmax=levels[-1], steps=args.steps,
+    interrupted = benchmark(
+        starts, args.optimizers, Path(args.out), levels=args.fmax, steps=args.steps,
         reference=args.reference, ref_fmax=args.ref_fmax,
-        energy_rtol=args.energy_rtol, progress=show)
-    if interrupted:
-        print(f'interrupted: reporting the {len(runs)} finished runs',
-              file=sys.stderr)
-    if runs:
-        summary = report.summarize(runs, levels)
-        report.write_csv(out / 'summary.csv', summary)
-        report.write_csv(out / 'overall.csv', report.overall(summary, levels))
-        info = report.environment(args.argv)
-        info['runs'] = (f'{len(runs)} of {len(starts) * len(args.optimizers)}'
-                        + ' (interrupted)' * interrupted)
-        info['reference'] = (f'lowest energy of {args.reference} to fmax '
-                             f'{args.ref_fmax:g}; another minimum beyond '
-                             f'relative {args.energy_rtol:g}')
-        info['step budget'] = args.steps
-        if skipped := report.skipped(runs):
-            info['skipped'] = skipped
-        (out / 'summary.md').write_text(report.markdown(summary, levels, info))
-        report.plot_convergence(runs, out, levels)
-        print((out / 'summary.md').read_text())
-    print(f'results in {out}/')
+        energy_rtol=args.energy_rtol, progress=show, argv=args.argv)
+    print(f'results in {args.out}/')
     return 130 if interrupted else 0
 
 

@@ -10,6 +10,10 @@ equilibrium but not at it, and no two points start closer than
 :data:`MIN_DISTANCE` ``a``.
 """
 
+from __future__ import annotations
+
+import inspect
+
 import numpy as np
 from ase import Atoms
 from ase.build import molecule as g2_molecule
@@ -124,7 +128,7 @@ def _separated(positions, redraw):
         positions[close] = redraw(positions[close])
 
 
-def dimer(size=2, seed=0, a=1.0, Q=1.0):
+def dimer(size: int = 2, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """Two points tied by one spring: equilibrium length ``a``.
 
     ``size`` is ignored. Starts at a random orientation and a length between
@@ -136,7 +140,7 @@ def dimer(size=2, seed=0, a=1.0, Q=1.0):
     return _scene([-d / 2, d / 2], [(0, 1)], a, Q)
 
 
-def ring(size=24, seed=0, a=1.0, Q=1.0):
+def ring(size: int = 24, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """``size`` points on a plane (dim=2), each sprung to its two neighbours.
 
     Starts on the circle of the equilibrium radius (design.md, about
@@ -149,7 +153,7 @@ def ring(size=24, seed=0, a=1.0, Q=1.0):
                   dim=2)
 
 
-def chain(size=30, seed=0, a=1.0, Q=1.0):
+def chain(size: int = 30, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """``size`` points in 3D sprung in a line, the ends fixed size a / 3 apart.
 
     Interior points start on the straight line, evenly spaced, then moved
@@ -163,7 +167,7 @@ def chain(size=30, seed=0, a=1.0, Q=1.0):
     return _scene(positions, _path(n), a, Q, fixed=[0, n - 1])
 
 
-def net2d(size=8, seed=0, a=1.0, Q=1.0):
+def net2d(size: int = 8, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """A size x size square net of spacing a on a plane (dim=2).
 
     Springs tie grid neighbours; the boundary points are fixed and the
@@ -176,7 +180,7 @@ def net2d(size=8, seed=0, a=1.0, Q=1.0):
     return _scene(positions, springs, a, Q, dim=2, fixed=np.flatnonzero(edge))
 
 
-def net3d(size=6, seed=0, a=1.0, Q=1.0):
+def net3d(size: int = 6, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """A free size x size square net in 3D, springs between grid neighbours.
 
     Starts flat at spacing a with every coordinate moved by up to 0.25 a.
@@ -189,7 +193,7 @@ def net3d(size=6, seed=0, a=1.0, Q=1.0):
     return _scene(positions, springs, a, Q)
 
 
-def hanging_net(size=8, seed=0, a=1.0, Q=1.0):
+def hanging_net(size: int = 8, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """Form finding: a size x size net in 3D with its boundary on a saddle.
 
     Boundary points sit at spacing a on the hyperbolic paraboloid
@@ -206,7 +210,7 @@ def hanging_net(size=8, seed=0, a=1.0, Q=1.0):
     return _scene(positions, springs, a, Q, fixed=np.flatnonzero(edge))
 
 
-def random_graph(size=30, seed=0, a=1.0, Q=1.0):
+def random_graph(size: int = 30, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """``size`` points in 3D on a random connected spring graph.
 
     A random spanning tree (each point, in random order, tied to a random
@@ -244,7 +248,7 @@ def _spectral_layout(springs, n, rng):
     return _separated(positions, _jitter(rng))
 
 
-def all_pairs(size=10, seed=0, a=1.0, Q=1.0):
+def all_pairs(size: int = 10, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """A cluster of ``size`` points in 3D with every pair sprung.
 
     Starts uniform in a ball of one point per a**3. Nothing fixed.
@@ -255,7 +259,7 @@ def all_pairs(size=10, seed=0, a=1.0, Q=1.0):
     return _scene(_ball(rng, n), springs, a, Q)
 
 
-def all_pairs2d(size=10, seed=0, a=1.0, Q=1.0):
+def all_pairs2d(size: int = 10, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """A cluster of ``size`` points on a plane (dim=2) with every pair sprung.
 
     Starts uniform in a disc of one point per a**2. Nothing fixed.
@@ -266,7 +270,7 @@ def all_pairs2d(size=10, seed=0, a=1.0, Q=1.0):
     return _scene(_ball(rng, n, dim=2), springs, a, Q, dim=2)
 
 
-def tree(size=30, seed=0, a=1.0, Q=1.0):
+def tree(size: int = 30, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """``size`` points in 3D on a random spring tree, the root (point 0)
     fixed.
 
@@ -290,7 +294,7 @@ def tree(size=30, seed=0, a=1.0, Q=1.0):
                   fixed=[0])
 
 
-def wheel(size=16, seed=0, a=1.0, Q=1.0):
+def wheel(size: int = 16, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """A hub (point 0) sprung to each of ``size`` rim points in 3D, each rim
     point also sprung to its two rim neighbours.
 
@@ -310,7 +314,7 @@ def wheel(size=16, seed=0, a=1.0, Q=1.0):
     return _scene(positions, springs, a, Q)
 
 
-def molecule(size='C6H6', seed=0, a=1.0, Q=1.0):
+def molecule(size: str = 'C6H6', seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """The bond graph of a molecule from ``ase.build.molecule``.
 
     ``size`` is the molecule's name (any of ``ase.collections.g2`` with two
@@ -334,7 +338,7 @@ def molecule(size='C6H6', seed=0, a=1.0, Q=1.0):
     return _scene(positions, springs, a, Q, symbols=mol.symbols)
 
 
-def cage(size=8, seed=0, a=1.0, Q=1.0):
+def cage(size: int = 8, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """A known saddle: one free point inside a fixed ring, on its axis.
 
     ``size`` fixed points on a circle of radius a in the plane z = 0, two
@@ -378,7 +382,21 @@ LARGE = [('chain', 100), ('ring', 100), ('ring', 1000), ('tree', 60),
 SUITES = {'small': SUITE, 'large': LARGE}
 
 
-def build(name, size=None, seed=0, **kwargs):
+def scene_sizes(names: list[str] | None, sizes: list | None,
+                suite: list[tuple[str, object]]) -> list[tuple[str, object]]:
+    """(scene, size) pairs: ``suite``'s by default, ``names`` x ``sizes`` if
+    both are given; a scene without a size takes its sizes in ``suite``, or
+    its builder's default."""
+    names = names or list(dict.fromkeys(name for name, _ in suite))
+    if sizes:
+        return [(name, size) for name in names for size in sizes]
+    default = {name: inspect.signature(builder).parameters['size'].default
+               for name, builder in SCENES.items()}
+    return [(name, size) for name in names
+            for size in [s for m, s in suite if m == name] or [default[name]]]
+
+
+def build(name: str, size: int | str | None = None, seed: int = 0, **kwargs: float) -> Atoms:
     """Build scene ``name`` (a key of :data:`SCENES`); ``size=None`` takes
     the builder's default. Other keywords (``a``, ``Q``) go to the builder."""
     if name not in SCENES:

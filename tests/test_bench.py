@@ -23,8 +23,8 @@ from ase_maud.bench.runner import (
 )
 from ase_maud.bench.suite import SAMPLE_COLUMNS, run_suite
 from ase_maud.calculator import MaudCalculator
-from ase_maud.cli import _pairs, build_parser, main
-from ase_maud.scenes import LARGE, SUITES, build
+from ase_maud.cli import build_parser, main
+from ase_maud.scenes import LARGE, SUITES, build, scene_sizes
 from ase_maud.threads import THREAD_VARIABLES
 
 PLOTS = ('fmax_vs_calls', 'fmax_vs_time', 'energy_error_vs_calls',
@@ -315,7 +315,7 @@ def test_skipped_over_the_size_limit(tmp_path, monkeypatch):
 def test_suite_option_picks_the_large_suite():
     parser = build_parser()
     args = parser.parse_args(['bench', '--suite', 'large', '--scenes', 'tree'])
-    assert _pairs(args.scenes, args.sizes, SUITES[args.suite]) == [
+    assert scene_sizes(args.scenes, args.sizes, SUITES[args.suite]) == [
         ('tree', 60), ('tree', 200)]
     args = parser.parse_args(['bench'])
     assert SUITES[args.suite] is not LARGE

@@ -11,7 +11,7 @@ from ase.io import read
 
 from ase_maud import cli
 from ase_maud.cli import main
-from ase_maud.scenes import SUITE
+from ase_maud.scenes import SUITE, scene_sizes
 from ase_maud.threads import THREAD_VARIABLES
 
 
@@ -71,12 +71,12 @@ def test_relax_reports_failure(tmp_path, capsys):
 
 
 def test_scene_selection():
-    assert cli._pairs(None, None, SUITE) == SUITE
-    assert cli._pairs(['ring', 'dimer'], None, SUITE) == [('ring', 16),
+    assert scene_sizes(None, None, SUITE) == SUITE
+    assert scene_sizes(['ring', 'dimer'], None, SUITE) == [('ring', 16),
                                                           ('dimer', 2)]
-    assert cli._pairs(['ring', 'chain'], [5, 9], SUITE) == [
+    assert scene_sizes(['ring', 'chain'], [5, 9], SUITE) == [
         ('ring', 5), ('ring', 9), ('chain', 5), ('chain', 9)]
-    assert cli._pairs(['chain', 'molecule'], None, [('ring', 16)]) == [
+    assert scene_sizes(['chain', 'molecule'], None, [('ring', 16)]) == [
         ('chain', 30), ('molecule', 'C6H6')]
     assert cli._size('12') == 12 and cli._size('CH4') == 'CH4'
 

@@ -149,3 +149,36 @@ def run_suite(starts: list[tuple[str, object, int]], optimisers: list[str],
             interrupted = True
     bar.close()
     return runs, interrupted
+
+
+def benchmark(starts: list[tuple[str, object, int]], optimisers: list[str],
+              out: Path, levels: list[float], steps: int, reference: str,
+              ref_fmax: float, energy_rtol: float, progress: bool,
+              argv: list[str] | None = None) -> bool:
+    """:func:`run_suite`, then the summary (CSV, markdown, overall table, PNGs)
+    in ``out``; prints the markdown. Returns whether it was interrupted."""
+    from . import report
+    out.mkdir(parents=True, exist_ok=True)
+    levels = sorted(levels, reverse=True)
+    runs, interrupted = run_suite(
+        starts, optimisers, out, fmax=levels[-1], steps=steps, reference=reference,
+        ref_fmax=ref_fmax, energy_rtol=energy_rtol, progress=progress)
+    if interrupted:
+        print(f'interrupted: reporting the {len(runs)} finished runs', file=sys.stderr)
+    if not runs:
+        return interrupted
+    summary = report.summarize(runs, levels)
+    report.write_csv(out / 'summary.csv', summary)
+    report.write_csv(out / 'overall.csv', report.overall(summary, levels))
+    info = report.environment(argv)
+    info['runs'] = (f'{len(runs)} of {len(starts) * len(optimisers)}'
+                    + ' (interrupted)' * interrupted)
+    info['reference'] = (f'lowest energy of {reference} to fmax {ref_fmax:g}; another '
+                         f'minimum beyond relative {energy_rtol:g}')
+    info['step budget'] = steps
+    if skipped := report.skipped(runs):
+        info['skipped'] = skipped
+    (out / 'summary.md').write_text(report.markdown(summary, levels, info))
+    report.plot_convergence(runs, out, levels)
+    print((out / 'summary.md').read_text())
+    return interrupted

@@ -1,15 +1,16 @@
 """Saddles and the minima they join, found and classified.
 
 1. The ``cage`` scene: a point inside a fixed ring sits on a saddle whose
-   unstable direction shows in its own nodal block, so
-   ``Maud(target='stationary')`` finds it. Stepping off along the unstable
-   mode and relaxing with Maud gives the two minima on either side.
+   unstable direction shows in its own nodal block. ``Maud(target='stationary')``
+   finds it; stepping off along the unstable mode and relaxing with Maud gives
+   the two minima on either side.
 2. Six points in the plane, every pair sprung: two minima, a pentagon round a
    centre point and, slightly higher, a hexagon with alternate corners at two
-   radii. The saddle between them is collective (every nodal block is
-   positive along its unstable mode), which the nodal Newton step of
-   ``target='stationary'`` cannot see: it stops with a StagnationError. So it
-   is found by minimising ``|f|**2`` (gradient ``-2 H f``) with SciPy, then
+   radii. The saddle between them is collective: every nodal block is
+   positive definite there, so the specification's nodal step
+   (``model='nodal'``) is pushed off it and ends in a minimum. The signed
+   Newton step on the whole Hessian, ``Maud(target='stationary',
+   model='exact')``, reaches it from a rough guess in a few steps; it is
    classified (index 1), left both ways and the sides relaxed with Maud.
 
 It prints energies and indices and draws the six-point saddle's three lowest
@@ -23,7 +24,6 @@ import itertools
 import matplotlib
 import numpy as np
 from ase import Atoms
-from scipy.optimize import minimize
 
 from ase_maud import Maud, MaudCalculator
 from ase_maud.analysis import classify, displace_along_mode
@@ -46,18 +46,11 @@ def guess():
     return atoms
 
 
-def minimise_force_norm(atoms):
-    """Move ``atoms`` to a nearby stationary point of any index by
-    minimising ``|f|**2`` (gradient ``-2 H f``) with SciPy's BFGS."""
-    dim = atoms.calc.parameters['dim']
-
-    def residual(x):
-        atoms.positions[:, :dim] = x.reshape(-1, dim)
-        forces = atoms.get_forces()[:, :dim].ravel()
-        return forces @ forces, -2 * atoms.calc.get_hessian(atoms) @ forces
-
-    minimize(residual, atoms.positions[:, :dim].ravel(), jac=True,
-             method='BFGS', options={'gtol': 1e-14, 'maxiter': 2000})
+def stationary(atoms, model, fmax=1e-10):
+    """Move ``atoms`` to a nearby stationary point of any index with the
+    signed step of ``model``; return its classification."""
+    Maud(atoms, target='stationary', model=model, logfile=None).run(fmax=fmax)
+    return classify(atoms)
 
 
 def plot_modes(atoms, point, count, path):
@@ -94,11 +87,15 @@ def saddle_and_sides(saddle, name):
 
 def main():
     cage = build('cage', 8, seed=0)
-    Maud(cage, target='stationary', logfile=None).run(fmax=1e-10)
+    stationary(cage, 'exact')
     saddle_and_sides(cage, 'cage')
 
+    nodal = guess()
+    end = stationary(nodal, 'nodal', fmax=1e-8)
+    print(f'six points: the nodal step from the guess ends in a {end.verdict} '
+          f'(E = {nodal.get_potential_energy():.6f}): the saddle is collective')
     six = guess()
-    minimise_force_norm(six)
+    stationary(six, 'exact')
     point = saddle_and_sides(six, 'six points')
     plot_modes(six, point, 3, 'saddle_and_minima.png')
     print('the six-point saddle\'s lowest modes are in saddle_and_minima.png')

@@ -1,0 +1,248 @@
+"""Index-1 saddle searches: Maud's signed steps against Sella, in calculator calls and CPU seconds.
+
+Starts (seeded), named ``scene:size:amp``:
+
+- ``cage:N:0``: the ``cage`` scene as built (the free point within 0.05 a of the centre),
+  a saddle that shows in the free point's own nodal block;
+- ``six:6:0``: the rough guess of ``examples/saddle_and_minima.py`` (six points in the plane,
+  every pair sprung), next to a collective saddle: every nodal block is positive definite there;
+- ``scene:N:amp``: the scene relaxed with Maud to fmax 1e-9 (a minimum, checked with
+  :func:`ase_maud.analysis.classify`), then moved along its lowest Hessian mode so that the
+  point that moves most moves ``amp`` a. 2D scenes also get ``FixCartesian`` on z (Maud never
+  moves z in 2D; Sella would otherwise see z as a free, flat direction).
+
+From each start, to ``--fmax`` (units of ``Q a``), at most ``--steps`` steps:
+
+- ``Maud-exact``: ``Maud(target='stationary', model='exact')``, signed Newton on the analytic
+  Hessian with its trust-region damping;
+- ``Maud-nodal``: ``Maud(target='stationary', model='nodal')``, the specification's step;
+- ``Sella``: ``Sella(order=1, internal=False)``, its Hessian estimated by its own iterative
+  diagonalisation through force calls; on scenes with ``FixAtoms`` it gets ``proj_rot=False``
+  (Sella projects out rotations whenever ``pbc`` is off, and on a scene with fixed points it
+  then reports convergence with forces along the rotations left: fmax 0.1 on ``chain``);
+- ``Sella-H``: the same with ``hessian_function`` giving the analytic Hessian
+  (``MaudCalculator``'s ``hessian``), as the exact model has it.
+
+Counted (:class:`ase_maud.bench.runner.CallRecorder`): every ``calc.calculate`` call, Sella's
+finite-difference force calls included; a call that also computes the Hessian counts as one
+(its cost is in the CPU seconds). CPU seconds are ``time.process_time`` over the optimiser's
+construction and run (every thread; run with one). Each optimiser is run once on a small cage
+before the table, so imports and first compilations are not counted. Each end point is
+classified (dense Hessian): index, energy, fmax; ``same as Sella`` when its energy is within
+``--energy-rtol`` (relative) of Sella's end point and its sorted pair distances within
+``--distance-atol`` (units of a). A run that raised (Maud's StagnationError, say) is a result:
+its error is in the row and its end point is classified where it stopped. Run::
+
+    NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
+        python tools/saddles.py --out saddles
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import runpy
+import sys
+import time
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from ase import Atoms
+from ase.constraints import FixAtoms, FixCartesian
+from ase.optimize.optimize import Optimizer
+from scipy.spatial.distance import pdist
+
+from ase_maud import Maud
+from ase_maud.analysis import StationaryPoint, classify
+from ase_maud.bench.runner import CallRecorder, fresh_copy
+from ase_maud.scenes import build
+
+EXAMPLE = Path(__file__).resolve().parent.parent / 'examples' / 'saddle_and_minima.py'
+
+#: Default starts, ``scene:size:amp`` (see the module docstring).
+STARTS = ['cage:8:0', 'six:6:0', 'all_pairs2d:7:0.3', 'all_pairs2d:9:0.3',
+          'all_pairs2d:16:0.3', 'all_pairs:5:0.3', 'all_pairs:6:0.3', 'all_pairs:7:0.3',
+          'all_pairs:10:0.3', 'all_pairs:20:0.3', 'chain:10:0.2', 'ring:12:0.5',
+          'wheel:8:0.5']
+
+
+def analytic_hessian(atoms: Atoms) -> np.ndarray:
+    """``MaudCalculator``'s Hessian as Sella wants it, (3N, 3N) in ``Q``: a 2D scene's
+    (2N, 2N) one with zero rows and columns for z (held by FixCartesian)."""
+    hessian = atoms.calc.get_property('hessian', atoms)
+    n = len(atoms)
+    dim = hessian.shape[0] // n
+    full = np.zeros((n, 3, n, 3))
+    full[:, :dim, :, :dim] = hessian.reshape(n, dim, n, dim)
+    return full.reshape(3 * n, 3 * n)
+
+
+def _sella(hessian: bool) -> Callable[[Atoms], Optimizer]:
+    def make(atoms: Atoms) -> Optimizer:
+        from sella import Sella
+        fixed = any(isinstance(c, FixAtoms) for c in atoms.constraints)
+        extra = {'hessian_function': analytic_hessian} if hessian else {}
+        return Sella(atoms, order=1, internal=False, logfile=None,
+                     proj_rot=not fixed, **extra)
+    return make
+
+
+def _maud(model: str) -> Callable[[Atoms], Optimizer]:
+    return lambda atoms: Maud(atoms, target='stationary', model=model, logfile=None)
+
+
+#: The compared saddle searches, by name.
+OPTIMIZERS: dict[str, Callable[[Atoms], Optimizer]] = {
+    'Maud-exact': _maud('exact'), 'Maud-nodal': _maud('nodal'),
+    'Sella': _sella(hessian=False), 'Sella-H': _sella(hessian=True)}
+
+
+def make_start(scene: str, size: int, seed: int, amp: float) -> Atoms:
+    """The start ``scene:size:amp`` (see the module docstring); ``seed`` seeds the scene."""
+    if scene == 'six':
+        atoms = runpy.run_path(str(EXAMPLE))['guess']()
+    else:
+        atoms = build(scene, size, seed=seed)
+    if atoms.calc.parameters['dim'] == 2:
+        atoms.set_constraint([*atoms.constraints,
+                              FixCartesian(range(len(atoms)), mask=(False, False, True))])
+    if amp == 0:
+        return atoms
+    Maud(atoms, logfile=None).run(fmax=1e-9, steps=5000)
+    point = classify(atoms)
+    if point.verdict != 'minimum':
+        raise ValueError(f'{scene} {size} seed {seed} relaxed to a {point.verdict}, '
+                         'not a minimum: no lowest mode to leave it along')
+    mode = point.modes[0]
+    start = fresh_copy(atoms)
+    start.positions += amp * mode / np.linalg.norm(mode, axis=1).max()
+    return start
+
+
+def search(start: Atoms, optimiser: str, fmax: float, steps: int
+           ) -> tuple[Atoms, dict, StationaryPoint]:
+    """Run ``optimiser`` from a fresh copy of ``start``; return the end point, its row
+    (converged, calls, cpu_s, error) and its classification."""
+    atoms = fresh_copy(start)
+    converged, error = False, ''
+    cpu = time.process_time()
+    with CallRecorder(atoms.calc) as recorder:
+        try:
+            converged = bool(OPTIMIZERS[optimiser](atoms).run(fmax=fmax, steps=steps))
+        except Exception as exc:  # a failed search is a result
+            error = f'{type(exc).__name__}: {str(exc).splitlines()[0][:120]}'
+    cpu = time.process_time() - cpu
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')  # a run that stopped early is not stationary
+        point = classify(atoms)
+    row = {'optimiser': optimiser, 'converged': converged, 'calls': len(recorder.samples),
+           'cpu_s': cpu, 'energy': atoms.get_potential_energy(), 'index': point.index,
+           'verdict': point.verdict, 'fmax': point.fmax, 'error': error}
+    return atoms, row, point
+
+
+def same_point(a: Atoms, b: Atoms, energy_rtol: float = 1e-8,
+               distance_atol: float = 1e-4) -> bool:
+    """Whether ``a`` and ``b`` are the same configuration up to rigid motion and
+    relabelling: energies within ``energy_rtol`` (relative) and sorted pair distances
+    within ``distance_atol`` (length units)."""
+    ea, eb = a.get_potential_energy(), b.get_potential_energy()
+    if abs(ea - eb) > energy_rtol * max(abs(ea), abs(eb)):
+        return False
+    return bool(np.abs(np.sort(pdist(a.positions)) - np.sort(pdist(b.positions))).max()
+                <= distance_atol)
+
+
+def compare(start: str, seed: int, optimisers: list[str], fmax: float, steps: int,
+            energy_rtol: float, distance_atol: float) -> list[dict]:
+    """The rows of one start: every optimiser, and whether it ended where Sella did."""
+    scene, size, amp = start.split(':')
+    atoms = make_start(scene, int(size), seed, float(amp))
+    ends, rows = {}, []
+    for name in optimisers:
+        ends[name], row, _ = search(atoms, name, fmax, steps)
+        rows.append({'start': start, 'seed': seed, 'natoms': len(atoms), **row})
+    for row in rows:
+        reference = ends.get('Sella')
+        row['same_as_Sella'] = '' if reference is None else same_point(
+            ends[row['optimiser']], reference, energy_rtol, distance_atol)
+    return rows
+
+
+def markdown(rows: list[dict], fmax: float) -> str:
+    """The rows as a markdown table, one line per start: for each optimiser its calls,
+    CPU seconds and the index of its end point, then ``=`` if that is Sella's end point
+    or else its energy, and its fmax if above ``fmax`` (not converged)."""
+    names = list(dict.fromkeys(r['optimiser'] for r in rows))
+    head = ['start', 'seed', 'N', "Sella's end E", *names]
+    lines = ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
+    for key in dict.fromkeys((r['start'], r['seed']) for r in rows):
+        mine = {r['optimiser']: r for r in rows if (r['start'], r['seed']) == key}
+        sella = mine.get('Sella')
+        cells = [*key, next(iter(mine.values()))['natoms'],
+                 '' if sella is None else f"{sella['energy']:.10f}"]
+        for name in names:
+            r = mine[name]
+            cell = f"{r['calls']}, {r['cpu_s']:.2f} s, i{r['index']}"
+            cell += ' =' if r['same_as_Sella'] is True else f", E {r['energy']:.6f}"
+            cell += f" (fmax {r['fmax']:.0e})" if r['fmax'] > fmax else ''
+            cells.append(cell)
+        lines.append('| ' + ' | '.join(map(str, cells)) + ' |')
+    return '\n'.join(lines) + '\n'
+
+
+def summary(rows: list[dict], fmax: float) -> str:
+    """Per optimiser: the starts from which it ended, converged, on an index-1 saddle,
+    how many of those are Sella's end point, and the median calls and CPU seconds."""
+    lines = []
+    for name in dict.fromkeys(r['optimiser'] for r in rows):
+        mine = [r for r in rows if r['optimiser'] == name]
+        hits = [r for r in mine if r['index'] == 1 and r['fmax'] <= fmax]
+        median = (f", median {np.median([r['calls'] for r in hits]):.0f} calls, "
+                  f"{np.median([r['cpu_s'] for r in hits]):.2f} CPU s" if hits else '')
+        same = sum(r['same_as_Sella'] is True for r in hits)
+        lines.append(f'- {name}: an index-1 saddle (fmax <= {fmax:g}) from {len(hits)} of '
+                     f"{len(mine)} starts ({same} Sella's){median}")
+    return '\n'.join(lines) + '\n'
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--starts', nargs='+', default=STARTS,
+                        help='scene:size:amp (see the module docstring)')
+    parser.add_argument('--seeds', type=int, nargs='+', default=[0])
+    parser.add_argument('--optimizers', nargs='+', choices=OPTIMIZERS,
+                        default=list(OPTIMIZERS))
+    parser.add_argument('--fmax', type=float, default=1e-6)
+    parser.add_argument('--steps', type=int, default=1000)
+    parser.add_argument('--energy-rtol', type=float, default=1e-8)
+    parser.add_argument('--distance-atol', type=float, default=1e-4)
+    parser.add_argument('--out', type=Path, default=Path('saddles'))
+    args = parser.parse_args(argv)
+    for name in args.optimizers:  # warm up: imports, first compilations
+        search(make_start('cage', 4, 0, 0.0), name, 1e-3, 50)
+    rows = []
+    for start in args.starts:
+        for seed in args.seeds:
+            for row in compare(start, seed, args.optimizers, args.fmax, args.steps,
+                               args.energy_rtol, args.distance_atol):
+                rows.append(row)
+                print(f"{row['start']:20s} {seed:3d} {row['optimiser']:11s} "
+                      f"{row['calls']:6d} calls {row['cpu_s']:7.2f} s  E "
+                      f"{row['energy']:.10f}  index {row['index']}  fmax {row['fmax']:.1e}"
+                      f"  same as Sella: {row['same_as_Sella']}  {row['error']}", flush=True)
+    args.out.mkdir(parents=True, exist_ok=True)
+    with open(args.out / 'saddles.csv', 'w', newline='') as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    table = markdown(rows, args.fmax) + '\n' + summary(rows, args.fmax)
+    (args.out / 'saddles.md').write_text(table)
+    print(table)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

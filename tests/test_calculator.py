@@ -370,3 +370,16 @@ def test_unbounded_components(random_points, dim, expected):
     atoms.set_constraint(FixAtoms([1]))
     atoms.calc = MaudCalculator(springs=[[0, 1], [2, 3]], dim=dim)
     assert atoms.calc.unbounded_components(atoms) == expected
+
+
+@pytest.mark.parametrize('a', [1e-12, 1.0, 1e12])
+def test_every_move_is_seen_at_any_scale(a):
+    # ASE's default change detection (absolute 1e-15) misses moves of tiny
+    # scenes; the calculator compares positions exactly.
+    from ase_maud.scenes import build
+    atoms = build('ring', 8, seed=int(a > 1), a=a)
+    before = atoms.get_forces().copy()
+    atoms.positions[3, 0] += 1e-3 * a
+    after = atoms.get_forces()
+    assert np.abs(after - before).max() > 1e-6 * np.abs(before).max()
+    assert atoms.calc.check_state(atoms) == []

@@ -45,7 +45,7 @@ def relax(args: argparse.Namespace) -> int:
               flush=True)
     atoms = build(args.scene, args.size, seed=args.seed)
     with CallRecorder(atoms.calc) as recorder, \
-            Maud(atoms, method=args.method, logfile='-',
+            Maud(atoms, model=args.model, method=args.method, logfile='-',
                  trajectory=args.traj) as opt:
         converged = opt.run(fmax=args.fmax, steps=args.steps)
     fmax = (atoms.get_forces()**2).sum(axis=1).max() ** 0.5
@@ -96,6 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     from . import backends as registry
     from .bench.optimizers import OPTIMIZERS
     from .scenes import SCENES, SUITES
+    from .stiffness import MODELS
 
     parser = argparse.ArgumentParser(
         prog='ase-maud', description='The Maud algorithm for points that '
@@ -113,8 +114,11 @@ def build_parser() -> argparse.ArgumentParser:
                    "builder's; molecule takes a name such as C6H6)")
     p.add_argument('--seed', type=int, default=0,
                    help='seed of the start (default: %(default)s)')
+    p.add_argument('--model', default='auto',
+                   choices=('auto', *MODELS),
+                   help='stiffness model of the step (default: %(default)s)')
     p.add_argument('--method', default='tensor', choices=('tensor', 'scalar'),
-                   help='Maud step (default: %(default)s)')
+                   help='nodal Maud step (default: %(default)s)')
     p.add_argument('--fmax', type=float, default=1e-3,
                    help='largest atomic force norm at convergence '
                    '(default: %(default)s)')

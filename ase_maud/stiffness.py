@@ -72,6 +72,11 @@ SOLVE_RTOL = 1e-10
 
 _TARGETS = ('minimum', 'stationary')
 
+#: Step-rule defaults of the nodal and secant models: Day's dynamic
+#: relaxation as tuned for the nodal step (docs/optimizer.md).
+DYNAMIC_RELAXATION = {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0,
+                      'trust_region': False}
+
 
 class Solver(ABC):
     """A stiffness ``K`` frozen at one configuration."""
@@ -180,8 +185,7 @@ class SecantModel(StiffnessModel):
     """
 
     name = 'secant'
-    step_defaults = {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0,
-                     'trust_region': False}
+    step_defaults = DYNAMIC_RELAXATION
 
     def __init__(self, target: str = 'minimum', floor: float | None = None,
                  kappa0: float = 70.0):
@@ -230,8 +234,7 @@ class NodalModel(StiffnessModel):
 
     name = 'nodal'
     prop = 'stiffness'
-    step_defaults = {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0,
-                     'trust_region': False}
+    step_defaults = DYNAMIC_RELAXATION
 
     def __init__(self, target: str = 'minimum', floor: float | None = None,
                  method: str = 'tensor'):

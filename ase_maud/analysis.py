@@ -54,6 +54,7 @@ from scipy.spatial import cKDTree
 
 from . import physics
 from .hessian import hessian_vector_product
+from .stiffness import free_dofs
 
 #: Eigenvalues with ``|lambda| <= RTOL * max|lambda|`` count as zero.
 RTOL = 1e-8
@@ -104,13 +105,11 @@ def free_mask(atoms: Atoms, dim: int) -> np.ndarray:
     Only :class:`FixAtoms` and :class:`FixCartesian` are understood; any other
     constraint is a ValueError (its projection would not be a coordinate one).
     """
-    free = np.ones((len(atoms), 3))
     for constraint in atoms.constraints:
         if not isinstance(constraint, (FixAtoms, FixCartesian)):
             raise ValueError(f'cannot classify with the constraint '
                              f'{constraint!r}: only FixAtoms and FixCartesian')
-        constraint.adjust_forces(atoms, free)
-    return free[:, :dim] != 0
+    return free_dofs(atoms, dim)
 
 
 def rigid_body_modes(positions: np.ndarray, free: np.ndarray, dim: int,

@@ -15,8 +15,9 @@ from ase_maud.bench.runner import CallRecorder
 from ase_maud.scenes import build
 from ase_maud.stiffness import GlobalModel
 
-SCENES = [('chain', 20), ('ring', 100), ('hanging_net', 20), ('random_graph', 200)]
-VARIANTS = [(0, 0.5), (10, 0.5), (30, 0.5), (30, 0.0), (30, 0.1), (30, 1.0)]
+SCENES = [('chain', 20), ('ring', 100), ('hanging_net', 20), ('random_graph', 200),
+          ('hanging_net', 50)]
+VARIANTS = [(0, 0.5), (10, 0.5), (30, 0.5), (30, 0.0), (30, 0.1), (30, 1.0), (30, 2.0)]
 
 
 def main():

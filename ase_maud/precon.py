@@ -42,11 +42,11 @@ class MaudPrecon(Precon):
         Relative eigenvalue floor of the repulsion blocks (default 1e-2).
     refresh : float
         Rebuild ``P`` when a point has moved more than this fraction of its
-        nearest-neighbour distance since the last build (default 0.1; 0 means
-        at every call).
+        nearest-neighbour distance since the last build (default 0.5, the
+        global model's; 0 means at every call).
     """
 
-    def __init__(self, floor: float = 1e-2, refresh: float = 0.1):
+    def __init__(self, floor: float = 1e-2, refresh: float = 0.5):
         self.model = GlobalModel(floor=floor, refresh=refresh)
         self.P: sp.csr_matrix | None = None
         self.solver = None

@@ -96,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     from . import backends as registry
     from .bench.optimizers import OPTIMIZERS
     from .scenes import SCENES, SUITES
-    from .stiffness import MODELS
+    from .stiffness import METHODS, MODELS
 
     parser = argparse.ArgumentParser(
         prog='ase-maud', description='The Maud algorithm for points that '
@@ -117,7 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--model', default='auto',
                    choices=('auto', *MODELS),
                    help='stiffness model of the step (default: %(default)s)')
-    p.add_argument('--method', default='tensor', choices=('tensor', 'scalar'),
+    p.add_argument('--method', default='tensor', choices=METHODS,
                    help='nodal Maud step (default: %(default)s)')
     p.add_argument('--fmax', type=float, default=1e-3,
                    help='largest atomic force norm at convergence '

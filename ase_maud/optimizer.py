@@ -35,7 +35,7 @@ from ase import Atoms
 from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 
 from .method import MaudMethod, StepRule, _Point, merit_tolerance
-from .stiffness import StiffnessModel, choose_model
+from .stiffness import METHODS, TARGETS, StiffnessModel, choose_model
 from .topology import describe_unbounded
 
 
@@ -51,8 +51,6 @@ class StagnationError(MaudError):
     """No progress: gamma underflowed or fmax stopped improving."""
 
 
-_TARGETS = ('minimum', 'stationary')
-_METHODS = ('tensor', 'scalar')
 
 
 class Maud(Optimizer):
@@ -117,10 +115,10 @@ class Maud(Optimizer):
                  maxstep: float | None = None, kappa0: float = 70.0,
                  overshoot_shrink: float = 0.6, divergence_factor: float = 3.0,
                  patience: int = 2000, **kwargs: Any):
-        if target not in _TARGETS:
-            raise ValueError(f'target must be one of {_TARGETS}, got {target!r}')
-        if method not in _METHODS:
-            raise ValueError(f'method must be one of {_METHODS}, got {method!r}')
+        if target not in TARGETS:
+            raise ValueError(f'target must be one of {TARGETS}, got {target!r}')
+        if method not in METHODS:
+            raise ValueError(f'method must be one of {METHODS}, got {method!r}')
         if isinstance(model, StiffnessModel):
             self.model = model
         else:
@@ -141,9 +139,8 @@ class Maud(Optimizer):
         if target == 'stationary':
             rule.memory = 0  # L-BFGS assumes a positive-definite model
         _check_rule(rule)
-        for name, value in (('kappa0', kappa0),):
-            if not value > 0:
-                raise ValueError(f'{name} must be positive, got {value!r}')
+        if not kappa0 > 0:
+            raise ValueError(f'kappa0 must be positive, got {kappa0!r}')
         if not divergence_factor > 1:
             raise ValueError('divergence_factor must exceed 1, got '
                              f'{divergence_factor!r}')

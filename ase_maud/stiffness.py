@@ -70,7 +70,9 @@ DENSE_MIN_DOFS = 300
 #: Relative residual of the iterative solves (CG, multigrid).
 SOLVE_RTOL = 1e-10
 
-_TARGETS = ('minimum', 'stationary')
+#: What a model may be asked to reach, and the nodal step's two forms.
+TARGETS = ('minimum', 'stationary')
+METHODS = ('tensor', 'scalar')
 
 #: Step-rule defaults of the nodal and secant models: Day's dynamic
 #: relaxation as tuned for the nodal step (docs/optimizer.md).
@@ -101,8 +103,8 @@ class StiffnessModel(ABC):
     step_defaults: dict[str, Any] = {}
 
     def __init__(self, target: str = 'minimum', floor: float | None = None):
-        if target not in _TARGETS:
-            raise ValueError(f'target must be one of {_TARGETS}, got {target!r}')
+        if target not in TARGETS:
+            raise ValueError(f'target must be one of {TARGETS}, got {target!r}')
         floor = self.default_floor if floor is None else floor
         if not (isinstance(floor, (int, float)) and 0 < floor < 1):
             raise ValueError(f'floor must be a number in (0, 1), got {floor!r}')
@@ -239,9 +241,8 @@ class NodalModel(StiffnessModel):
     def __init__(self, target: str = 'minimum', floor: float | None = None,
                  method: str = 'tensor'):
         super().__init__(target, floor)
-        if method not in ('tensor', 'scalar'):
-            raise ValueError("method must be 'tensor' or 'scalar', got "
-                             f'{method!r}')
+        if method not in METHODS:
+            raise ValueError(f'method must be one of {METHODS}, got {method!r}')
         self.method = method
 
     def at(self, atoms: Atoms) -> Solver:

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from ase_maud import Maud
-from ase_maud.bench.runner import CallRecorder
+from ase_maud.bench.runner import calls_and_cpu
 from ase_maud.scenes import build
 from ase_maud.stiffness import GlobalModel
 
@@ -31,13 +31,10 @@ def main():
     for name, size in SCENES:
         for memory, refresh in VARIANTS:
             atoms = build(name, size, seed=args.seed)
-            start = time.process_time()
-            with CallRecorder(atoms.calc) as recorder:
-                done = Maud(atoms, model=GlobalModel(refresh=refresh), memory=memory,
-                            logfile=None).run(fmax=args.fmax, steps=3000)
+            opt = Maud(atoms, model=GlobalModel(refresh=refresh), memory=memory, logfile=None)
+            calls, cpu, done = calls_and_cpu(atoms, opt, args.fmax, 3000)
             row = (f'| {name} | {len(atoms)} | {memory} | {refresh:g} | '
-                   f'{len(recorder.samples)}{"" if done else " (not conv.)"} | '
-                   f'{time.process_time() - start:.2f} | '
+                   f'{calls}{"" if done else " (not conv.)"} | {cpu:.2f} | '
                    f'{atoms.get_potential_energy():.10g} |')
             print(row, flush=True)
             lines.append(row)

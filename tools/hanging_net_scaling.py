@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from ase_maud.bench.optimizers import OPTIMIZERS
-from ase_maud.bench.runner import CallRecorder
+from ase_maud.bench.runner import calls_and_cpu
 from ase_maud.scenes import build
 
 
@@ -31,11 +31,10 @@ def main():
     for size in args.sizes:
         for name in args.optimizers:
             atoms = build('hanging_net', size, seed=args.seed)
-            start = time.process_time()
-            with CallRecorder(atoms.calc) as recorder:
-                done = OPTIMIZERS[name](atoms).run(fmax=args.fmax, steps=args.steps)
-            row = (f'| {len(atoms)} | {name} | {bool(done)} | {len(recorder.samples)} | '
-                   f'{time.process_time() - start:.1f} | {atoms.get_potential_energy():.10g} |')
+            calls, cpu, done = calls_and_cpu(atoms, OPTIMIZERS[name](atoms), args.fmax,
+                                             args.steps)
+            row = (f'| {len(atoms)} | {name} | {done} | {calls} | {cpu:.1f} | '
+                   f'{atoms.get_potential_energy():.10g} |')
             print(row, flush=True)
             lines.append(row)
     if args.out:

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 from ase_maud import Maud
-from ase_maud.bench.runner import CallRecorder
+from ase_maud.bench.runner import calls_and_cpu
 from ase_maud.scenes import build
 from ase_maud.stiffness import free_dofs
 
@@ -24,10 +24,9 @@ SCENES = [('ring', n) for n in (50, 100, 200, 300)] + [
 def measure(name, size, model, fmax, seed):
     """(calls, CPU seconds, converged) of one run."""
     atoms = build(name, size, seed=seed)
-    start = time.process_time()
-    with CallRecorder(atoms.calc) as recorder:
-        converged = Maud(atoms, model=model, logfile=None).run(fmax=fmax, steps=3000)
-    return len(recorder.samples), time.process_time() - start, converged, len(atoms)
+    calls, cpu, converged = calls_and_cpu(
+        atoms, Maud(atoms, model=model, logfile=None), fmax, 3000)
+    return calls, cpu, converged, len(atoms)
 
 
 def main():

@@ -120,6 +120,17 @@ class Run:
                    'status': self.status}
 
 
+def calls_and_cpu(atoms: Atoms, optimizer: Any, fmax: float,
+                  steps: int) -> tuple[int, float, bool]:
+    """Run ``optimizer`` (built on ``atoms``) to ``fmax``: its calculator
+    calls, process CPU seconds and whether it converged (the tools' one-line
+    measurement; :func:`run_optimizer` keeps every sample)."""
+    start = time.process_time()
+    with CallRecorder(atoms.calc) as recorder:
+        converged = bool(optimizer.run(fmax=fmax, steps=steps))
+    return len(recorder.samples), time.process_time() - start, converged
+
+
 def fresh_copy(atoms: Atoms) -> Atoms:
     """A copy of ``atoms`` (constraints included) with a new calculator of
     the same class and parameters: the same start, no shared results."""

@@ -1,7 +1,13 @@
 """The ``ase-maud`` command (also ``python -m ase_maud``).
 
-- ``ase-maud relax``: relax a built-in scene with Maud, ASE's log on stdout
-  and a trajectory for ``ase gui``.
+- ``ase-maud relax [NET_FILE]``: relax a net read from a file
+  (:mod:`ase_maud.io`: OBJ, COMPAS JSON, ASE trajectory, XYZ plus an edge
+  list), or a built-in scene, with Maud; a progress bar on a terminal (else
+  ASE's log on stdout), a trajectory for ``ase gui`` and the relaxed net.
+- ``ase-maud show FILE``: a picture of a net or a trajectory frame (PNG), or
+  the relaxation animated (GIF) (:mod:`ase_maud.pictures`).
+- ``ase-maud classify FILE``: minimum, saddle of index k or not stationary,
+  with the lowest Hessian eigenvalues (:mod:`ase_maud.analysis`).
 - ``ase-maud bench``: every chosen optimiser from the same starts, force
   calls and wall time against the error; CSV, markdown and PNG in ``--out``.
 - ``ase-maud backends``: time per call against accuracy of the registered
@@ -19,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -33,28 +40,116 @@ def _size(text):
         return text
 
 
+def _net_options(args: argparse.Namespace) -> dict:
+    """The keywords of :func:`ase_maud.io.read_net` from --edges, --fixed,
+    --a, --Q and --dim."""
+    return {'edges': args.edges, 'fixed': args.fixed, 'a': args.a, 'Q': args.Q,
+            'dim': args.dim}
+
+
+def _progress_bar(opt, atoms):
+    """A tqdm bar on stderr advanced by every step of the optimizer ``opt``,
+    showing fmax and the energy."""
+    from tqdm import tqdm
+
+    bar = tqdm(unit='step', file=sys.stderr, dynamic_ncols=True)
+
+    def advance():
+        fmax = (atoms.get_forces()**2).sum(axis=1).max() ** 0.5
+        bar.set_postfix_str(f'fmax {fmax:.3g}, energy {atoms.get_potential_energy():.10g}',
+                            refresh=False)
+        bar.update()
+
+    opt.attach(advance)
+    return bar
+
+
 def relax(args: argparse.Namespace) -> int:
     """``ase-maud relax``: exit status 0 if converged, else 1."""
     from . import kernels_cached
     from .bench.runner import CallRecorder
+    from .io import net_format, read_net, write_net
     from .optimizer import Maud
     from .scenes import build
 
+    if args.net is None:
+        atoms = build(args.scene, args.size, seed=args.seed,
+                      **{k: v for k, v in (('a', args.a), ('Q', args.Q)) if v is not None})
+        label = args.scene
+    else:
+        atoms = read_net(args.net, **_net_options(args))
+        label = Path(args.net).name
     if not kernels_cached():
         print('compiling the kernels (first run only, ~20 s)...', file=sys.stderr,
               flush=True)
-    atoms = build(args.scene, args.size, seed=args.seed)
+    progress = (sys.stderr.isatty() if args.progress is None else args.progress) \
+        and not args.quiet and args.log != '-'
+    logfile = args.log or (None if progress or args.quiet else '-')
     with CallRecorder(atoms.calc) as recorder, \
-            Maud(atoms, model=args.model, method=args.method, logfile='-',
+            Maud(atoms, model=args.model, method=args.method, logfile=logfile,
                  trajectory=args.traj) as opt:
-        converged = opt.run(fmax=args.fmax, steps=args.steps)
+        bar = _progress_bar(opt, atoms) if progress else None
+        try:
+            converged = opt.run(fmax=args.fmax, steps=args.steps)
+        finally:
+            if bar is not None:
+                bar.close()
     fmax = (atoms.get_forces()**2).sum(axis=1).max() ** 0.5
-    print(f'{"converged" if converged else "NOT converged"}: {args.scene} '
+    written = f'trajectory {args.traj}'
+    if args.out:
+        like = args.net if args.net and net_format(args.net) == net_format(args.out) else None
+        written += ', relaxed net ' + ' '.join(map(str, write_net(args.out, atoms, like=like)))
+    print(f'{"converged" if converged else "NOT converged"}: {label} '
           f'{len(atoms)} points, {opt.nsteps} steps, '
           f'{len(recorder.samples)} force calls, energy '
-          f'{atoms.get_potential_energy():.12g}, fmax {fmax:.3g}; '
-          f'trajectory {args.traj}')
+          f'{atoms.get_potential_energy():.12g}, fmax {fmax:.3g}; {written}')
     return 0 if converged else 1
+
+
+def show(args: argparse.Namespace) -> int:
+    """``ase-maud show``: exit status 0."""
+    from .io import read_frames, read_net
+    from .pictures import save_animation, save_picture
+
+    suffix = '.gif' if args.gif else '.png'
+    out = args.output or str(Path(args.file).with_suffix(suffix))
+    if args.gif:
+        frames = read_frames(args.file, **_net_options(args))
+        count = save_animation(frames, out, fps=args.fps)
+        print(f'wrote {out} ({count} of {len(frames)} frames)')
+    else:
+        save_picture(read_net(args.file, index=args.frame, **_net_options(args)), out)
+        print(f'wrote {out}')
+    return 0
+
+
+def describe(point) -> str:
+    """The verdict of a :class:`~ase_maud.analysis.StationaryPoint` in words:
+    'minimum', 'saddle of index k', 'maximum' or 'degenerate (...)', after
+    'not stationary; the curvature there: ' if it is not stationary."""
+    verdict = {'saddle': f'saddle of index {point.index}',
+               'degenerate': f'degenerate ({point.n_zero} zero modes, '
+                             f'{point.n_negative} negative)'}.get(point.verdict, point.verdict)
+    if not point.stationary:
+        verdict = f'not stationary (fmax {point.fmax:.3g}); the curvature there: {verdict}'
+    return verdict
+
+
+def classify(args: argparse.Namespace) -> int:
+    """``ase-maud classify``: exit status 0 if stationary, else 1."""
+    from .analysis import classify as classify_point
+    from .io import read_net
+
+    atoms = read_net(args.file, index=args.frame, **_net_options(args))
+    with warnings.catch_warnings():   # "not stationary" is said below
+        warnings.simplefilter('ignore', UserWarning)
+        point = classify_point(atoms, k=args.k, ftol=args.ftol)
+    print(f'{describe(point)}: {Path(args.file).name} {len(atoms)} points, '
+          f'{point.n_modes} free non-rigid modes ({point.n_fixed} fixed coordinates, '
+          f'{point.n_rigid} rigid-body modes removed), fmax {point.fmax:.3g}')
+    lowest = ' '.join(f'{value:.6g}' for value in point.eigenvalues[:args.k])
+    print(f'lowest eigenvalues ({point.method}, units of Q): {lowest}')
+    return 0 if point.stationary else 1
 
 
 def bench(args: argparse.Namespace) -> int:
@@ -85,6 +180,33 @@ def backends(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_net_options(parser):
+    """--edges, --fixed, --a, --Q and --dim of a command that reads a net."""
+    parser.add_argument('--edges', metavar='EDGES_FILE',
+                        help='edge list: two 0-based point indices per line (default: '
+                        "the file's own springs, or NAME.edges.txt beside NAME.xyz)")
+    parser.add_argument('--fixed', metavar='FIXED_FILE',
+                        help='0-based indices of the points held fixed, one or more per '
+                        "line (default: the file's own: trajectory constraints, COMPAS "
+                        'is_anchor)')
+    parser.add_argument('--a', type=float,
+                        help='length a of the repulsion a^3 Q / L (default: stored in a '
+                        'trajectory, else 1)')
+    parser.add_argument('--Q', type=float,
+                        help='spring constant Q (default: stored in a trajectory, else 1)')
+    parser.add_argument('--dim', type=int, choices=(2, 3),
+                        help='2: points on a plane z = const; 3 (default: stored in a '
+                        'trajectory, else 2 if every z is equal, else 3)')
+
+
+def _command(commands, name, help, description, examples):
+    """A subcommand parser with ``examples`` (lines) as its --help epilog."""
+    return commands.add_parser(
+        name, help=help, description=description,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog='examples:\n' + '\n'.join(f'  {line}' for line in examples))
+
+
 def _add_threads(parser, default, default_text):
     parser.add_argument('--threads', type=int, default=default, metavar='N',
                         help='pin OpenMP, BLAS and numba to N threads '
@@ -100,15 +222,37 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = argparse.ArgumentParser(
         prog='ase-maud', description='The Maud algorithm for points that '
-        'repel and are tied by springs: relax a scene, or benchmark.')
+        'repel and are tied by springs: relax a net from a file or a built-in '
+        'scene, draw it, classify its stationary point, or benchmark.',
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog='examples:\n  ase-maud relax\n'
+        '  ase-maud relax net.obj --fixed fixed.txt --out relaxed.obj\n'
+        '  ase-maud show maud.traj --gif\n  ase-maud classify maud.traj\n'
+        'Each command has its own --help.')
     commands = parser.add_subparsers(dest='command', metavar='COMMAND')
 
-    p = commands.add_parser(
-        'relax', help='relax a built-in scene with Maud',
-        description='Relax a built-in scene with Maud, printing ASE\'s log, '
-        'write a trajectory for "ase gui" and a one-line summary.')
+    p = _command(
+        commands, 'relax', 'relax a net from a file, or a built-in scene, with Maud',
+        'Relax the net of NET_FILE (OBJ: points and face/polyline edges; COMPAS '
+        'mesh or network JSON; an ASE trajectory; or XYZ and any file ASE reads, '
+        'with an edge list) or, without NET_FILE, a built-in scene, with Maud. '
+        'Shows a progress bar with fmax and the energy on a terminal (else '
+        'prints ASE\'s log), writes a trajectory for "ase gui" (it keeps the '
+        'springs, a, Q and dim: every command here reads it back), the relaxed '
+        'net with --out (like NET_FILE if of its format), and a one-line summary.',
+        ['ase-maud relax                       # the default scene, maud.traj',
+         'ase-maud relax net.obj --fixed fixed.txt --fmax 1e-6 --traj out.traj '
+         '--out relaxed.obj',
+         'ase-maud relax points.xyz --edges edges.txt --dim 2 --quiet',
+         'ase-maud relax --scene ring --size 100 --log ring.log'])
+    p.add_argument('net', nargs='?', metavar='NET_FILE',
+                   help='the net to relax (default: the built-in --scene)')
+    _add_net_options(p)
+    p.add_argument('--out', metavar='RELAXED_FILE',
+                   help='write the relaxed net here, in the format of its suffix '
+                   '(.obj, .json, .traj, .xyz plus NAME.edges.txt, ...)')
     p.add_argument('--scene', default='hanging_net', choices=SCENES,
-                   metavar='NAME', help=f'of: {", ".join(SCENES)} '
+                   metavar='NAME', help=f'without NET_FILE, of: {", ".join(SCENES)} '
                    '(default: %(default)s)')
     p.add_argument('--size', type=_size, help="scene size (default: the "
                    "builder's; molecule takes a name such as C6H6)")
@@ -126,12 +270,64 @@ def build_parser() -> argparse.ArgumentParser:
                    help='step budget (default: %(default)s)')
     p.add_argument('--traj', default='maud.traj',
                    help='trajectory file (default: %(default)s)')
+    p.add_argument('--progress', action=argparse.BooleanOptionalAction,
+                   help='progress bar on stderr instead of ASE\'s log on stdout '
+                   '(default: if stderr is a terminal)')
+    p.add_argument('--quiet', action='store_true',
+                   help='no progress bar and no log: only the summary line')
+    p.add_argument('--log', metavar='FILE',
+                   help="ASE's per-step log to FILE ('-': stdout, and no bar)")
     _add_threads(p, None, 'leave the environment alone')
     p.set_defaults(func=relax)
 
-    p = commands.add_parser(
-        'bench', help='force calls and wall time against error, per optimiser',
-        description='Run every optimiser from the same starts (scene, size, '
+    p = _command(
+        commands, 'show', 'draw a net or a trajectory frame (PNG), or animate (GIF)',
+        'Draw the net of FILE (any file relax reads; of a trajectory, frame '
+        '--frame): springs as grey lines, free points coloured by their force '
+        '|f| with arrows along it, fixed points as black squares; in the plane '
+        'for dim 2, in 3D otherwise. --gif animates every frame of a '
+        'trajectory (at most 60, evenly picked).',
+        ['ase-maud show net.obj                 # net.png',
+         'ase-maud show maud.traj --frame 0 -o start.png',
+         'ase-maud show maud.traj --gif         # maud.gif'])
+    p.add_argument('file', metavar='FILE', help='net or trajectory')
+    p.add_argument('-o', '--output', metavar='PICTURE',
+                   help='image file (default: FILE with .png, or .gif with --gif)')
+    p.add_argument('--frame', type=int, default=-1,
+                   help='frame of a trajectory (default: the last)')
+    p.add_argument('--gif', action='store_true', help='animate the frames to a GIF')
+    p.add_argument('--fps', type=int, default=8,
+                   help='frames per second of the GIF (default: %(default)s)')
+    _add_net_options(p)
+    _add_threads(p, None, 'leave the environment alone')
+    p.set_defaults(func=show)
+
+    p = _command(
+        commands, 'classify', 'minimum, saddle of index k, or not stationary',
+        'Classify the net of FILE (of a trajectory, frame --frame) by the '
+        'eigenvalues of its Hessian on the free degrees of freedom, rigid-body '
+        'modes removed (ase_maud.analysis.classify): minimum, saddle of index k '
+        '(k negative eigenvalues), degenerate, or not stationary (fmax above '
+        '--ftol, the curvature there reported). Prints the lowest eigenvalues. '
+        'Exit status 0 if stationary, 1 if not.',
+        ['ase-maud classify maud.traj',
+         'ase-maud classify relaxed.obj --fixed fixed.txt -k 10'])
+    p.add_argument('file', metavar='FILE', help='net or trajectory')
+    p.add_argument('--frame', type=int, default=-1,
+                   help='frame of a trajectory (default: the last)')
+    p.add_argument('-k', type=int, default=6,
+                   help='eigenvalues to print (and to compute, above 2000 free '
+                   'coordinates) (default: %(default)s)')
+    p.add_argument('--ftol', type=float,
+                   help='fmax above which the point is not stationary '
+                   '(default: 1e-6 Q a)')
+    _add_net_options(p)
+    _add_threads(p, None, 'leave the environment alone')
+    p.set_defaults(func=classify)
+
+    p = _command(
+        commands, 'bench', 'force calls and wall time against error, per optimiser',
+        'Run every optimiser from the same starts (scene, size, '
         'seed), sampling fmax, energy, force calls, wall and CPU time at '
         'every calculator call; the energy error is against the lowest energy '
         'of a tight reference run. Writes samples.csv (one row per sample), '
@@ -139,7 +335,9 @@ def build_parser() -> argparse.ArgumentParser:
         'level, their ratio to the best ASE optimiser and, for CPU time, to '
         'L-BFGS-B), overall.csv (median and worst ratios), and log-log PNGs '
         'of fmax and energy error against calls and time. Ctrl-C stops and '
-        'reports what finished.')
+        'reports what finished.',
+        ['ase-maud bench --out maud-bench       # the small suite, every optimiser',
+         'ase-maud bench --scenes ring chain --sizes 50 --optimizers Maud FIRE LBFGS'])
     p.add_argument('--scenes', nargs='+', choices=SCENES, metavar='NAME',
                    help=f'of: {", ".join(SCENES)} (default: those of '
                    'the suite, at their suite sizes)')
@@ -175,13 +373,13 @@ def build_parser() -> argparse.ArgumentParser:
     _add_threads(p, 1, '1')
     p.set_defaults(func=bench)
 
-    p = commands.add_parser(
-        'backends',
-        help='time per call against accuracy of the calculator backends',
-        description='Time one energy-and-forces call, and one call with the '
+    p = _command(
+        commands, 'backends', 'time per call against accuracy of the calculator backends',
+        'Time one energy-and-forces call, and one call with the '
         'nodal stiffness, of every backend on N random points, and its '
         'relative error against the numpy reference. Writes backends.csv, '
-        'backends.md and backends.png.')
+        'backends.md and backends.png.',
+        ['ase-maud backends --natoms 1000 10000 --backends numba fmm'])
     p.add_argument('--natoms', nargs='+', type=int,
                    default=[100, 300, 1000, 3000], metavar='N',
                    help='numbers of points (default: 100 300 1000 3000)')
@@ -212,6 +410,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
+    if args.command == 'relax' and args.net is None and (
+            args.edges or args.fixed or args.dim):
+        parser.error('relax: --edges, --fixed and --dim need NET_FILE')
     args.argv = sys.argv[1:] if argv is None else list(argv)
     if args.threads is not None:
         pin_threads(args.threads, restart=argv is None)

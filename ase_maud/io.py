@@ -1,0 +1,476 @@
+"""Nets from files and back: points, springs, and the Maud parameters.
+
+:func:`read_net` returns an :class:`ase.Atoms` (``pbc=False``) with a
+:class:`~ase_maud.MaudCalculator` attached; its ``calc.springs`` are the
+file's edges. :func:`write_net` writes a (relaxed) net back, in the format
+its file name says, keeping the rest of an original file (``like=``).
+
+Formats, chosen by the file name's suffix:
+
+- ``.obj``, Wavefront OBJ: each ``v`` line is a point; the springs are the
+  edges of the faces (``f``), each undirected edge once, plus the segments of
+  the polylines (``l``). Indices may be ``v``, ``v/vt``, ``v//vn``,
+  ``v/vt/vn``, 1-based or negative (relative). Other statements (``vn``,
+  ``vt``, ``g``, ``o``, ``usemtl``, ...) are kept on writing and ignored on
+  reading. Written back with every ``v`` line's coordinates replaced.
+- ``.json``, COMPAS data: a mesh (``vertex`` and ``face`` dicts; springs are
+  the faces' edges) or a network/graph (``node`` and ``edge`` dicts; springs
+  are the edges), bare or in COMPAS's envelope (``{"dtype": ..., "value":
+  {...}}`` of COMPAS 1.x, ``{"dtype": ..., "data": {...}}`` of 2.x). Points
+  are in the order of the file's vertex (node) keys; a vertex attribute
+  ``is_anchor`` or ``is_fixed`` that is true fixes the point. Written back as
+  the original structure with only ``x``, ``y``, ``z`` replaced.
+- ``.traj``, ASE trajectory: the springs, ``a``, ``Q`` and ``dim`` come back
+  from the calculator parameters that ASE's trajectory stores with every
+  frame (:meth:`MaudCalculator.todict`), the fixed points from its
+  constraints.
+- anything else ASE reads (extended XYZ, ...), plus an edge list: a text
+  file of two 0-based point indices per line, ``#`` comments allowed. By
+  default ``NAME.edges.txt`` beside ``NAME.xyz``; :func:`write_net` writes it
+  there.
+
+Reader choice: our own OBJ parser (about 40 lines). meshio's OBJ reader skips
+``l`` lines and reports no line numbers; trimesh triangulates quads, adding
+a diagonal spring to every quad. Neither keeps the rest of the file for
+writing back. COMPAS's JSON is plain JSON: the standard library reads it.
+
+Malformed input is a ValueError naming the file, the line (where the format
+has lines) and what was expected.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import uuid
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import ase.io
+import numpy as np
+from ase import Atoms
+from ase.constraints import FixAtoms
+
+from .calculator import MaudCalculator
+from .stiffness import free_dofs
+
+PathLike = str | os.PathLike
+#: Parameters of :class:`MaudCalculator` that a trajectory brings back.
+CALC_PARAMETERS = ('springs', 'a', 'Q', 'dim', 'backend', 'fmm_eps')
+#: The name under which ASE's trajectory stores a MaudCalculator.
+CALC_NAME = 'maudcalculator'
+#: Vertex (node) attributes of COMPAS data that fix a point when true.
+ANCHOR_ATTRIBUTES = ('is_anchor', 'is_fixed')
+
+
+def net_format(path: PathLike) -> str:
+    """'obj', 'json', 'traj' or 'ase' (any other file ASE reads), by suffix."""
+    suffix = Path(path).suffix.lower()
+    return {'.obj': 'obj', '.json': 'json', '.traj': 'traj'}.get(suffix, 'ase')
+
+
+def edges_path(path: PathLike) -> Path:
+    """The default edge list of a point file: ``NAME.edges.txt`` beside it."""
+    path = Path(path)
+    return path.with_name(path.stem + '.edges.txt')
+
+
+def read_net(path: PathLike, edges: PathLike | None = None,
+             fixed: PathLike | Sequence[int] | None = None,
+             a: float | None = None, Q: float | None = None,
+             dim: int | None = None, index: int = -1) -> Atoms:
+    """Read a net: an Atoms with a MaudCalculator attached.
+
+    Parameters
+    ----------
+    path : file name
+        OBJ, COMPAS JSON, ASE trajectory or any file ASE reads (see the
+        module docstring).
+    edges : file name, optional
+        Edge list (two 0-based indices per line); overrides the springs a
+        file holds. Default for point files: ``NAME.edges.txt`` if present.
+    fixed : file name or indices, optional
+        Points held fixed (:class:`FixAtoms`), 0-based; a file lists them one
+        or more per line. Replaces the constraints read from the file.
+    a, Q : float, optional
+        Length and spring constant of the potential; default: what a
+        trajectory stores, else 1.
+    dim : 2 or 3, optional
+        Default: what a trajectory stores, else 2 if every point has the
+        same z, else 3.
+    index : int
+        The frame of a trajectory (or multi-frame file), default the last.
+    """
+    return _read(path, edges, fixed, a, Q, dim, index)[0]
+
+
+def read_frames(path: PathLike, edges: PathLike | None = None,
+                fixed: PathLike | Sequence[int] | None = None,
+                a: float | None = None, Q: float | None = None,
+                dim: int | None = None) -> list[Atoms]:
+    """Every frame of a file (one for OBJ and JSON), as :func:`read_net`."""
+    return _read(path, edges, fixed, a, Q, dim, slice(None))
+
+
+def _read(path, edges, fixed, a, Q, dim, index):
+    """Frames of ``path`` with their calculators, as :func:`read_net` says."""
+    kind = net_format(path)
+    if kind in ('obj', 'json'):
+        positions, springs, anchors = (read_obj(path) + ([],) if kind == 'obj'
+                                       else read_compas(path))
+        frames = [Atoms(positions=positions, pbc=False)]
+        if len(anchors):
+            frames[0].set_constraint(FixAtoms(indices=anchors))
+        stored = {'springs': springs}
+    else:
+        frames, stored = _read_ase(path, index)
+    natoms = len(frames[0])
+    if edges is None and 'springs' not in stored and edges_path(path).exists():
+        edges = edges_path(path)
+    if edges is not None:
+        stored['springs'] = read_edges(edges, natoms)
+    if 'springs' not in stored:
+        raise ValueError(f'{path} holds no springs: give an edge list '
+                         f'(edges=..., --edges, or {edges_path(path).name} '
+                         'beside it)')
+    given = {'a': a, 'Q': Q, 'dim': dim}
+    parameters = {**stored, **{k: v for k, v in given.items() if v is not None}}
+    if fixed is not None:
+        indices = (read_indices(fixed, natoms) if isinstance(fixed, (str, os.PathLike))
+                   else _fixed_indices(fixed, natoms))
+    for atoms in frames:
+        atoms.pbc = False
+        z = atoms.positions[:, 2]
+        inferred = {'dim': 2 if np.all(z == z[:1]) else 3}
+        atoms.calc = MaudCalculator(**{**inferred, **parameters})
+        if fixed is not None:
+            atoms.set_constraint(FixAtoms(indices=indices))
+    return frames
+
+
+def _read_ase(path, index):
+    """Frames of an ASE-readable file, and the MaudCalculator parameters its
+    (first) frame stores, if any."""
+    try:
+        frames = ase.io.read(path, index)
+    except FileNotFoundError:
+        raise
+    except Exception as error:   # ASE's readers raise many kinds
+        raise ValueError(f'{path}: ASE cannot read it ({type(error).__name__}: '
+                         f'{error})') from error
+    frames = frames if isinstance(frames, list) else [frames]
+    if not frames:
+        raise ValueError(f'{path}: no frame at index {index}')
+    calc = frames[0].calc
+    stored = {}
+    if calc is not None and getattr(calc, 'name', '') == CALC_NAME:
+        stored = {k: v for k, v in calc.parameters.items() if k in CALC_PARAMETERS}
+    for atoms in frames:
+        atoms.calc = None
+    return frames, stored
+
+
+def _lines(path: PathLike) -> Iterator[tuple[int, list[str]]]:
+    """(line number, tokens) of every line with tokens, ``#`` comments cut."""
+    with open(path) as f:
+        for number, line in enumerate(f, 1):
+            tokens = line.split('#', 1)[0].split()
+            if tokens:
+                yield number, tokens
+
+
+def _integers(path, number, tokens, what):
+    """``tokens`` as ints, or ValueError naming the line and ``what``."""
+    try:
+        return [int(t) for t in tokens]
+    except ValueError:
+        raise ValueError(f'{path} line {number}: expected {what}, got '
+                         f'{" ".join(tokens)!r}') from None
+
+
+def _check_index(path, number, i, natoms):
+    if not 0 <= i < natoms:
+        raise ValueError(f'{path} line {number}: index {i} out of range '
+                         f'({natoms} points, 0-based)')
+
+
+def _fixed_indices(indices, natoms):
+    """``indices`` as a list of ints in ``range(natoms)``, or ValueError."""
+    indices = [int(i) for i in indices]
+    for i in indices:
+        if not 0 <= i < natoms:
+            raise ValueError(f'fixed point {i} out of range ({natoms} points, 0-based)')
+    return indices
+
+
+def read_edges(path: PathLike, natoms: int) -> np.ndarray:
+    """An edge list: (K, 2) int array from two 0-based indices per line.
+
+    ValueError with the line number on anything else, an index out of
+    ``range(natoms)``, a spring from a point to itself or a repeated pair.
+    """
+    springs, seen = [], {}
+    for number, tokens in _lines(path):
+        pair = _integers(path, number, tokens, 'two integer indices')
+        if len(pair) != 2:
+            raise ValueError(f'{path} line {number}: expected two integer '
+                             f'indices, got {len(pair)}')
+        for i in pair:
+            _check_index(path, number, i, natoms)
+        key = tuple(sorted(pair))
+        if key[0] == key[1]:
+            raise ValueError(f'{path} line {number}: spring ties point '
+                             f'{key[0]} to itself')
+        if key in seen:
+            raise ValueError(f'{path} line {number}: spring {key} repeats '
+                             f'line {seen[key]}')
+        seen[key] = number
+        springs.append(pair)
+    return np.array(springs, dtype=int).reshape(-1, 2)
+
+
+def read_indices(path: PathLike, natoms: int) -> list[int]:
+    """0-based point indices, one or more per line (``#`` comments allowed);
+    ValueError with the line number on a non-integer or out of range."""
+    indices = []
+    for number, tokens in _lines(path):
+        for i in _integers(path, number, tokens, 'integer point indices'):
+            _check_index(path, number, i, natoms)
+            indices.append(i)
+    return indices
+
+
+def read_obj(path: PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Points (N, 3) and springs (K, 2) of an OBJ file.
+
+    Springs: the edges of every face (``f``) and the segments of every
+    polyline (``l``), each undirected pair once, in order of appearance.
+    """
+    points, springs, seen = [], [], set()
+    refs = []   # (line number, element kind, resolved 0-based indices)
+    for number, tokens in _lines(path):
+        keyword, rest = tokens[0], tokens[1:]
+        if keyword == 'v':
+            try:
+                points.append([float(t) for t in rest[:3]])
+            except ValueError:
+                raise ValueError(f"{path} line {number}: expected 'v x y z' "
+                                 f'with numbers, got {" ".join(tokens)!r}') from None
+            if len(rest) < 3:
+                raise ValueError(f"{path} line {number}: expected 'v x y z', "
+                                 f'got {len(rest)} coordinates')
+        elif keyword in ('f', 'l'):
+            least = 3 if keyword == 'f' else 2
+            if len(rest) < least:
+                raise ValueError(f'{path} line {number}: a {keyword!r} needs '
+                                 f'at least {least} vertex indices, got {len(rest)}')
+            raw = _integers(path, number, [t.split('/')[0] for t in rest],
+                            'integer vertex indices (v, v/vt, v//vn or v/vt/vn)')
+            if 0 in raw:
+                raise ValueError(f'{path} line {number}: vertex index 0 (OBJ '
+                                 'counts from 1)')
+            # negative indices count back from the last vertex read so far
+            refs.append((number, keyword,
+                         [i - 1 if i > 0 else len(points) + i for i in raw]))
+    for number, keyword, indices in refs:
+        for i in indices:
+            if not 0 <= i < len(points):
+                one_based = i + 1 if i >= 0 else i - len(points)
+                kind = 'face' if keyword == 'f' else 'line'
+                raise ValueError(f'{path} line {number}: {kind} index '
+                                 f'{one_based} out of range ({len(points)} vertices)')
+        ring = indices + indices[:1] if keyword == 'f' else indices
+        for i, j in zip(ring[:-1], ring[1:], strict=True):
+            if i == j:
+                raise ValueError(f'{path} line {number}: vertex {i + 1} '
+                                 'repeats next to itself (a spring from a '
+                                 'point to itself)')
+            if (key := (min(i, j), max(i, j))) not in seen:
+                seen.add(key)
+                springs.append((i, j))
+    if not points:
+        raise ValueError(f"{path}: no vertices ('v x y z' lines)")
+    return (np.array(points, dtype=float),
+            np.array(springs, dtype=int).reshape(-1, 2))
+
+
+def _compas_data(path: PathLike) -> tuple[Any, dict[str, Any]]:
+    """The whole JSON document of a COMPAS file and its data dict."""
+    try:
+        with open(path) as f:
+            document = json.load(f)
+    except json.JSONDecodeError as error:
+        raise ValueError(f'{path} line {error.lineno}: not valid JSON '
+                         f'({error.msg})') from None
+    data = document
+    if isinstance(data, dict) and 'dtype' in data:
+        data = data.get('data', data.get('value'))
+    if not isinstance(data, dict) or not ({'vertex', 'face'} <= data.keys()
+                                          or 'node' in data):
+        raise ValueError(f'{path}: expected COMPAS mesh data ("vertex" and '
+                         '"face") or network data ("node" and "edge"), bare or '
+                         'in {"dtype": ..., "data"/"value": ...}')
+    return document, data
+
+
+def _compas_points(path, data):
+    """The points' dict (vertex or node) and default attributes of ``data``."""
+    if 'face' in data:
+        return data['vertex'], data.get('default_vertex_attributes', data.get('dva', {}))
+    return data['node'], data.get('default_node_attributes', data.get('dna', {}))
+
+
+def read_compas(path: PathLike) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Points (N, 3), springs (K, 2) and anchors of a COMPAS mesh or network
+    JSON file (see the module docstring)."""
+    _, data = _compas_data(path)
+    points, defaults = _compas_points(path, data)
+    if not isinstance(points, dict) or not points:
+        raise ValueError(f'{path}: no vertices (nodes)')
+    keys = {str(k): n for n, k in enumerate(points)}
+    positions, anchors = [], []
+    for key, attributes in points.items():
+        xyz = []
+        for axis in 'xyz':
+            value = attributes.get(axis, defaults.get(axis))
+            if not isinstance(value, (int, float)) or isinstance(value, bool):
+                raise ValueError(f'{path}: vertex {key} has no number {axis} '
+                                 f'(got {value!r})')
+            xyz.append(float(value))
+        positions.append(xyz)
+        if any(attributes.get(name, defaults.get(name)) for name in ANCHOR_ATTRIBUTES):
+            anchors.append(keys[key])
+
+    def index(key, where):
+        name = str(key)   # 2.x faces hold int keys, everything else strings
+        if name not in keys:
+            raise ValueError(f'{path}: {where} names vertex {key!r}, which is '
+                             'not in the vertex (node) dict')
+        return keys[name]
+
+    if 'face' in data:
+        pairs = []
+        for fkey, vertices in data['face'].items():
+            ring = [index(v, f'face {fkey}') for v in vertices]
+            pairs += zip(ring, ring[1:] + ring[:1], strict=True)
+    else:
+        pairs = [(index(u, f'edge {u}-{v}'), index(v, f'edge {u}-{v}'))
+                 for u, neighbours in (data.get('edge') or {}).items()
+                 for v in (neighbours or {})]
+    springs, seen = [], set()
+    for i, j in pairs:
+        if i == j:
+            raise ValueError(f'{path}: vertex {list(keys)[i]} is tied to itself')
+        if (key := (min(i, j), max(i, j))) not in seen:
+            seen.add(key)
+            springs.append((i, j))
+    return (np.array(positions), np.array(springs, dtype=int).reshape(-1, 2),
+            anchors)
+
+
+def fixed_points(atoms: Atoms) -> np.ndarray:
+    """Indices of the points whose every coordinate is held (FixAtoms, or
+    FixCartesian on x, y and z)."""
+    return np.flatnonzero(~free_dofs(atoms, 3).any(axis=1))
+
+
+def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None) -> list[Path]:
+    """Write the net ``atoms`` (with a MaudCalculator) to ``path``; return
+    the files written.
+
+    The format is ``path``'s (see the module docstring). ``like``, a file of
+    the same format with as many points (the one the net was read from),
+    is kept but for the coordinates: OBJ faces, polylines, groups and
+    comments, COMPAS attributes. Without it: OBJ gets the springs as ``l``
+    lines, JSON a COMPAS 2.x graph (fixed points ``is_anchor``). A trajectory
+    stores the springs, ``a``, ``Q`` and ``dim`` with the frame. ``.xyz``
+    (``.extxyz``) is extended XYZ with every digit of the coordinates
+    (ASE's writer keeps 8 decimals) and the fixed points as ``move_mask``;
+    any other format is written by ASE. Both get the edge list at
+    :func:`edges_path`.
+    """
+    path = Path(path)
+    kind = net_format(path)
+    if like is not None and net_format(like) != kind:
+        raise ValueError(f'cannot write {path.name} like {Path(like).name}: '
+                         'they are of different formats')
+    if kind == 'obj':
+        path.write_text(_obj_text(atoms, like))
+    elif kind == 'json':
+        with open(path, 'w') as f:
+            json.dump(_compas_document(atoms, like), f)
+    elif kind == 'traj':
+        ase.io.write(path, atoms, format='traj')
+    else:
+        if path.suffix.lower() in ('.xyz', '.extxyz'):
+            path.write_text(_extxyz_text(atoms))
+        else:
+            ase.io.write(path, atoms)
+        edges = edges_path(path)
+        with open(edges, 'w') as f:
+            f.write(f'# springs of {path.name}: two 0-based point indices a line\n')
+            np.savetxt(f, atoms.calc.springs, fmt='%d')
+        return [path, edges]
+    return [path]
+
+
+def _coordinates(x):
+    return ' '.join(repr(float(c)) for c in x)
+
+
+def _extxyz_text(atoms):
+    """Extended XYZ of the symbols, positions (shortest exact repr) and,
+    if any point is fixed, ``move_mask`` (F for fixed), as ASE reads it."""
+    fixed = np.isin(np.arange(len(atoms)), fixed_points(atoms))
+    mask = ':move_mask:L:1' if fixed.any() else ''
+    rows = [f'{symbol} {_coordinates(x)}{" F" if held else " T" if mask else ""}\n'
+            for symbol, x, held in zip(atoms.get_chemical_symbols(), atoms.positions,
+                                       fixed, strict=True)]
+    return (f'{len(atoms)}\nProperties=species:S:1:pos:R:3{mask} pbc="F F F"\n'
+            + ''.join(rows))
+
+
+def _obj_text(atoms, like):
+    """The OBJ text of ``atoms``: ``like`` with its ``v`` lines' coordinates
+    replaced, or points and ``l`` springs."""
+    if like is None:
+        lines = [f'v {_coordinates(x)}' for x in atoms.positions]
+        lines += [f'l {i + 1} {j + 1}' for i, j in atoms.calc.springs]
+        return '\n'.join(['# written by ase_maud', *lines]) + '\n'
+    count = sum(1 for _, tokens in _lines(like) if tokens[0] == 'v')
+    if count != len(atoms):
+        raise ValueError(f'{like} has {count} vertices, the net {len(atoms)} points')
+    text, points = [], iter(atoms.positions)
+    with open(like) as f:
+        for line in f:
+            tokens = line.split('#', 1)[0].split()
+            if tokens and tokens[0] == 'v':   # keep w or colours after x y z
+                line = ' '.join(['v', _coordinates(next(points)), *tokens[4:]]) + '\n'
+            text.append(line)
+    return ''.join(text)
+
+
+def _compas_document(atoms, like):
+    """The COMPAS JSON document of ``atoms``: ``like``'s with new x, y, z,
+    or a COMPAS 2.x graph."""
+    if like is None:
+        fixed = set(fixed_points(atoms).tolist())
+        node = {str(n): {'x': float(x), 'y': float(y), 'z': float(z),
+                         **({'is_anchor': True} if n in fixed else {})}
+                for n, (x, y, z) in enumerate(atoms.positions)}
+        edge = {str(n): {} for n in range(len(atoms))}
+        for i, j in atoms.calc.springs:
+            edge[str(i)][str(j)] = {}
+        data = {'attributes': {}, 'default_node_attributes': {'x': 0.0, 'y': 0.0, 'z': 0.0},
+                'default_edge_attributes': {}, 'node': node, 'edge': edge,
+                'max_node': len(atoms) - 1}
+        return {'dtype': 'compas.datastructures/Graph', 'data': data,
+                'guid': str(uuid.uuid4())}
+    document, data = _compas_data(like)
+    points, _ = _compas_points(like, data)
+    if len(points) != len(atoms):
+        raise ValueError(f'{like} has {len(points)} vertices, the net {len(atoms)} points')
+    for attributes, x in zip(points.values(), atoms.positions, strict=True):
+        attributes.update(zip('xyz', map(float, x), strict=True))
+    return document

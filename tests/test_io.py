@@ -1,0 +1,271 @@
+"""ase_maud.io: nets from OBJ, COMPAS JSON, trajectories and XYZ plus edge
+lists, and back; malformed files are ValueErrors naming the line."""
+
+import json
+
+import numpy as np
+import pytest
+from ase.constraints import FixAtoms
+
+from ase_maud import Maud, MaudCalculator
+from ase_maud.io import (
+    edges_path,
+    read_compas,
+    read_edges,
+    read_frames,
+    read_net,
+    read_obj,
+    write_net,
+)
+
+FORMATS = ('obj', 'mesh2.json', 'mesh1.json', 'network1.json', 'xyz')
+
+
+def quad_net(n=5, seed=0, flat=False):
+    """A quad mesh of n x n points, spacing 1, the boundary fixed on the
+    saddle z = (x^2 - y^2) / n (on z = 0 if ``flat``), the interior jittered
+    by up to 0.3 per coordinate (in the plane if ``flat``).
+
+    Returns positions (n*n, 3), the quads (lists of 4 indices), the springs
+    (the quads' edges, sorted pairs) and the boundary's indices."""
+    rng = np.random.default_rng(seed)
+    c = np.arange(n) - (n - 1) / 2
+    x, y = np.meshgrid(c, c, indexing='ij')
+    positions = np.column_stack([x.ravel(), y.ravel(), np.zeros(n * n)])
+    idx = np.arange(n * n).reshape(n, n)
+    boundary = np.zeros((n, n), dtype=bool)
+    boundary[[0, -1], :] = boundary[:, [0, -1]] = True
+    boundary = boundary.ravel()
+    if not flat:
+        positions[boundary, 2] = (positions[boundary, 0]**2 - positions[boundary, 1]**2) / n
+    axes = 2 if flat else 3
+    positions[~boundary, :axes] += rng.uniform(-0.3, 0.3, ((~boundary).sum(), axes))
+    quads = [[idx[i, j], idx[i + 1, j], idx[i + 1, j + 1], idx[i, j + 1]]
+             for i in range(n - 1) for j in range(n - 1)]
+    springs = {tuple(sorted((int(q[k]), int(q[(k + 1) % 4])))) for q in quads for k in range(4)}
+    return positions, quads, sorted(springs), np.flatnonzero(boundary)
+
+
+def write_quad_net(folder, kind, n=5, seed=0, flat=False):
+    """Write :func:`quad_net` as ``folder/net.<kind>`` (OBJ with quad faces, a
+    COMPAS 2.x or 1.x mesh, a COMPAS 1.x network, or XYZ plus
+    ``net.edges.txt``) and ``folder/fixed.txt``; return the net file, the
+    positions, springs and fixed indices."""
+    positions, quads, springs, fixed = quad_net(n, seed, flat)
+    path = folder / f'net.{kind}'
+    xyz = [dict(zip('xyz', map(float, p), strict=True)) for p in positions]
+    if kind == 'obj':
+        lines = ['# quad mesh', 'o net']
+        lines += [f'v {x!r} {y!r} {z!r}' for x, y, z in positions.tolist()]
+        lines += ['vn 0 0 1']
+        lines += ['f ' + ' '.join(f'{i + 1}//1' for i in q) for q in quads]
+        path.write_text('\n'.join(lines) + '\n')
+    elif kind == 'mesh2.json':
+        data = {'attributes': {'name': 'net'},
+                'default_vertex_attributes': {'x': 0.0, 'y': 0.0, 'z': 0.0},
+                'default_edge_attributes': {}, 'default_face_attributes': {},
+                'vertex': {str(i): p for i, p in enumerate(xyz)},
+                'face': {str(f): [int(i) for i in q] for f, q in enumerate(quads)},
+                'facedata': {}, 'edgedata': {}, 'max_vertex': len(xyz) - 1,
+                'max_face': len(quads) - 1}
+        path.write_text(json.dumps({'dtype': 'compas.datastructures/Mesh', 'data': data,
+                                    'guid': '00000000-0000-0000-0000-000000000000'}))
+    elif kind == 'mesh1.json':
+        data = {'attributes': {'name': 'net'}, 'dva': {'x': 0.0, 'y': 0.0, 'z': 0.0},
+                'dea': {}, 'dfa': {}, 'vertex': {str(i): p for i, p in enumerate(xyz)},
+                'face': {str(f): [int(i) for i in q] for f, q in enumerate(quads)},
+                'facedata': {}, 'edgedata': {}, 'max_vertex': len(xyz) - 1,
+                'max_face': len(quads) - 1}
+        path.write_text(json.dumps({'dtype': 'compas.datastructures/Mesh', 'value': data}))
+    elif kind == 'network1.json':
+        edge = {str(i): {} for i in range(len(xyz))}
+        for i, j in springs:
+            edge[str(i)][str(j)] = {}
+        data = {'attributes': {'name': 'net'}, 'dna': {'x': 0.0, 'y': 0.0, 'z': 0.0},
+                'dea': {}, 'node': {str(i): p for i, p in enumerate(xyz)}, 'edge': edge,
+                'adjacency': {}, 'max_node': len(xyz) - 1}
+        path.write_text(json.dumps(data))
+    else:
+        path.write_text(f'{len(positions)}\nProperties=species:S:1:pos:R:3\n' + ''.join(
+            f'X {x!r} {y!r} {z!r}\n' for x, y, z in positions.tolist()))
+        edges_path(path).write_text('# i j\n' + ''.join(f'{i} {j}\n' for i, j in springs))
+    (folder / 'fixed.txt').write_text('# the boundary\n' + '\n'.join(map(str, fixed)) + '\n')
+    return path, positions, springs, fixed
+
+
+def relaxed_in_python(positions, springs, fixed, dim=3, fmax=1e-6):
+    """The net relaxed with Maud from Python: its energy."""
+    from ase import Atoms
+
+    atoms = Atoms(positions=positions, pbc=False)
+    atoms.calc = MaudCalculator(springs, dim=dim)
+    atoms.set_constraint(FixAtoms(indices=fixed))
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=fmax, steps=500)
+    return atoms.get_potential_energy()
+
+
+def pairs(springs):
+    return sorted(tuple(sorted(map(int, p))) for p in springs)
+
+
+@pytest.mark.parametrize('kind', FORMATS)
+def test_read_gives_the_net_built_in_python(tmp_path, kind):
+    path, positions, springs, fixed = write_quad_net(tmp_path, kind, seed=3)
+    atoms = read_net(path, fixed=tmp_path / 'fixed.txt')
+    np.testing.assert_array_equal(atoms.positions, positions)
+    assert pairs(atoms.calc.springs) == springs
+    assert atoms.calc.dim == 3 and not atoms.pbc.any()
+    assert atoms.constraints[0].index.tolist() == fixed.tolist()
+    assert (atoms.calc.parameters['a'], atoms.calc.parameters['Q']) == (1.0, 1.0)
+
+
+def test_flat_net_is_2d_unless_told(tmp_path):
+    path, *_ = write_quad_net(tmp_path, 'obj', flat=True)
+    assert read_net(path).calc.dim == 2
+    assert read_net(path, dim=3, a=0.5, Q=2.0).calc.parameters['a'] == 0.5
+    assert read_net(path, dim=3).calc.dim == 3
+
+
+def test_obj_faces_and_polylines(tmp_path):
+    """Each face edge once (shared edges too), polyline segments, v/vt/vn and
+    negative indices, and coordinates beyond x y z ignored."""
+    path = tmp_path / 'mixed.obj'
+    path.write_text('v 0 0 0\nv 1 0 0 1.0\nv 1 1 0\nv 0 1 0\nvt 0 0\n'
+                    'f 1/1 2/1 3/1\nf 1 3 -1\n'     # shares the edge 1-3
+                    'v 2 0 0\nv 3 0 0\nl 2 -2 -1\n')  # 2-5, 5-6
+    positions, springs = read_obj(path)
+    assert positions.shape == (6, 3) and positions[1].tolist() == [1, 0, 0]
+    assert springs.tolist() == [[0, 1], [1, 2], [2, 0], [2, 3], [3, 0], [1, 4], [4, 5]]
+
+
+@pytest.mark.parametrize('kind', FORMATS)
+def test_read_write_read_is_identical(tmp_path, kind):
+    path, *_ = write_quad_net(tmp_path, kind, seed=1)
+    atoms = read_net(path)
+    rng = np.random.default_rng(2)
+    atoms.positions += rng.normal(size=atoms.positions.shape)   # "relaxed"
+    out = tmp_path / f'out.{kind}'
+    written = write_net(out, atoms, like=path if kind != 'xyz' else None)
+    again = read_net(out)
+    np.testing.assert_array_equal(again.positions, atoms.positions)
+    np.testing.assert_array_equal(again.calc.springs, atoms.calc.springs)
+    if kind == 'obj':   # everything but the coordinates kept
+        def rest(p):
+            return [line for line in p.read_text().splitlines() if not line.startswith('v ')]
+        assert rest(out) == rest(path)
+    if kind == 'xyz':
+        assert written == [out, edges_path(out)]
+
+
+@pytest.mark.parametrize('kind', ('obj', 'json'))
+def test_fresh_files_keep_points_and_springs(tmp_path, kind):
+    """Written without an original: OBJ with ``l`` springs, a COMPAS 2.x
+    graph with the fixed points as anchors."""
+    path, positions, springs, fixed = write_quad_net(tmp_path, 'obj', seed=4)
+    atoms = read_net(path, fixed=fixed)
+    out = tmp_path / f'fresh.{kind}'
+    write_net(out, atoms)
+    again = read_net(out)
+    np.testing.assert_array_equal(again.positions, positions)
+    assert pairs(again.calc.springs) == springs
+    if kind == 'json':
+        document = json.loads(out.read_text())
+        assert document['dtype'] == 'compas.datastructures/Graph'
+        assert again.constraints[0].index.tolist() == fixed.tolist()
+        positions, _, anchors = read_compas(out)
+        assert anchors == fixed.tolist()
+
+
+def test_trajectory_keeps_springs_a_q_dim_and_fixed(tmp_path):
+    path, *_ = write_quad_net(tmp_path, 'obj', flat=True, seed=5)
+    atoms = read_net(path, fixed=tmp_path / 'fixed.txt', a=0.7, Q=2.5)
+    assert atoms.calc.dim == 2
+    with Maud(atoms, logfile=None, trajectory=str(tmp_path / 'run.traj')) as opt:
+        opt.run(fmax=1e-3, steps=3)
+    frames = read_frames(tmp_path / 'run.traj')
+    assert len(frames) == 4
+    for frame in frames:
+        p = frame.calc.parameters
+        assert isinstance(frame.calc, MaudCalculator)
+        np.testing.assert_array_equal(frame.calc.springs, atoms.calc.springs)
+        assert (p['a'], p['Q'], p['dim']) == (0.7, 2.5, 2)
+        assert frame.constraints[0].index.tolist() == atoms.constraints[0].index.tolist()
+    np.testing.assert_array_equal(frames[-1].positions, atoms.positions)
+    assert frames[-1].get_potential_energy() == pytest.approx(
+        atoms.get_potential_energy(), rel=1e-14)
+    first = read_net(tmp_path / 'run.traj', index=0, Q=1.0)   # an override
+    assert first.calc.parameters['Q'] == 1.0 and first.calc.parameters['a'] == 0.7
+    write_net(tmp_path / 'one.traj', atoms)
+    assert read_net(tmp_path / 'one.traj').calc.parameters['Q'] == 2.5
+
+
+BROKEN = [
+    ('net.obj', 'v 0 0 0\nv 1 0\n', r'net\.obj line 2: expected .v x y z., got 2'),
+    ('net.obj', 'v 0 0 0\nv 1 a 0\n', r'net\.obj line 2: expected .v x y z. with numbers'),
+    ('net.obj', '# c\nv 0 0 0\nv 1 0 0\nv 0 1 0\n\nf 1 2 12\n',
+     r'net\.obj line 6: face index 12 out of range \(3 vertices\)'),
+    ('net.obj', 'v 0 0 0\nv 1 0 0\nl 1 -3\n', r'net\.obj line 3: line index -3 out of range'),
+    ('net.obj', 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n', r'net\.obj line 4: expected integer'),
+    ('net.obj', 'v 0 0 0\nv 1 0 0\nf 1 2\n', r'net\.obj line 3: a .f. needs at least 3'),
+    ('net.obj', 'v 0 0 0\nv 1 0 0\nl 0 1\n', r'net\.obj line 3: vertex index 0'),
+    ('net.obj', 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 2\n', r'net\.obj line 4: vertex 2 repeats'),
+    ('net.obj', '# nothing\n', r'no vertices'),
+    ('net.json', '{"vertex": {"0": {"x": 0}},\n "face": {}\n', r'net\.json line 3: not valid JSON'),
+    ('net.json', '{"node": {"0": {"x": 0, "y": 0}}, "edge": {}}',
+     r'net\.json: vertex 0 has no number z'),
+    ('net.json', '{"node": {"0": {"x": 0, "y": 0, "z": 0}}, "edge": {"0": {"7": {}}}}',
+     r"net\.json: edge 0-7 names vertex '7'"),
+    ('net.json', '{"dtype": "compas.geometry/Point", "data": [0, 0, 0]}',
+     r'expected COMPAS mesh data'),
+]
+
+
+@pytest.mark.parametrize('name, text, message', BROKEN)
+def test_malformed_net_files_name_the_line(tmp_path, name, text, message):
+    (tmp_path / name).write_text(text)
+    with pytest.raises(ValueError, match=message):
+        read_net(tmp_path / name)
+
+
+BROKEN_LISTS = [
+    ('0 1\n1 2 3\n', r'edges\.txt line 2: expected two integer indices, got 3'),
+    ('# pairs\n0 1\n1 x\n', r"edges\.txt line 3: expected two integer indices, got '1 x'"),
+    ('0 1\n\n1 9\n', r'edges\.txt line 3: index 9 out of range \(3 points'),
+    ('0 1\n1 1\n', r'edges\.txt line 2: spring ties point 1 to itself'),
+    ('0 1\n1 2\n1 0  # again\n', r'edges\.txt line 3: spring \(0, 1\) repeats line 1'),
+]
+
+
+@pytest.mark.parametrize('text, message', BROKEN_LISTS)
+def test_malformed_edge_lists_name_the_line(tmp_path, text, message):
+    (tmp_path / 'p.xyz').write_text('3\n\nX 0 0 0\nX 1 0 0\nX 0 1 0\n')
+    (tmp_path / 'edges.txt').write_text(text)
+    with pytest.raises(ValueError, match=message):
+        read_net(tmp_path / 'p.xyz', edges=tmp_path / 'edges.txt')
+    with pytest.raises(ValueError, match=message):
+        read_edges(tmp_path / 'edges.txt', 3)
+
+
+def test_missing_springs_and_bad_fixed_points(tmp_path):
+    (tmp_path / 'p.xyz').write_text('2\n\nX 0 0 0\nX 1 0 0\n')
+    with pytest.raises(ValueError, match=r'p\.xyz holds no springs: give an edge list'):
+        read_net(tmp_path / 'p.xyz')
+    (tmp_path / 'p.edges.txt').write_text('0 1\n')
+    (tmp_path / 'fixed.txt').write_text('0\n2\n')
+    with pytest.raises(ValueError, match=r'fixed\.txt line 2: index 2 out of range'):
+        read_net(tmp_path / 'p.xyz', fixed=tmp_path / 'fixed.txt')
+    with pytest.raises(ValueError, match='fixed point 5 out of range'):
+        read_net(tmp_path / 'p.xyz', fixed=[5])
+    (tmp_path / 'q.xyz').write_text('3\n\nX 0 0 0\nX 1 0 zz\n')
+    with pytest.raises(ValueError, match=r'q\.xyz: ASE cannot read it'):
+        read_net(tmp_path / 'q.xyz')
+
+
+def test_write_refuses_a_mismatched_original(tmp_path):
+    path, *_ = write_quad_net(tmp_path, 'obj', n=4)
+    atoms = read_net(path)
+    with pytest.raises(ValueError, match='different formats'):
+        write_net(tmp_path / 'out.json', atoms, like=path)
+    with pytest.raises(ValueError, match='has 16 vertices, the net 9 points'):
+        write_net(tmp_path / 'out.obj', atoms[:9], like=path)

@@ -154,8 +154,11 @@ def test_read_write_read_is_identical(tmp_path, kind):
         def rest(p):
             return [line for line in p.read_text().splitlines() if not line.startswith('v ')]
         assert rest(out) == rest(path)
-    if kind == 'xyz':
+    if kind == 'xyz':   # the fixed points too, as extended XYZ's move_mask
         assert written == [out, edges_path(out)]
+        atoms.set_constraint(FixAtoms(indices=[0, 3]))
+        write_net(out, atoms)
+        assert read_net(out).constraints[0].index.tolist() == [0, 3]
 
 
 @pytest.mark.parametrize('kind', ('obj', 'json'))

@@ -122,7 +122,7 @@ def _read(path, edges, fixed, a, Q, dim, index):
         frames = [Atoms(positions=positions, pbc=False)]
         if len(anchors):
             frames[0].set_constraint(FixAtoms(indices=anchors))
-        stored = {'springs': springs}
+        stored = {'springs': springs} if len(springs) else {}
     else:
         frames, stored = _read_ase(path, index)
     natoms = len(frames[0])

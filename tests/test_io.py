@@ -260,6 +260,9 @@ def test_missing_springs_and_bad_fixed_points(tmp_path):
         read_net(tmp_path / 'p.xyz', fixed=tmp_path / 'fixed.txt')
     with pytest.raises(ValueError, match='fixed point 5 out of range'):
         read_net(tmp_path / 'p.xyz', fixed=[5])
+    (tmp_path / 'points.obj').write_text('v 0 0 0\nv 1 0 0\n')   # no f, no l
+    with pytest.raises(ValueError, match=r'points\.obj holds no springs'):
+        read_net(tmp_path / 'points.obj')
     (tmp_path / 'q.xyz').write_text('3\n\nX 0 0 0\nX 1 0 zz\n')
     with pytest.raises(ValueError, match=r'q\.xyz: ASE cannot read it'):
         read_net(tmp_path / 'q.xyz')

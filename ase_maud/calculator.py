@@ -60,6 +60,8 @@ class MaudCalculator(Calculator):
         backend (default 1e-6); ignored by the direct sums. Forces cannot be
         relaxed much below ``fmm_eps`` times the typical repulsive force.
 
+    Notes
+    -----
     Only what is asked is computed: ``energy``/``forces`` never build the
     blocks; asking for ``stiffness`` computes all three in one pass; asking
     for ``hessian`` (the dense (dim N, dim N) matrix, small scenes only) adds

@@ -27,7 +27,8 @@ stiffness solver ``K^-1`` (:mod:`ase_maud.stiffness`)::
 - No point moves further in one step than ``maxstep_nn`` (< 1/2) times its
   distance to its nearest other point, nor than ``maxstep`` if given (length
   units): two points stepping towards each other keep at least
-  ``1 - 2 maxstep_nn`` of their distance. Each point's move is scaled down
+  ``1 - 2 maxstep_nn`` of their distance. For a chain of images (ASE's NEB)
+  the nearest point is sought within each image (``image_size``). Each point's move is scaled down
   on its own; or (``trust_region``, for a model that can damp itself, the
   exact one) the move becomes ``gamma (K + mu I)^-1 f`` with the smallest
   ``mu >= 0`` that keeps every point within its bound (Levenberg-Marquardt):
@@ -60,6 +61,10 @@ class StepRule:
     maxstep_nn: float = 0.45
     maxstep: float | None = None
     trust_region: bool = False
+    #: Points per image when the positions are a chain of images (ASE's NEB):
+    #: the nearest other point is sought within the same image only (the same
+    #: atom in the next image is not a neighbour). None: one scene.
+    image_size: int | None = None
 
 
 @dataclass
@@ -163,9 +168,12 @@ class MaudMethod:
 
     def _limits(self, x: np.ndarray) -> np.ndarray:
         """The longest move allowed to each point (length units)."""
+        size = self.rule.image_size or len(x)
         limit = np.full(len(x), np.inf)
-        if len(x) > 1:
-            limit = self.rule.maxstep_nn * cKDTree(x).query(x, k=2)[0][:, 1]
+        if size > 1:
+            limit = self.rule.maxstep_nn * np.concatenate(
+                [cKDTree(image).query(image, k=2)[0][:, 1]
+                 for image in x.reshape(-1, size, x.shape[1])])
         if self.rule.maxstep is not None:
             limit = np.minimum(limit, self.rule.maxstep)
         return limit

@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 from ase import Atoms
-from ase.constraints import FixAtoms, FixCartesian
+from ase.constraints import FixAtoms, FixCartesian, FixedLine, FixedPlane
 from scipy.sparse.linalg import LinearOperator, cg, splu
 from scipy.spatial import cKDTree
 
@@ -155,6 +155,32 @@ def free_dofs(atoms: Atoms, dim: int) -> np.ndarray:
         if isinstance(constraint, (FixAtoms, FixCartesian)):
             constraint.adjust_forces(atoms, free)
     return free[:, :dim] != 0
+
+
+#: The constraints that project each atom's move onto a line, a plane or
+#: nothing: the exact model represents them exactly (:func:`allowed_basis`).
+PROJECTIONS = (FixAtoms, FixCartesian, FixedPlane, FixedLine)
+
+
+def allowed_basis(atoms: Atoms, dim: int) -> np.ndarray:
+    """Orthonormal columns (dim N, m) spanning the moves that FixAtoms,
+    FixCartesian, FixedPlane and FixedLine allow (each is a projection of
+    every atom's move onto a line, a plane or nothing); other constraints
+    are left to ASE."""
+    projector = np.zeros((len(atoms), 3, 3))  # P_i, column k = P_i e_k
+    for k in range(3):
+        unit = np.zeros((len(atoms), 3))
+        unit[:, k] = 1.0
+        for constraint in atoms.constraints:
+            if isinstance(constraint, PROJECTIONS):
+                constraint.adjust_forces(atoms, unit)
+        projector[:, :, k] = unit
+    values, vectors = np.linalg.eigh(projector[:, :dim, :dim])
+    atom, column = np.nonzero(values > 0.5)   # eigenvalues are 0 or 1
+    basis = np.zeros((dim * len(atoms), len(atom)))
+    for j, (i, c) in enumerate(zip(atom, column, strict=True)):
+        basis[dim * i:dim * (i + 1), j] = vectors[i, :, c]
+    return basis
 
 
 class _DofSolver(Solver):
@@ -289,7 +315,8 @@ class _BlockSolver(Solver):
 
 class ExactModel(StiffnessModel):
     """The dense analytic Hessian (calculator property ``hessian``,
-    (dim N, dim N)) on the free degrees of freedom, eigen-decomposed.
+    (dim N, dim N)) on the moves the constraints allow
+    (:func:`allowed_basis`), eigen-decomposed.
 
     ``floor`` is relative to the largest absolute eigenvalue of the whole
     matrix (default 1e-8: soft collective modes must keep their own
@@ -306,10 +333,10 @@ class ExactModel(StiffnessModel):
     def at(self, atoms: Atoms) -> Solver:
         hessian = atoms.calc.get_property('hessian', atoms)
         dim = hessian.shape[0] // len(atoms)
-        free = free_dofs(atoms, dim)
-        keep = free.ravel()
-        values, vectors = np.linalg.eigh(hessian[np.ix_(keep, keep)])
-        return _EigenSolver(vectors, self._absolute(values), free)
+        basis = allowed_basis(atoms, dim)
+        values, vectors = np.linalg.eigh(basis.T @ hessian @ basis)
+        return _EigenSolver(basis @ vectors, self._absolute(values),
+                            np.ones((len(atoms), dim), dtype=bool))
 
 
 class _EigenSolver(_DofSolver):
@@ -481,7 +508,9 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
     """The stiffness model ``name`` for ``atoms``' calculator.
 
     ``'auto'``: ``exact`` while the free degrees of freedom are at most
-    :data:`EXACT_MAX_DOFS` and the calculator has a ``hessian``; else
+    :data:`EXACT_MAX_DOFS`, the calculator has a ``hessian`` and every
+    constraint is one of :data:`PROJECTIONS` (a Hookean tether, say, adds
+    stiffness the Hessian does not hold); else
     ``global`` if it has the nodal blocks and ``get_spring_hessian``; else
     ``nodal`` if it has the blocks; else ``secant``. ``options`` go to the
     model (``floor``; ``method`` for nodal; ``kappa0`` for secant); options
@@ -491,7 +520,8 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
     offers = set(getattr(calc, 'implemented_properties', ()))
     if name == 'auto':
         dim = 2 if getattr(calc, 'dim', 3) == 2 else 3
-        if 'hessian' in offers and free_dofs(atoms, dim).sum() <= EXACT_MAX_DOFS:
+        if ('hessian' in offers and free_dofs(atoms, dim).sum() <= EXACT_MAX_DOFS
+                and all(isinstance(c, PROJECTIONS) for c in atoms.constraints)):
             name = 'exact'
         elif 'stiffness' in offers and hasattr(calc, 'get_spring_hessian'):
             name = 'global'

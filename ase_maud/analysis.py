@@ -293,8 +293,8 @@ def near_field_stiffness(atoms: Atoms, cutoff: float = 1.5) -> sp.csr_matrix:
     """
     calc = atoms.calc
     p = calc.parameters
-    dim, c = p['dim'], p['a']**3 * p['Q']
-    x = atoms.positions[:, :dim]
+    dim = p['dim']
+    x = atoms.positions[:, :dim] / p['a']   # units of a: Q times unit blocks
     n = len(x)
     tree = cKDTree(x)
     spacing = np.median(tree.query(x, k=2)[0][:, 1])
@@ -304,9 +304,10 @@ def near_field_stiffness(atoms: Atoms, cutoff: float = 1.5) -> sp.csr_matrix:
                              axis=0, return_inverse=True)
     i, j = pairs.T
     d = x[i] - x[j]
-    blocks = c * physics.repulsion_block(d)
+    blocks = physics.repulsion_block(d)
     sprung = where[:len(springs)]
-    blocks[sprung] += physics.spring_block(d[sprung], p['Q'])
+    blocks[sprung] += physics.spring_block(d[sprung], 1.0)
+    blocks *= p['Q']
     values, vectors = np.linalg.eigh(blocks)
     blocks = np.einsum('pak,pk,pbk->pab', vectors, np.abs(values), vectors)
     axis = np.arange(dim)

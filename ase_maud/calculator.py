@@ -9,6 +9,12 @@ works in (ASE's eV and Angstrom if the scene is mixed with other ASE tools).
 Forces follow ASE's sign, ``f = -dE/dr``. The property ``stiffness`` holds the
 nodal blocks ``K_mm = d2E/dr_m2`` (N, dim, dim), the Hessian's diagonal blocks:
 the stiffness at point m with every other point held fixed.
+
+Scale. Everything is computed for the scene measured in ``a`` (``x' = x /
+a``) at ``a = Q = 1`` and scaled back: ``E = a**2 Q e(x')``, ``F = a Q
+f(x')``, ``K = Q k(x')``, so no power of ``a`` is formed and every result
+is finite wherever it is representable; where it is not, a ValueError names
+the atoms (or ``a`` and ``Q``), never a NaN.
 """
 
 from __future__ import annotations
@@ -22,13 +28,18 @@ import scipy.sparse as sp
 from ase import Atoms
 from ase.calculators.calculator import Calculator, all_changes
 from numpy.typing import ArrayLike
+from scipy.spatial import cKDTree
 
 from . import backends, physics, topology
+from .backends.auto import DEFAULT_TOL
 from .hessian import dense_hessian
 from .springs import check_range, check_springs
 
 #: Relative tolerance on the spread of z for a ``dim=2`` scene.
 PLANE_TOLERANCE = 1e-10
+#: Pairs closer than this many ``a`` overflow the blocks ``1 / L**3`` (and
+#: from about 1e-154 a the forces): named when a result is not finite.
+CLOSEST_REDUCED_DISTANCE = 1e-100
 
 
 class MaudCalculator(Calculator):
@@ -49,19 +60,56 @@ class MaudCalculator(Calculator):
         relative :data:`PLANE_TOLERANCE`), forces have ``z = 0`` exactly and
         the blocks are 2x2. ``3`` (default): 3x3 blocks.
     backend : str
-        The repulsion kernel, a name in the registry :mod:`.backends`: the
-        direct sums ``numba`` (default, compiled, parallel over
-        ``NUMBA_NUM_THREADS``) and ``numpy`` (the slow reference), or
-        ``fmm``, FMM3D's fast multipole method (O(N), faster from a few
-        thousand points, approximate to ``fmm_eps``; needs
-        ``pip install 'ase-maud[fmm]'``, parallel over ``OMP_NUM_THREADS``).
+        The repulsion kernel, a name in the registry :mod:`.backends`:
+        ``auto`` (default) picks per call the cheapest backend that meets
+        ``tol`` for this N, dim and property set: the exact ``numba`` direct
+        sum below a measured crossover, the FMM above it (with ``fmm_eps``
+        derived from ``tol``; the direct sum if fmm3dpy is not installed).
+        Explicit: ``numba`` (compiled direct sum, parallel over numba's
+        threads), ``numpy`` (the slow reference) or ``fmm`` (FMM3D's fast
+        multipole method at ``fmm_eps``, O(N);
+        ``pip install 'ase-maud[fmm]'``).
+    tol : float in [0, 1)
+        For ``auto``: the force error allowed, relative to the largest
+        repulsive force ``max_i |f_i|`` of the repulsion alone (for a scene
+        without springs, the largest force; the springs are always exact).
+        Default :data:`~.backends.auto.DEFAULT_TOL` = 1e-8, far below what
+        a relaxation resolves, yet coarse enough for the FMM from a few ten
+        thousand points; 0 asks for the exact direct sum. Ignored by the
+        explicit backends.
+    crossover : int or None
+        For ``auto``: the number of points from which the FMM is used,
+        whatever ``tol`` (down to 1e-13) and the thread count; ``None``
+        (default) uses the measured table
+        :data:`ase_maud.backends.auto.CROSSOVER` (assign to it to change
+        it for every calculator).
     fmm_eps : float in (0, 1)
-        Requested relative precision of the multipole sums of the ``fmm``
-        backend (default 1e-6); ignored by the direct sums. Forces cannot be
-        relaxed much below ``fmm_eps`` times the typical repulsive force.
+        Requested relative precision of the explicit ``fmm`` backend
+        (default 1e-6); its forces are good to ``0.1 fmm_eps`` of the
+        largest repulsive force.
 
     Notes
     -----
+    Accuracy per run. ``calc.set(tol=...)`` changes the accuracy for the
+    next calls (an optimiser lowers it as its forces approach ``fmax``:
+    ``tol = safety * fmax / calc.last_force_scale``). Results already held
+    stay if they meet the new ``tol`` (a looser one, or any ``tol`` after an
+    exact call); a tighter one discards them. After a call,
+    :attr:`last_backend` names the backend that computed the results held,
+    :attr:`last_tolerance` is their promised force error relative to
+    :attr:`last_force_scale` (0.0 for an exact backend), the largest
+    repulsive force (units of ``Q a``); all three are None before a call.
+
+    Threads. The numba direct sums run on ``numba.get_num_threads()``
+    threads: ``NUMBA_NUM_THREADS`` at start-up, or
+    ``numba.set_num_threads(n)`` (or :func:`ase_maud.threads.pin_threads`)
+    later. The FMM follows ``OMP_NUM_THREADS`` if fmm3dpy was built with
+    OpenMP; the PyPI wheel was not and runs on one thread (the ``auto``
+    crossovers assume that).
+
+    Memory is O(N) on every path but ``hessian``: no N x N array is built
+    for energy, forces or stiffness.
+
     Only what is asked is computed: ``energy``/``forces`` never build the
     blocks; asking for ``stiffness`` computes all three in one pass; asking
     for ``hessian`` (the dense (dim N, dim N) matrix, small scenes only) adds
@@ -73,7 +121,8 @@ class MaudCalculator(Calculator):
     # springs default to a tuple: Calculator.todict compares each parameter
     # with its default by ``!=``, which fails on an ndarray default.
     default_parameters = {'springs': (), 'a': 1.0, 'Q': 1.0, 'dim': 3,
-                          'backend': 'numba', 'fmm_eps': 1e-6}
+                          'backend': 'auto', 'tol': DEFAULT_TOL,
+                          'crossover': None, 'fmm_eps': 1e-6}
     discard_results_on_any_change = True
     nolabel = True
 
@@ -81,19 +130,47 @@ class MaudCalculator(Calculator):
     #: (dim N)**2 matrix: 3000 atoms in 3D is an 81e6-entry, 648 MB array.
     max_hessian_atoms = 3000
 
+    #: Parameters that change the accuracy of the next calls, not the
+    #: potential: results that meet the new ``tol`` stay.
+    accuracy_parameters = frozenset({'tol', 'crossover'})
+
     def __init__(self, springs: ArrayLike = (), a: float = 1.0,
-                 Q: float = 1.0, dim: int = 3, backend: str = 'numba',
+                 Q: float = 1.0, dim: int = 3, backend: str = 'auto',
+                 tol: float = DEFAULT_TOL, crossover: int | None = None,
                  fmm_eps: float = 1e-6, **kwargs: Any) -> None:
         self._spring_hessian: tuple[tuple, sp.csr_matrix] | None = None
+        self.last_backend: str | None = None
+        self.last_tolerance: float | None = None
+        self.last_force_scale: float | None = None
         super().__init__(springs=springs, a=a, Q=Q, dim=dim, backend=backend,
-                         fmm_eps=fmm_eps, **kwargs)
+                         tol=tol, crossover=crossover, fmm_eps=fmm_eps,
+                         **kwargs)
 
     def set(self, **kwargs: Any) -> dict[str, Any]:
-        """Set parameters; invalid values raise ValueError and are not kept."""
+        """Set parameters; invalid values raise ValueError and are not kept.
+
+        Any change discards the results, except a change of ``tol`` or
+        ``crossover`` alone that the results held already meet
+        (:attr:`last_tolerance` ``<=`` the new ``tol``).
+        """
         if 'springs' in kwargs:
             kwargs['springs'] = check_springs(kwargs['springs'])
         _check_parameters({**self.parameters, **kwargs})
+        if (kwargs and set(kwargs) <= self.accuracy_parameters
+                and self.last_tolerance is not None
+                and self.last_tolerance <= kwargs.get(
+                    'tol', self.parameters['tol'])):
+            changed = {key: value for key, value in kwargs.items()
+                       if self.parameters.get(key) != value}
+            self.parameters.update(kwargs)
+            return changed
         return super().set(**kwargs)
+
+    def reset(self) -> None:
+        """Clear the results and what is known of their accuracy."""
+        super().reset()
+        self.last_backend = self.last_tolerance = None
+        self.last_force_scale = None
 
     @property
     def springs(self) -> np.ndarray:
@@ -160,7 +237,8 @@ class MaudCalculator(Calculator):
                 k = int(np.argmax(off))
                 raise ValueError(f'dim=2 needs every point on one plane z = '
                                  f'const: atom {k} has z = {z[k]}, atom 0 '
-                                 f'has z = {z[0]}')
+                                 f'has z = {z[0]} (ASE drivers move z: hold it '
+                                 'with ase_maud.scenes.keep_on_plane(atoms))')
         return positions
 
     def calculate(self, atoms: Atoms | None = None,
@@ -169,33 +247,46 @@ class MaudCalculator(Calculator):
         super().calculate(atoms, properties, system_changes)
         positions = self.check_atoms(self.atoms)
         p = self.parameters
-        dim, c = p['dim'], p['a']**3 * p['Q']
+        dim, a, Q = p['dim'], p['a'], p['Q']
         want_blocks = 'stiffness' in properties
-        flat = positions.copy()
-        if dim == 2:
-            flat[:, 2] = 0.0
-        backend = backends.get(p['backend'])
-        e_rep, f_rep, block6 = backend.evaluate(flat, want_blocks,
-                                                **backend.options(p))
-        if not np.isfinite(e_rep):
-            raise_on_coincident(flat)
-        e_spr, f_spr = physics.spring_terms(flat, self.springs, p['Q'])
-        energy = c * e_rep + e_spr
-        forces = c * f_rep + f_spr
-        if dim == 2:
-            forces[:, 2] = 0.0
-        self.results['energy'] = self.results['free_energy'] = energy
-        self.results['forces'] = forces
+        scaled = reduced_positions(positions, a, dim)
+        (e_rep, f_rep, block6), choice = backends.evaluate(
+            p, scaled, dim, want_blocks)
+        if not (np.isfinite(e_rep) and np.isfinite(f_rep).all() and (
+                block6 is None or np.isfinite(block6).all())):
+            raise_on_coincident(scaled)
+            raise_on_closest(scaled, a)
+        e_spr, f_spr = physics.spring_terms(scaled, self.springs, 1.0)
+        # E = a^2 Q e(x'), F = a Q f(x'), K = Q k(x') (module docstring)
+        aq = a * Q
+        results = {'energy': (aq * a) * (e_rep + e_spr),
+                   'forces': aq * (f_rep + f_spr)}
         if want_blocks:
-            blocks = c * backends.voigt_to_blocks(block6, dim)
-            blocks += physics.spring_nodal_blocks(self.springs, len(flat),
-                                                  p['Q'], dim)
-            self.results['stiffness'] = blocks
+            blocks = backends.voigt_to_blocks(block6, dim)
+            blocks += physics.spring_nodal_blocks(self.springs, len(scaled),
+                                                  1.0, dim)
+            results['stiffness'] = Q * blocks
         if 'hessian' in properties:
-            self._check_hessian_size(len(flat))
-            self.results['hessian'] = dense_hessian(
-                flat, self.springs, p['a'], p['Q'], dim,
+            self.check_hessian_size(len(scaled))
+            results['hessian'] = dense_hessian(
+                scaled, self.springs, 1.0, Q, dim,
                 spring_part=self.get_spring_hessian(self.atoms))
+        bad = [name for name, value in results.items()
+               if not np.all(np.isfinite(value))]
+        if bad:
+            raise_on_closest(scaled, a)   # the Hessian's 1/L**3
+            raise ValueError(f'the {", ".join(bad)} overflow float64 at a = '
+                             f'{a!r}, Q = {Q!r} (energies scale as a^2 Q, '
+                             'forces as a Q): choose units nearer the scene')
+        if dim == 2:
+            results['forces'][:, 2] = 0.0
+        results['energy'] = float(results['energy'])
+        self.results.update(results, free_energy=results['energy'])
+        self.last_backend = choice.backend.name
+        self.last_tolerance = max(self.last_tolerance or 0.0,
+                                  choice.tolerance)
+        self.last_force_scale = aq * float(
+            np.sqrt(np.einsum('ij,ij->i', f_rep, f_rep).max(initial=0.0)))
 
     def get_stiffness(self, atoms: Atoms | None = None) -> np.ndarray:
         """Nodal blocks ``K_mm``, shape (N, dim, dim), units of ``Q``."""
@@ -208,16 +299,22 @@ class MaudCalculator(Calculator):
         :attr:`max_hessian_atoms` atoms with a ValueError.
         """
         if atoms is not None:
-            self._check_hessian_size(len(atoms))
+            self.check_hessian_size(len(atoms))
         return self.get_property('hessian', atoms)
 
-    def _check_hessian_size(self, natoms: int) -> None:
+    def check_hessian_size(self, natoms: int, what: str = 'get_hessian',
+                           ) -> None:
+        """Raise ValueError, naming the O(N)-memory alternatives, if a dense
+        Hessian of ``natoms`` atoms exceeds :attr:`max_hessian_atoms`."""
         if natoms > self.max_hessian_atoms:
             raise ValueError(
-                f'get_hessian: {natoms} atoms exceed max_hessian_atoms = '
+                f'{what}: {natoms} atoms exceed max_hessian_atoms = '
                 f'{self.max_hessian_atoms} (the dense matrix would hold '
                 f'{(self.parameters["dim"] * natoms)**2:.2e} entries); use'
-                ' Hessian-vector products (ase_maud.hessian) instead')
+                ' Hessian-vector products (ase_maud.hessian.'
+                'hessian_vector_product, or ase_maud.analysis.hessian_operator'
+                " and classify(atoms, method='iterative') for the lowest "
+                'modes) instead')
 
     def get_spring_hessian(self, atoms: Atoms | None = None) -> sp.csr_matrix:
         """The springs' exact, constant Hessian ``Q (L (x) I_dim)``, shape
@@ -259,8 +356,40 @@ def _check_parameters(p: Mapping[str, Any]) -> None:
     backends.check_parameters(p)
 
 
+def reduced_positions(positions: np.ndarray, a: float,
+                      dim: int) -> np.ndarray:
+    """The positions in units of ``a``, ``x / a``, with ``z = 0`` for
+    ``dim=2``; a ValueError names an atom whose ``x / a`` overflows."""
+    with np.errstate(over='ignore'):
+        scaled = positions / a
+    bad = np.flatnonzero(~np.isfinite(scaled).all(axis=1))
+    if bad.size:
+        raise ValueError(f'atom {bad[0]} at {positions[bad[0]].tolist()} is '
+                         f'beyond the float64 range in units of a = {a!r}; '
+                         'choose a nearer the size of the scene')
+    if dim == 2:
+        scaled[:, 2] = 0.0
+    return scaled
+
+
+def raise_on_closest(scaled: np.ndarray, a: float) -> None:
+    """Raise ValueError naming the closest pair of points if it is closer
+    than :data:`CLOSEST_REDUCED_DISTANCE` ``a`` (``scaled`` is ``x / a``)."""
+    if len(scaled) < 2:
+        return
+    distance, index = cKDTree(scaled).query(scaled, k=2)
+    i = int(np.argmin(distance[:, 1]))
+    if distance[i, 1] < CLOSEST_REDUCED_DISTANCE:
+        j = int(index[i, 1])
+        raise ValueError(
+            f'atoms {min(i, j)} and {max(i, j)} are {distance[i, 1]:.3g} a '
+            f'apart (a = {a!r}): 1/L**3 overflows float64 below about '
+            f'{CLOSEST_REDUCED_DISTANCE:g} a; move them apart or choose a '
+            'smaller a')
+
+
 def raise_on_coincident(positions: np.ndarray) -> None:
-    """Raise ValueError naming two points at the same position."""
+    """Raise ValueError naming two points at the same position, if any."""
     order = np.lexsort(positions.T[::-1])
     same = np.all(positions[order[1:]] == positions[order[:-1]], axis=1)
     if np.any(same):
@@ -269,5 +398,3 @@ def raise_on_coincident(positions: np.ndarray) -> None:
         raise ValueError(f'atoms {i} and {j} are at the same position '
                          f'{positions[i].tolist()}: the repulsion a^3 Q / L '
                          'is infinite there')
-    raise FloatingPointError('the repulsion overflowed: points closer than '
-                             'the float64 range allows')

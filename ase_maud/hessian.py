@@ -6,6 +6,15 @@ block, plus the spring's ``Q I`` if (i, j) is a spring), the Hessian has
 ``K_ii``) on it, in units of ``Q``; coordinates are ordered point by point
 (x0, y0, [z0,] x1, ...). For ``dim=2`` only x and y enter (points on a plane
 z = const).
+
+The repulsion's part is computed in units of ``a``, ``Q`` times the unit
+repulsion's Hessian at ``x / a`` (no ``a**3`` is formed: finite wherever the
+blocks are).
+
+Dense or not: :func:`dense_hessian` holds (dim N)**2 numbers (the calculator
+refuses it above ``MaudCalculator.max_hessian_atoms``);
+:func:`hessian_vector_product` is O(N) memory at any N, the way to the
+spectrum of a large scene (:func:`ase_maud.analysis.hessian_operator`).
 """
 
 from __future__ import annotations
@@ -31,7 +40,7 @@ def dense_hessian(positions: np.ndarray, springs: np.ndarray, a: float,
     n = len(x)
     hess = np.zeros((n, dim, n, dim))
     for i, j in physics.pair_chunks(n, chunk_pairs):
-        block = a**3 * Q * physics.repulsion_block(x[i] - x[j])
+        block = Q * physics.repulsion_block((x[i] - x[j]) / a)
         hess[i, :, j, :] = hess[j, :, i, :] = -block
     diagonal = np.arange(n)
     hess[diagonal, :, diagonal, :] = -hess.sum(axis=2)   # K_ii = sum_j B_ij
@@ -57,11 +66,11 @@ def hessian_vector_product(positions: np.ndarray, springs: np.ndarray,
     v = np.asarray(v, dtype=float)
     block = v.reshape(-1, n, dim)
     x = np.zeros((3, n))
-    x[:dim] = np.asarray(positions, dtype=float)[:, :dim].T
+    x[:dim] = np.asarray(positions, dtype=float)[:, :dim].T / a
     u = np.zeros((len(block), 3, n))
     u[:, :dim] = block.transpose(0, 2, 1)
     hv = repulsion_hvp(x, u, numba.get_num_threads())
-    hv = a**3 * Q * hv[:, :dim].transpose(0, 2, 1)
+    hv = Q * hv[:, :dim].transpose(0, 2, 1)
     spring = physics.spring_hessian(springs, n, Q, dim)
     hv += (spring @ block.reshape(len(block), -1).T).T.reshape(hv.shape)
     return hv.reshape(v.shape)

@@ -17,6 +17,10 @@ Conventions, fixed here once:
   in-plane and out-of-plane motions decouple, so the in-plane block is exactly
   the ``dim=2`` Hessian and the extra modes are those of points free to leave
   the plane (their stability is what a 2D calculator cannot see).
+- Everything here is dense, (3N)**2 numbers: each function refuses more than
+  ``MaudCalculator.max_hessian_atoms`` atoms with a ValueError naming the
+  O(N)-memory alternatives (Hessian-vector products, the iterative
+  :func:`ase_maud.analysis.classify`).
 - Phonopy sees the scene centred in a cubic box with :data:`BOX_MARGIN`
   extents of empty space on each side, with no symmetry and the box as its
   own primitive cell; at Gamma every phase factor is 1, so no periodic image
@@ -33,7 +37,7 @@ from ase.vibrations import VibrationsData
 from numpy.typing import ArrayLike
 from phonopy import Phonopy
 from phonopy.structure.atoms import PhonopyAtoms
-from scipy.spatial.distance import pdist
+from scipy.spatial import cKDTree
 
 from .calculator import MaudCalculator
 
@@ -70,10 +74,12 @@ def phonopy_cell(atoms: Atoms, masses: ArrayLike | None = None) -> PhonopyAtoms:
 
 
 def make_phonopy(atoms: Atoms, masses: ArrayLike | None = None) -> Phonopy:
-    """A Phonopy object for the scene, without force constants.
+    """A Phonopy object for the scene, without force constants (refused
+    above ``max_hessian_atoms``: phonopy's force constants are dense).
 
     Frequencies come out angular in ``sqrt(Q / mass)`` (unit conversion 1).
     """
+    atoms.calc.check_hessian_size(len(atoms), 'make_phonopy')
     phonon = Phonopy(phonopy_cell(atoms, masses),
                      supercell_matrix=np.eye(3, dtype=int),
                      primitive_matrix='P', is_symmetry=False)
@@ -110,8 +116,11 @@ def finite_difference_force_constants(atoms: Atoms,
     gives the forces; phonopy fits the force constants (N, N, 3, 3). The
     central differences leave errors of order ``distance**2``.
     """
+    atoms.calc.check_hessian_size(len(atoms),
+                                  'finite_difference_force_constants')
     if distance is None:
-        distance = 1e-4 * pdist(atoms.positions).min()
+        nearest = cKDTree(atoms.positions).query(atoms.positions, k=2)[0]
+        distance = 1e-4 * nearest[:, 1].min()
     phonon = make_phonopy(atoms)
     phonon.generate_displacements(distance=distance, is_plusminus=True)
     probe = atoms.copy()

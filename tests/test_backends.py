@@ -110,7 +110,7 @@ def test_blocks_in_voigt_order(name):
 # -- the registry -------------------------------------------------------------
 
 def test_registered_backends_describe_themselves():
-    assert backends.names() == ['numba', 'numpy', 'fmm']
+    assert backends.names() == ['numba', 'numpy', 'fmm', 'auto']
     for name in backends.names():
         backend = backends.get(name)
         assert backend.name == name and backend.summary
@@ -137,8 +137,8 @@ def test_installed_follows_the_imports(monkeypatch):
 
 @pytest.mark.parametrize('name', ['cuda', None, ['numba']])
 def test_unknown_name(name):
-    with pytest.raises(ValueError, match=r"backend must be one of \['fmm', "
-                       r"'numba', 'numpy'\], got "):
+    with pytest.raises(ValueError, match=r"backend must be one of \['auto', "
+                       r"'fmm', 'numba', 'numpy'\], got "):
         backends.get(name)
 
 

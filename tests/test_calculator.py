@@ -8,6 +8,8 @@ from ase import Atoms
 from ase.calculators.fd import calculate_numerical_forces
 from ase.constraints import FixAtoms
 from ase.io import read, write
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.spatial.distance import pdist, squareform
 
 from ase_maud.calculator import MaudCalculator
@@ -383,3 +385,100 @@ def test_every_move_is_seen_at_any_scale(a):
     after = atoms.get_forces()
     assert np.abs(after - before).max() > 1e-6 * np.abs(before).max()
     assert atoms.calc.check_state(atoms) == []
+
+
+# -- extreme scales: the scaled form, or a ValueError (never NaN) -------------
+
+EXTREME = [(1e-105, 1.0), (1e100, 1e-12), (1e-12, 1e12), (1e12, 1e-12),
+           (1e-150, 1e12), (1e150, 1.0)]
+
+
+def check_scaled(unit, a, Q, dim, with_hessian=True):
+    """The scene ``unit`` (at a = Q = 1) scaled by ``a``, evaluated at
+    ``a, Q``: finite and ``a^2 Q E``, ``a Q F``, ``Q K`` (and ``Q H``) of the
+    unit scene within 1e-12, or a ValueError that says what overflowed."""
+    scaled = unit.copy()
+    scaled.positions *= a
+    scaled.calc = MaudCalculator(springs=unit.calc.springs, a=a, Q=Q,
+                                 dim=dim)
+    properties = ['energy', 'forces', 'stiffness'] + (
+        ['hessian'] * with_hessian)
+    try:
+        scaled.calc.calculate(scaled, properties)
+    except ValueError as err:
+        assert 'overflow' in str(err)
+        return None
+    unit.calc.calculate(unit, properties)
+    got, ref = scaled.calc.results, unit.calc.results
+    for name, power in [('energy', 2), ('forces', 1), ('stiffness', 0),
+                        ('hessian', 0)][:3 + with_hessian]:
+        assert np.all(np.isfinite(got[name])), name
+        expected = Q * a**power * np.asarray(ref[name]) if power else (
+            Q * np.asarray(ref[name]))
+        np.testing.assert_allclose(got[name], expected, rtol=0,
+                                   atol=1e-12 * np.abs(expected).max())
+    return got
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(log_a=st.floats(-12, 12), log_q=st.floats(-12, 12),
+       seed=st.integers(0, 2**16), dim=st.sampled_from([2, 3]))
+def test_any_scale_is_the_unit_scene_scaled(log_a, log_q, seed, dim):
+    rng = np.random.default_rng(seed)
+    n = 7
+    unit = Atoms(f'H{n}', rng.uniform(-1, 1, (n, 3)) * [1, 1, dim == 3])
+    unit.calc = MaudCalculator(springs=make_springs('tree', n, rng), dim=dim)
+    got = check_scaled(unit, 10.0**log_a, 10.0**log_q, dim)
+    assert got is not None   # nothing overflows between 1e-12 and 1e12
+
+
+@pytest.mark.parametrize('a, Q', EXTREME)
+@pytest.mark.parametrize('dim', [2, 3])
+def test_extreme_scales_are_finite_or_refused(scene, a, Q, dim):
+    unit = scene('chain', n=6, dim=dim, seed=4, a=1.0, Q=1.0)
+    got = check_scaled(unit, a, Q, dim)
+    if a * a * Q < 1e300:   # a^2 Q e is representable: it must be given
+        assert got is not None
+
+
+def test_scale_invariance_for_unit_q(scene):
+    unit = scene('ring', n=8, seed=5, a=1.0, Q=1.0)
+    for a in (1e-105, 1e-30, 3.0, 1e100):
+        scaled = unit.copy()
+        scaled.positions *= a
+        scaled.calc = MaudCalculator(springs=unit.calc.springs, a=a)
+        assert scaled.get_potential_energy() == pytest.approx(
+            a**2 * unit.get_potential_energy(), rel=1e-13)
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+def test_forces_and_blocks_are_derivatives_at_a_1e_105(scene, dim):
+    a, Q = 1e-105, 0.7
+    atoms = scene('tree', n=7, dim=dim, seed=6, a=1.0, Q=1.0)
+    atoms.positions *= a
+    atoms.calc = MaudCalculator(springs=atoms.calc.springs, a=a, Q=Q,
+                                dim=dim)
+    forces = atoms.get_forces()
+    numerical = calculate_numerical_forces(atoms, eps=STEP * a,
+                                           icarts=range(dim))
+    assert rel_err(forces[:, :dim], numerical) < FD_RTOL
+    blocks = atoms.calc.get_stiffness(atoms)
+    assert rel_err(blocks, block_diagonal(fd_hessian(atoms, dim, STEP * a),
+                                          dim)) < FD_RTOL
+
+
+def test_separation_1e_110_names_the_pair_or_scales():
+    # 1 / L**3 overflows below L = 1e-103 a: refused, naming the pair; in
+    # units of a of the same order the same scene is finite.
+    positions = [[0, 0, 0], [1e-110, 0, 0], [2e-110, 1e-110, 0]]
+    atoms = Atoms('H3', positions)
+    atoms.calc = MaudCalculator()
+    with pytest.raises(ValueError, match=r'atoms 0 and 1 are 1e-110 a apart'):
+        atoms.get_forces()
+    atoms.calc = MaudCalculator(a=1e-110, springs=[[0, 1]])
+    assert np.isfinite(atoms.get_forces()).all()
+    assert np.isfinite(atoms.calc.get_stiffness(atoms)).all()
+    far = Atoms('H2', [[0, 0, 0], [1e300, 0, 0]])
+    far.calc = MaudCalculator(a=1e-10)
+    with pytest.raises(ValueError, match='atom 1 .* beyond the float64 range'):
+        far.get_forces()

@@ -6,8 +6,11 @@ takes, and evaluates the unit-strength repulsion (:mod:`.base`). The
 calculator, the ``ase-maud backends`` command and the benchmark read this
 registry, and nothing else names a backend.
 
-Registered: ``numba`` (:mod:`.direct`, the default), ``numpy``
-(:mod:`.reference`) and ``fmm`` (:mod:`.fmm`). Adding one (a Barnes-Hut tree,
+Registered: ``numba`` (:mod:`.direct`), ``numpy`` (:mod:`.reference`),
+``fmm`` (:mod:`.fmm`) and ``auto`` (:mod:`.auto`, the default: per call the
+cheapest of the others that meets the calculator's ``tol``). The calculator
+evaluates through :func:`evaluate`, which asks the named backend for its
+choices and runs the first that can meet its tolerance. Adding one (a Barnes-Hut tree,
 a GPU kernel) is one new file here that defines ``BACKEND =
 Backend(name=..., evaluate=..., ...)``, plus one registration line at the end
 of this file, ``register(newmodule.BACKEND)`` (and its module in the import
@@ -20,12 +23,23 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from . import direct, fmm, reference
-from .base import VOIGT_PAIRS, Backend, Result, blocks_to_voigt, voigt_to_blocks
+import numpy as np
 
-__all__ = ['Backend', 'Result', 'VOIGT_PAIRS', 'blocks_to_voigt',
-           'check_parameters', 'get', 'installed', 'names', 'register',
-           'voigt_to_blocks']
+from . import auto, direct, fmm, reference
+from .base import (
+    VOIGT_PAIRS,
+    Backend,
+    BeyondTolerance,
+    Choice,
+    Result,
+    blocks_to_voigt,
+    evaluate_first,
+    voigt_to_blocks,
+)
+
+__all__ = ['Backend', 'BeyondTolerance', 'Choice', 'Result', 'VOIGT_PAIRS',
+           'blocks_to_voigt', 'check_parameters', 'evaluate', 'get',
+           'installed', 'names', 'register', 'voigt_to_blocks']
 
 _REGISTRY: dict[str, Backend] = {}
 
@@ -68,6 +82,17 @@ def check_parameters(parameters: Mapping[str, Any]) -> None:
                 check(parameters[name])
 
 
+def evaluate(parameters: Mapping[str, Any], positions: np.ndarray, dim: int,
+             want_blocks: bool) -> tuple[Result, Choice]:
+    """The unit repulsion at ``positions`` (N, 3) by the backend named in
+    ``parameters['backend']`` (or the one it picks for these N, ``dim`` and
+    ``want_blocks``), and the :class:`Choice` that computed it."""
+    choices = get(parameters['backend']).choices(len(positions), dim,
+                                                  want_blocks, parameters)
+    return evaluate_first(choices, positions, want_blocks)
+
+
 register(direct.BACKEND)
 register(reference.BACKEND)
 register(fmm.BACKEND)
+register(auto.BACKEND)

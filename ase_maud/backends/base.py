@@ -10,6 +10,11 @@ holds the nodal blocks ``sum_j (3 d d^T / L**5 - I / L**3)`` as the entries
 xx, yy, zz, xy, xz, yz (:data:`VOIGT_PAIRS`), computed only when
 ``want_blocks``. Coincident points give a non-finite energy, never an error:
 the calculator names them.
+
+A backend that cannot meet its tolerance on a scene raises
+:class:`BeyondTolerance`. A backend that delegates (``auto``) has a
+``choose`` function that returns, per call, the backends to try in order
+(:class:`Choice`); :func:`evaluate_first` runs the first that can.
 """
 
 from __future__ import annotations
@@ -26,6 +31,11 @@ VOIGT_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
 #: ``(energy, forces (N, 3), block6 (N, 6) or None)``, unit strength.
 Result = tuple[float, np.ndarray, np.ndarray | None]
+
+
+class BeyondTolerance(ValueError):
+    """A backend cannot meet its tolerance on this scene; the message says
+    why and names a backend that can."""
 
 
 @dataclass(frozen=True)
@@ -53,6 +63,8 @@ class Backend:
     parameters: Mapping[str, Callable[[Any], None]] = field(
         default_factory=dict)
     requires: tuple[str, ...] = ()
+    force_tolerance: Callable[..., float] | None = None
+    choose: Callable[..., list[Choice]] | None = None
 
     @property
     def exact(self) -> bool:
@@ -73,6 +85,43 @@ class Backend:
     def options(self, parameters: Mapping[str, Any]) -> dict[str, Any]:
         """The keywords of ``evaluate``, taken from calculator parameters."""
         return {name: parameters[name] for name in self.parameters}
+
+    def choices(self, natoms: int, dim: int, want_blocks: bool,
+                parameters: Mapping[str, Any]) -> list[Choice]:
+        """The backends to try, in order, for one call on ``natoms`` points
+        in ``dim`` dimensions: this backend alone, unless it delegates."""
+        options = self.options(parameters)
+        if self.choose is not None:
+            return self.choose(natoms, dim, want_blocks, **options)
+        tolerance = (0.0 if self.force_tolerance is None
+                     else self.force_tolerance(**options))
+        return [Choice(self, options, tolerance)]
+
+
+@dataclass(frozen=True)
+class Choice:
+    """One backend picked for a call: ``backend``, the keywords ``options``
+    of its ``evaluate``, and ``tolerance``, the force error it promises
+    relative to the largest repulsive force (0.0: exact to rounding)."""
+
+    backend: Backend
+    options: Mapping[str, Any]
+    tolerance: float
+
+
+def evaluate_first(choices: list[Choice], positions: np.ndarray,
+                   want_blocks: bool) -> tuple[Result, Choice]:
+    """Evaluate by the first of ``choices`` that does not raise
+    :class:`BeyondTolerance` (the last one's error is raised); return the
+    result and the choice that gave it."""
+    for choice in choices[:-1]:
+        try:
+            return (choice.backend.evaluate(positions, want_blocks,
+                                            **choice.options), choice)
+        except BeyondTolerance:
+            continue
+    last = choices[-1]
+    return last.backend.evaluate(positions, want_blocks, **last.options), last
 
 
 def voigt_to_blocks(block6: np.ndarray, dim: int) -> np.ndarray:

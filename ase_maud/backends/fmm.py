@@ -12,18 +12,31 @@ kernel is ``1/(4 pi r)`` and it drops each point's own term; with unit charges
   ``x_i``, ``sum_j (3 d d^T / L**5 - I / L**3)``, in the same xx, yy, zz, xy,
   xz, yz order as :mod:`.base`.
 
-The sums are approximate: ``fmm_eps`` is FMM3D's requested relative
-precision, and the measured error of the energy, of the largest force and of
-the blocks, relative to their largest entry, stays below ``fmm_eps``. Points
-on a plane (2D scenes) work as they are. The result is not a smooth function of the
-positions at the ``fmm_eps`` level (the octree changes as points move), so a
-relaxation can only resolve forces down to about ``fmm_eps`` times the
-typical repulsive force: ask for a small ``fmm_eps`` to relax tightly.
+Accuracy. ``fmm_eps`` is FMM3D's requested relative precision. Measured
+(``python tools/backend_crossover.py --errors``, docs/calculator.md) on random
+scenes in 3D and on a plane, with near pairs and far clusters, the largest
+force error relative to the largest force stays below
+:data:`FORCE_ERROR_PER_EPS` ``* fmm_eps``; that product is the backend's
+promised force tolerance (:func:`force_tolerance`).
 
-Cost is O(N), parallel over ``OMP_NUM_THREADS``, with about 10 ms of fixed
-cost per call. Against the numba direct sum on one thread (random points in
-3D) it breaks even near N = 4000 at ``fmm_eps = 1e-3`` and beyond N = 16000 at
-``1e-6`` (near 12000 with the blocks); below a few hundred points FMM3D sums
+Near pairs. FMM3D maps the scene into its unit box, which rounds every
+coordinate to about ``1e-16`` of the scene's size ``D`` (the largest extent):
+a pair at distance ``L`` gets a relative error near ``1e-16 D / L`` and is
+dropped altogether below about ``2**-51 D``, whatever ``fmm_eps``. So the
+points whose nearest neighbour is closer than :func:`near_radius`
+(``NEAR_ROUNDING * D / fmm_eps``, where that rounding is a tenth of
+``fmm_eps``) are taken out of the multipole sums: the pairs among them are
+summed exactly by the direct kernel, the pairs between them and the rest by
+two FMM calls with separate sources and targets (every such pair is farther
+apart than the radius). More than :data:`MAX_NEAR_POINTS` such points is a
+:class:`~.base.BeyondTolerance` error (a ValueError) naming the closest pair
+and the exact backend. Finding them costs a k-d tree per call (about 10 % of
+an E+F call at ``fmm_eps = 1e-3``, 1.4 s at 10**6 points).
+
+Cost is O(N), with about 10 ms of fixed cost per call; the fmm3dpy wheel from
+PyPI is built without OpenMP and runs on one thread (a source build with
+OpenMP follows ``OMP_NUM_THREADS``). Measured crossovers against the numba
+direct sum: docs/calculator.md. Below a few hundred points FMM3D sums
 directly and the result is exact to rounding.
 """
 
@@ -32,11 +45,25 @@ from __future__ import annotations
 from numbers import Real
 
 import numpy as np
+from scipy.spatial import cKDTree
 
-from .base import Backend, Result
+from . import direct
+from .base import Backend, BeyondTolerance, Result
 
 #: FMM3D's Laplace kernel is ``1 / (4 pi r)``; the repulsion's is ``1 / r``.
 FMM3D_SCALE = 4.0 * np.pi
+#: Largest measured force error over ``fmm_eps`` (max over points of the
+#: error's norm, relative to the largest force), rounded up: see the module
+#: docstring and docs/calculator.md.
+FORCE_ERROR_PER_EPS = 0.1
+#: A point whose nearest neighbour is closer than ``NEAR_ROUNDING * D /
+#: fmm_eps`` (``D`` the scene's largest extent) is summed exactly: FMM3D's
+#: own rounding of that pair, about ``1e-16 D / L``, would exceed a tenth of
+#: ``fmm_eps``.
+NEAR_ROUNDING = 1e-15
+#: Most points summed exactly with one another (:data:`NEAR_ROUNDING`): the
+#: direct sum over them costs up to about 50 ms.
+MAX_NEAR_POINTS = 4096
 
 
 def check_eps(eps: object) -> None:
@@ -44,6 +71,22 @@ def check_eps(eps: object) -> None:
     if not (isinstance(eps, Real) and 0.0 < eps < 1.0):
         raise ValueError(f'fmm_eps must be a number in (0, 1), the requested '
                          f'relative precision, got {eps!r}')
+
+
+def force_tolerance(fmm_eps: float) -> float:
+    """The force error promised at ``fmm_eps``, relative to the largest
+    force: ``FORCE_ERROR_PER_EPS * fmm_eps``."""
+    return FORCE_ERROR_PER_EPS * fmm_eps
+
+
+def eps_for(tol: float) -> float:
+    """The ``fmm_eps`` whose promised force error is ``tol``."""
+    return tol / FORCE_ERROR_PER_EPS
+
+
+def near_radius(positions: np.ndarray, fmm_eps: float) -> float:
+    """Distance below which a pair is summed exactly (module docstring)."""
+    return NEAR_ROUNDING * float(np.ptp(positions, axis=0).max()) / fmm_eps
 
 
 def _lfmm3d():
@@ -61,10 +104,10 @@ def evaluate(positions: np.ndarray, want_blocks: bool = False,
     """Unit repulsion by the fast multipole method; see the module docstring.
 
     Returns ``(energy, forces (N, 3), block6 (N, 6) or None)`` like the
-    direct sums (:mod:`.base`). Two points at the same position give ``energy = inf`` and
-    NaN forces, as the direct sums do (FMM3D itself would drop that pair);
-    points closer than about ``2**-51`` times the scene's size, a few
-    rounding errors, are dropped by FMM3D.
+    direct sums (:mod:`.base`). Two points at the same position give
+    ``energy = inf`` and NaN forces, as the direct sums do (FMM3D itself
+    would drop that pair). Too many near points (module docstring) raise
+    :class:`~.base.BeyondTolerance`.
     """
     check_eps(fmm_eps)
     lfmm3d = _lfmm3d()
@@ -72,28 +115,87 @@ def evaluate(positions: np.ndarray, want_blocks: bool = False,
     n = len(p)
     if n < 2:  # FMM3D gives NaN for a lone point
         return 0.0, np.zeros((n, 3)), np.zeros((n, 6)) if want_blocks else None
-    if _has_coincident(p):
-        return (np.inf, np.full((n, 3), np.nan),
-                np.full((n, 6), np.nan) if want_blocks else None)
-    out = lfmm3d(eps=fmm_eps, sources=np.ascontiguousarray(p.T),
-                 charges=np.ones(n), pg=3 if want_blocks else 2)
-    energy = 0.5 * FMM3D_SCALE * float(out.pot.sum())
-    forces = -FMM3D_SCALE * np.ascontiguousarray(out.grad.T)
-    block6 = (FMM3D_SCALE * np.ascontiguousarray(out.hess.T) if want_blocks
-              else None)
+    near = _near_points(p, fmm_eps)
+    if near.size == 0:
+        out = lfmm3d(eps=fmm_eps, sources=np.ascontiguousarray(p.T),
+                     charges=np.ones(n), pg=3 if want_blocks else 2)
+        return _unscale(0.5 * out.pot.sum(), out.grad,
+                        out.hess if want_blocks else None)
+    far = np.setdiff1d(np.arange(n), near)
+    if far.size < 2:
+        return direct.evaluate(p, want_blocks)
+    return _split(lfmm3d, p, near, far, want_blocks, fmm_eps)
+
+
+def _split(lfmm3d, p, near, far, want_blocks, eps):
+    """FMM over the far points, each group's field at the other group's
+    points by FMM (sources and targets apart), and the near points among
+    themselves by the exact direct sum."""
+    order = 3 if want_blocks else 2
+    far_far = lfmm3d(eps=eps, sources=np.ascontiguousarray(p[far].T),
+                     charges=np.ones(far.size),
+                     targets=np.ascontiguousarray(p[near].T), pg=order,
+                     pgt=order)
+    near_far = lfmm3d(eps=eps, sources=np.ascontiguousarray(p[near].T),
+                      charges=np.ones(near.size),
+                      targets=np.ascontiguousarray(p[far].T), pgt=order)
+    # far-far pairs twice in pot, far-near pairs once in pottarg
+    pot = 0.5 * far_far.pot.sum() + far_far.pottarg.sum()
+    fields = []
+    for name in ('grad', 'hess')[:order - 1]:
+        field = np.zeros((getattr(far_far, name).shape[0], len(p)))
+        field[:, far] = getattr(far_far, name) + getattr(near_far,
+                                                         name + 'targ')
+        field[:, near] = getattr(far_far, name + 'targ')
+        fields.append(field)
+    energy, forces, block6 = _unscale(pot, *fields)
+    e_near, f_near, b_near = direct.evaluate(p[near], want_blocks)
+    forces[near] += f_near
+    if want_blocks:
+        block6[near] += b_near
+    return energy + e_near, forces, block6
+
+
+def _unscale(pot_sum, grad, hess=None):
+    """Energy, forces and blocks (if ``hess`` is given) of the unit
+    repulsion from FMM3D's sums."""
+    energy = FMM3D_SCALE * float(pot_sum)
+    forces = -FMM3D_SCALE * np.ascontiguousarray(grad.T)
+    block6 = (None if hess is None
+              else FMM3D_SCALE * np.ascontiguousarray(hess.T))
     return energy, forces, block6
 
 
-def _has_coincident(p):
-    """Whether two rows of ``p`` are equal (a sort, O(N log N))."""
-    s = p[np.lexsort(p.T)]
-    return bool(np.any(np.all(s[1:] == s[:-1], axis=1)))
+def _near_points(p, eps):
+    """Sorted indices of the points whose nearest neighbour is within
+    :func:`near_radius`; BeyondTolerance if there are too many."""
+    radius = near_radius(p, eps)
+    tree = cKDTree(p, balanced_tree=False, compact_nodes=False)
+    # each pair counted twice, each point once with itself: O(1) memory
+    count = (int(tree.count_neighbors(tree, radius)) - len(p)) // 2
+    if count == 0:
+        return np.zeros(0, dtype=int)
+    if count <= MAX_NEAR_POINTS**2 // 2:
+        pairs = tree.query_pairs(radius, output_type='ndarray')
+        near = np.unique(pairs)
+        if near.size <= MAX_NEAR_POINTS:
+            return near
+    distance, index = tree.query(p, k=2)
+    i = int(np.argmin(distance[:, 1]))
+    j = int(index[i, 1])
+    raise BeyondTolerance(
+        f'{count} pairs are closer than {radius:.3g}, among them atoms '
+        f'{min(i, j)} and {max(i, j)} at {distance[i, 1]:.3g}: FMM3D rounds '
+        f'such pairs beyond fmm_eps = {eps:g} and more than '
+        f'{MAX_NEAR_POINTS} points are too many to sum exactly; use '
+        "backend='numba' (exact) or a larger fmm_eps")
 
 
 #: FMM3D's fast multipole method, approximate to ``fmm_eps``.
 BACKEND = Backend(
     name='fmm', evaluate=evaluate, cost='N', tolerance='fmm_eps',
     parameters={'fmm_eps': check_eps}, requires=('fmm3dpy',),
-    summary="FMM3D's fast multipole method, O(N), approximate to fmm_eps, "
-    'parallel over OMP_NUM_THREADS; faster from a few thousand points '
-    "(pip install 'ase-maud[fmm]')")
+    force_tolerance=force_tolerance,
+    summary="FMM3D's fast multipole method, O(N), forces to 0.1 fmm_eps; "
+    'one thread with the PyPI wheel (OMP_NUM_THREADS if built with '
+    "OpenMP); pip install 'ase-maud[fmm]'")

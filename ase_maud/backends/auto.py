@@ -1,0 +1,115 @@
+"""The ``auto`` backend: per call, the cheapest backend that meets ``tol``.
+
+``tol`` is the force error allowed, relative to the largest repulsive force
+(the largest norm over points of the repulsion's force; for a scene without
+springs, the largest force). The direct sum (``numba``) is exact, so it meets
+any ``tol``; the FMM (``fmm``, if fmm3dpy is installed) meets it at
+``fmm_eps = tol / FORCE_ERROR_PER_EPS`` (:func:`.fmm.eps_for`) and is chosen
+when the scene has at least the crossover number of points for that
+``fmm_eps``, the dimension and what is asked (energy and forces, or with the
+nodal blocks). Should the FMM refuse the scene (too many near pairs,
+:mod:`.fmm`), the direct sum is used.
+
+The crossovers are :data:`CROSSOVER`, measured on one thread by
+``python tools/backend_crossover.py`` (docs/calculator.md has the table, the
+date and the command) and multiplied by numba's thread count (the direct sum
+runs on ``numba.get_num_threads()`` threads, the FMM wheel on one). Override
+them for a machine of your own by assigning to
+``ase_maud.backends.auto.CROSSOVER``, or per calculator with the
+``crossover`` keyword: a number of points from which the FMM is used
+whatever the thread count (``None``, the default: the table).
+"""
+
+from __future__ import annotations
+
+from numbers import Integral, Real
+
+import numba
+import numpy as np
+
+from . import direct, fmm
+from .base import Backend, Choice, Result, evaluate_first
+
+#: Default ``tol``: forces to 1e-8 of the largest repulsive force, far below
+#: what a relaxation to an ``fmax`` of 1e-6 of it resolves, and still coarse
+#: enough for the FMM from a few ten thousand points (docs/calculator.md).
+DEFAULT_TOL = 1e-8
+
+#: Points from which the FMM (rows: its ``fmm_eps``) is faster than the numba
+#: direct sum on one thread, by (dim, with blocks). Measured 2026-12-01 by
+#: ``python tools/backend_crossover.py``; an ``fmm_eps`` between two rows
+#: takes the tighter row's crossover, one below the last row never uses the
+#: FMM.
+CROSSOVER: dict[tuple[int, bool], dict[float, int]] = {
+    (3, False): {1e-3: 4000, 1e-6: 12000, 1e-9: 30000, 1e-12: 60000},
+    (3, True): {1e-3: 4000, 1e-6: 12000, 1e-9: 30000, 1e-12: 60000},
+    (2, False): {1e-3: 4000, 1e-6: 12000, 1e-9: 30000, 1e-12: 60000},
+    (2, True): {1e-3: 4000, 1e-6: 12000, 1e-9: 30000, 1e-12: 60000},
+}
+#: The coarsest ``fmm_eps`` used: a larger ``tol`` gains little more speed.
+MAX_EPS = 1e-3
+
+
+def check_tol(tol: object) -> None:
+    """Raise ValueError unless ``tol`` is a real number in [0, 1)."""
+    if not (isinstance(tol, Real) and 0.0 <= tol < 1.0):
+        raise ValueError(f'tol must be a number in [0, 1), the force error '
+                         'allowed relative to the largest repulsive force (0: '
+                         f'exact), got {tol!r}')
+
+
+def check_crossover(crossover: object) -> None:
+    """Raise ValueError unless ``crossover`` is None or a number of points
+    (an integer >= 0)."""
+    if crossover is not None and not (isinstance(crossover, Integral)
+                                      and not isinstance(crossover, bool)
+                                      and crossover >= 0):
+        raise ValueError('crossover must be None (the measured table) or '
+                         'the number of points from which the FMM is used, '
+                         f'an integer >= 0, got {crossover!r}')
+
+
+def crossover_points(eps: float, dim: int, want_blocks: bool) -> float:
+    """Points from which the FMM at ``eps`` beats the direct sum here: the
+    :data:`CROSSOVER` entry, times numba's thread count (inf below the
+    table's tightest ``fmm_eps``)."""
+    rows = CROSSOVER[dim, want_blocks]
+    tighter = [row for row in rows if row <= eps]
+    if not tighter:
+        return np.inf
+    return rows[max(tighter)] * numba.get_num_threads()
+
+
+def choose(natoms: int, dim: int, want_blocks: bool,
+           tol: float = DEFAULT_TOL, crossover: int | None = None,
+           ) -> list[Choice]:
+    """The backends to try, in order (module docstring)."""
+    exact = Choice(direct.BACKEND, {}, 0.0)
+    if tol == 0 or not fmm.BACKEND.installed:
+        return [exact]
+    eps = min(fmm.eps_for(tol), MAX_EPS)
+    start = (crossover_points(eps, dim, want_blocks) if crossover is None
+             else crossover)
+    if natoms < max(start, 2):
+        return [exact]
+    return [Choice(fmm.BACKEND, {'fmm_eps': eps}, fmm.force_tolerance(eps)),
+            exact]
+
+
+def evaluate(positions: np.ndarray, want_blocks: bool = False,
+             tol: float = DEFAULT_TOL, crossover: int | None = None) -> Result:
+    """Unit repulsion by the backend :func:`choose` picks; points with one
+    z are a 2D scene."""
+    p = np.asarray(positions, dtype=float)
+    dim = 2 if len(p) and np.ptp(p[:, 2]) == 0 else 3
+    return evaluate_first(choose(len(p), dim, want_blocks, tol, crossover),
+                          p, want_blocks)[0]
+
+
+#: Per call, the cheapest backend that meets ``tol``.
+BACKEND = Backend(
+    name='auto', evaluate=evaluate, cost='N', tolerance='tol',
+    parameters={'tol': check_tol, 'crossover': check_crossover},
+    choose=choose, summary='per call, the cheapest backend that meets tol: '
+    'the numba direct sum below a measured crossover, the FMM above it '
+    '(the default)')

@@ -16,7 +16,17 @@ from ase import Atoms
 from ase.constraints import FixCartesian
 
 from .calculator import MaudCalculator
-from .scenes import _ball, _count, _path, _scene, all_pairs, hanging_net, net3d, ring
+from .scenes import (
+    _ball,
+    _count,
+    _path,
+    _scene,
+    all_pairs,
+    hanging_net,
+    keep_on_plane,
+    net3d,
+    ring,
+)
 from .topology import fixed_atoms
 
 #: Start distance of the close pair, in units of ``a``.
@@ -133,7 +143,7 @@ def ring_with_centre(size: int = 16, seed: int = 0, a: float = 1.0, Q: float = 1
     centre[:2] += rng.uniform(-0.1, 0.1, 2) * radius
     atoms.append('X')
     atoms.positions[-1] = centre
-    return atoms
+    return keep_on_plane(atoms)
 
 
 def stiff_soft(size: int = 40, seed: int = 0, a: float = 1.0, Q: float = 1.0,

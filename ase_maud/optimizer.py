@@ -24,14 +24,28 @@ checks.
   progress for ``patience`` steps (neither fmax fell by 0.1 % nor, for
   ``'minimum'``, the energy below its lowest beyond rounding). The
   trajectory written so far stays valid.
+- Nothing silently wrong (docs/hard_cases.md): every keyword and run argument
+  is checked (ValueError naming it and what is accepted); every energy and
+  force the calculator returns is checked finite before it is logged or
+  written: a non-finite one puts the positions back to the last step whose
+  results were finite and raises :class:`MaudError` naming the step and the
+  value; the restart file is replaced atomically after each trajectory frame
+  and holds the positions its state belongs to, so a run killed at any moment
+  carries on exactly (:meth:`Maud.resume`).
 """
 
 from __future__ import annotations
 
-from typing import IO, Any
+import math
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import IO, Any, NamedTuple
 
 import numpy as np
 from ase import Atoms
+from ase.io.jsonio import write_json
 from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 
 from .method import MaudMethod, StepRule, _Point, merit_tolerance
@@ -65,8 +79,10 @@ class Maud(Optimizer):
         :func:`ase_maud.stiffness.choose_model`).
     method : 'tensor' (default) or 'scalar'
         For ``model='nodal'``: ``K_mm^-1 f_m`` or ``f_m / Tr K_mm``.
-    target : 'minimum' (default) or 'stationary'
-        Move only downhill, or seek any stationary point.
+    target : 'minimum', 'stationary' or None
+        Move only downhill, or seek any stationary point. None (default):
+        'minimum', except for a band of images (ASE's ``NEB``), whose forces
+        are not the gradient of an energy: 'stationary' (said in the log).
     gamma : float
         Initial step factor (default 1: the full Newton step of the model).
     gamma_max : float or None
@@ -108,49 +124,63 @@ class Maud(Optimizer):
                  logfile: IO | str | None = '-', trajectory: str | None = None,
                  append_trajectory: bool = False,
                  model: str | StiffnessModel = 'auto', method: str = 'tensor',
-                 target: str = 'minimum', gamma: float = 1.0,
+                 target: str | None = None, gamma: float = 1.0,
                  gamma_max: float | None = None, gamma_growth: float = 1.1,
                  beta_max: float | None = None, memory: int | None = None,
                  floor: float | None = None, maxstep_nn: float = 0.45,
                  maxstep: float | None = None, kappa0: float = 70.0,
                  overshoot_shrink: float = 0.6, divergence_factor: float = 3.0,
                  patience: int = 2000, **kwargs: Any):
-        if target not in TARGETS:
-            raise ValueError(f'target must be one of {TARGETS}, got {target!r}')
-        if method not in METHODS:
-            raise ValueError(f'method must be one of {METHODS}, got {method!r}')
+        system = atoms.__ase_optimizable__() if hasattr(
+            atoms, '__ase_optimizable__') else atoms
+        image_size = _image_size(system)
+        chosen_target = target is None
+        if chosen_target:  # NEB forces are not the gradient of its energy
+            target = 'minimum' if image_size is None else 'stationary'
+        for name, value, known in (('target', target, TARGETS),
+                                   ('method', method, METHODS)):
+            if not (isinstance(value, str) and value in known):
+                raise ValueError(f'{name} must be one of {known}, got {value!r}')
+        n = {name: _keyword(name, value) for name, value in (
+            ('gamma', gamma), ('gamma_max', gamma_max),
+            ('gamma_growth', gamma_growth), ('beta_max', beta_max),
+            ('memory', memory), ('floor', floor), ('maxstep_nn', maxstep_nn),
+            ('maxstep', maxstep), ('kappa0', kappa0),
+            ('overshoot_shrink', overshoot_shrink),
+            ('divergence_factor', divergence_factor), ('patience', patience))}
+        _check_files(restart, logfile, trajectory, append_trajectory)
         if isinstance(model, StiffnessModel):
             self.model = model
-        else:
-            system = atoms.__ase_optimizable__() if hasattr(
-                atoms, '__ase_optimizable__') else atoms
+        elif isinstance(model, str):
             self.model = choose_model(getattr(system, 'atoms', atoms), model,
-                                      target, method=method, floor=floor,
-                                      kappa0=kappa0)
+                                      target, method=method, floor=n['floor'],
+                                      kappa0=n['kappa0'])
+        else:
+            raise ValueError("model must be 'auto', a model name or a "
+                             f'StiffnessModel, got {model!r}')
         defaults = self.model.step_defaults
         rule = StepRule(
-            target=target, gamma=gamma,
-            gamma_max=defaults['gamma_max'] if gamma_max is None else gamma_max,
-            gamma_growth=gamma_growth, overshoot_shrink=overshoot_shrink,
-            beta_max=defaults['beta_max'] if beta_max is None else beta_max,
-            memory=defaults['memory'] if memory is None else memory,
-            maxstep_nn=maxstep_nn, maxstep=maxstep,
-            trust_region=defaults['trust_region'])
+            target=target, gamma=n['gamma'],
+            gamma_max=_default(n['gamma_max'], defaults['gamma_max']),
+            gamma_growth=n['gamma_growth'], overshoot_shrink=n['overshoot_shrink'],
+            beta_max=_default(n['beta_max'], defaults['beta_max']),
+            memory=_default(n['memory'], defaults['memory']),
+            maxstep_nn=n['maxstep_nn'], maxstep=n['maxstep'],
+            trust_region=defaults['trust_region'], image_size=image_size)
         if target == 'stationary':
             rule.memory = 0  # L-BFGS assumes a positive-definite model
-        _check_rule(rule)
-        if not kappa0 > 0:
-            raise ValueError(f'kappa0 must be positive, got {kappa0!r}')
-        if not divergence_factor > 1:
-            raise ValueError('divergence_factor must exceed 1, got '
-                             f'{divergence_factor!r}')
         self.rule = rule
         self.method = method
         self.target = target
-        self.divergence_factor = divergence_factor
-        self.patience = patience
+        self.divergence_factor = n['divergence_factor']
+        self.patience = n['patience']
         super().__init__(atoms, restart, logfile, trajectory,
                          append_trajectory=append_trajectory, **kwargs)
+        self.optimizable = _CheckedOptimizable(self.optimizable, self)
+        if chosen_target and target == 'stationary':
+            self.logfile.write("Maud: target='stationary' (the forces of a "
+                               'band of images are not the gradient of its '
+                               'energy)\n')
         if self.model.name == 'secant':
             self.logfile.write('Maud: the calculator gives no stiffness; it is '
                                'estimated as kappa I (secant curvature)\n')
@@ -173,15 +203,80 @@ class Maud(Optimizer):
         self.lowest = (np.inf, 0)  # lowest merit so far ('minimum'), and step
 
     def read(self) -> None:
+        """Take the restart file's state, and its positions (they win: the
+        state belongs to them; a line in the log says if the atoms moved)."""
         state = self.load()
+        if not {'x', 'step', 'method'} <= set(state):
+            raise ValueError(f'restart file {str(self.restart)!r} was not written by '
+                             'this version of Maud (no positions); delete it')
+        x, here = np.asarray(state['x'], float), self.optimizable.get_x()
+        if x.shape != here.shape:
+            raise ValueError(
+                f'restart file {str(self.restart)!r} holds {x.size // 3} points, '
+                f'the atoms given {here.size // 3}: give the atoms of that run, '
+                'or delete the file')
+        if not np.array_equal(x, here):
+            gap = np.abs(x - here).max()
+            self.optimizable.set_x(x)
+            self.logfile.write(
+                f'Maud: the atoms moved to the positions of step {state["step"]} '
+                f'in {self.restart} (up to {gap:.3g} from the atoms given)\n')
         self.initialize()
         self.maud.load(state['method'])
-        self.size0, self.best = state['size0'], tuple(state['best'])
-        self.lowest = tuple(state['lowest'])
+        step = state['step']   # this run counts its steps from 0 again
+        self.size0 = state['size0']
+        self.best = (state['best'][0], state['best'][1] - step)
+        self.lowest = (state['lowest'][0], state['lowest'][1] - step)
 
-    def _dump_state(self) -> None:
-        self.dump({'method': self.maud.state(), 'size0': self.size0,
-                   'best': list(self.best), 'lowest': list(self.lowest)})
+    def call_observers(self) -> None:
+        """ASE's observers (the trajectory first), then the restart file: it
+        is never ahead of the trajectory's last frame."""
+        super().call_observers()
+        if self.restart is not None:
+            self.dump({'x': self.optimizable.get_x(), 'step': self.nsteps,
+                       'method': self.maud.state(), 'size0': self.size0,
+                       'best': list(self.best), 'lowest': list(self.lowest)})
+
+    def dump(self, data: dict[str, Any]) -> None:
+        """Replace the restart file atomically (a temporary file in the same
+        directory, flushed and synced, then ``os.replace``): after a kill at
+        any moment it holds the old state or the new one, never a part."""
+        if self.comm.rank != 0 or self.restart is None:
+            return
+        path = Path(self.restart)
+        handle, temporary = tempfile.mkstemp(dir=path.parent,
+                                             prefix=f'.{path.name}.', suffix='.tmp')
+        try:
+            with os.fdopen(handle, 'w') as fd:
+                write_json(fd, data)
+                fd.flush()
+                os.fsync(fd.fileno())
+            os.replace(temporary, path)
+        except BaseException:
+            Path(temporary).unlink(missing_ok=True)
+            raise
+
+    @classmethod
+    def resume(cls, atoms: Atoms, restart: str | Path = 'maud.json',
+               trajectory: str | Path = 'maud.traj', **kwargs: Any) -> Maud:
+        """Carry on a run that was stopped or killed at any moment.
+
+        ``atoms`` are the run's atoms with their calculator and constraints
+        (its start, or any frame: the positions are replaced). They take the
+        last frame of ``trajectory`` if it has one, then the restart file's
+        positions if it exists (its state belongs to them; it is never ahead
+        of the trajectory, at most one frame behind, which is then written
+        again). The trajectory is appended to. The resumed run makes the
+        steps the uninterrupted one would have made. ``kwargs`` go to Maud.
+        """
+        frame = last_frame(trajectory)
+        if frame is not None:
+            if len(frame) != len(atoms):
+                raise ValueError(f'trajectory {str(trajectory)!r} holds {len(frame)} '
+                                 f'atoms, the atoms given {len(atoms)}')
+            atoms.set_positions(frame.positions, apply_constraint=False)
+        return cls(atoms, restart=restart, trajectory=trajectory,
+                   append_trajectory=True, **kwargs)
 
     # -- the step ---------------------------------------------------------------
 
@@ -211,22 +306,46 @@ class Maud(Optimizer):
             here = maud.revert()
             if here.solver is None:  # resumed from a restart file
                 opt.set_x(here.x.ravel())
-                here.solver = self.model.at(self._atoms())
+                here.solver = self._solver()
         else:
             maud.accept(x, forces)
-            here = _Point(x.copy(), merit, forces.copy(), self.model.at(self._atoms()))
+            here = _Point(x.copy(), merit, forces.copy(), self._solver())
         self._check_progress(here.x, here.merit, here.forces)
         move = maud.move(here)
+        if not np.isfinite(move).all():
+            self._no_step(f'the {self.model.name} stiffness model gave a non-finite move')
         opt.set_x((here.x + move).ravel())
         maud.moved(opt.get_x().reshape(-1, 3))
-        self._dump_state()
         self._evaluate()
 
+    def _solver(self) -> Any:
+        """The stiffness model at the current positions."""
+        try:
+            return self.model.at(self._atoms())
+        except np.linalg.LinAlgError as error:
+            self._no_step(f'the {self.model.name} stiffness model failed ({error})')
+
+    def _no_step(self, why: str) -> None:
+        """Stop: no finite step from here; the calculator's non-finite
+        stiffness property is named if it is the cause."""
+        atoms = self._atoms()
+        prop = None if atoms is None else self.model.needs(atoms)
+        if prop is not None:
+            value = np.asarray(atoms.calc.get_property(prop, atoms))
+            if not np.isfinite(value).all():
+                where = np.argwhere(~np.isfinite(value))[0].tolist()
+                why = (f'the calculator returned a non-finite {prop} (entry '
+                       f'{where}: {value[tuple(where)]})')
+        self._stop(MaudError, f'no finite step from step {self.nsteps}: {why}; the '
+                   f'positions are those of step {self.nsteps}')
+
     def irun(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS):
+        fmax, steps = _run_arguments(fmax, steps)
         self._preflight()
         return super().irun(fmax, steps)
 
     def run(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS) -> bool:
+        fmax, steps = _run_arguments(fmax, steps)
         self._preflight()
         return super().run(fmax, steps)
 
@@ -286,22 +405,163 @@ class Maud(Optimizer):
         return f', energy {self.lowest[0]:.12g} lowest since step {self.lowest[1]}'
 
 
-def _check_rule(rule: StepRule) -> None:
-    """Raise ValueError naming the first step-rule keyword out of range."""
-    checks = (
-        ('gamma', rule.gamma, rule.gamma > 0, 'a positive number'),
-        ('gamma_max', rule.gamma_max, rule.gamma_max > 0, 'a positive number'),
-        ('gamma_growth', rule.gamma_growth, rule.gamma_growth >= 1, 'a number >= 1'),
-        ('overshoot_shrink', rule.overshoot_shrink, 0 < rule.overshoot_shrink <= 1,
-         'in (0, 1]'),
-        ('beta_max', rule.beta_max, 0 <= rule.beta_max < 1, 'in [0, 1)'),
-        ('memory', rule.memory, isinstance(rule.memory, (int, np.integer))
-         and rule.memory >= 0, 'a whole number >= 0'),
-        ('maxstep_nn', rule.maxstep_nn, 0 < rule.maxstep_nn < 0.5,
-         'in (0, 0.5) (at 0.5 two points could meet)'),
-        ('maxstep', rule.maxstep, rule.maxstep is None or rule.maxstep > 0,
-         'None or a positive length'),
-    )
-    for name, value, ok, what in checks:
-        if not ok:
-            raise ValueError(f'{name} must be {what}, got {value!r}')
+class _CheckedOptimizable:
+    """The optimizable with every energy and gradient it returns checked
+    finite (everything else passes through): a non-finite one puts the
+    positions back to the last ones whose results were finite and stops the
+    run with a MaudError naming the step and the value. ASE asks for both
+    before it logs a step or writes its frame, so neither sees it."""
+
+    def __init__(self, inner: Any, optimizer: Maud):
+        self.inner = inner
+        self.optimizer = optimizer
+        self.good: tuple[np.ndarray, int] | None = None  # positions, step
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
+
+    def get_value(self) -> float:
+        value = self.inner.get_value()
+        if not np.isfinite(value):
+            self._fail(f'a non-finite energy ({value})')
+        return value
+
+    def get_gradient(self) -> np.ndarray:
+        gradient = self.inner.get_gradient()
+        rows = gradient.reshape(-1, 3)
+        bad = np.flatnonzero(~np.isfinite(rows).all(axis=1))
+        if bad.size:
+            force = ', '.join(f'{v:.6g}' for v in 0.0 - rows[bad[0]])
+            self._fail(f'non-finite forces (atom {bad[0]}: [{force}]'
+                       f'{f" and {bad.size - 1} more atoms" if bad.size > 1 else ""})')
+        self.get_value()
+        self.good = (self.inner.get_x().copy(), self.optimizer.nsteps)
+        return gradient
+
+    def _fail(self, what: str) -> None:
+        if self.good is None:
+            where = 'the atoms are at their start positions'
+        else:
+            self.inner.set_x(self.good[0])
+            where = f'positions restored to step {self.good[1]}'
+        self.optimizer._stop(MaudError, f'the calculator returned {what} at step '
+                             f'{self.optimizer.nsteps}; {where}')
+
+
+def last_frame(trajectory: str | Path) -> Atoms | None:
+    """The last complete frame of an ASE trajectory file, or None if it has
+    none (missing, empty, or killed before its first frame was complete).
+
+    ASE's ulm writer counts a frame only once all of it is written, so a
+    trajectory killed mid-write reads as its complete frames.
+    """
+    from ase.io.trajectory import Trajectory
+    path = Path(trajectory)
+    if not path.is_file() or path.stat().st_size == 0:
+        return None
+    with Trajectory(path) as frames:
+        return frames[-1] if len(frames) else None
+
+
+class _Range(NamedTuple):
+    """What a numeric keyword accepts: the words for the error, the test, a
+    whole number only, None too."""
+
+    accepted: str
+    test: Callable[[float], bool]
+    whole: bool = False
+    none: bool = False
+
+
+#: Maud's numeric keywords and what each accepts.
+KEYWORDS = {
+    'gamma': _Range('a positive finite number', lambda v: v > 0),
+    'gamma_max': _Range("a positive finite number, or None (the model's)",
+                        lambda v: v > 0, none=True),
+    'gamma_growth': _Range('a finite number >= 1', lambda v: v >= 1),
+    'overshoot_shrink': _Range('a number in (0, 1]', lambda v: 0 < v <= 1),
+    'beta_max': _Range("a number in [0, 1), or None (the model's)",
+                       lambda v: 0 <= v < 1, none=True),
+    'memory': _Range("a whole number >= 0, or None (the model's)",
+                     lambda v: v >= 0, whole=True, none=True),
+    'floor': _Range("a number in (0, 1), or None (the model's)",
+                    lambda v: 0 < v < 1, none=True),
+    'maxstep_nn': _Range('a number in (0, 0.5) (at 0.5 two points could meet)',
+                         lambda v: 0 < v < 0.5),
+    'maxstep': _Range('a positive finite length, or None (no bound)',
+                      lambda v: v > 0, none=True),
+    'kappa0': _Range('a positive finite number (force per length)', lambda v: v > 0),
+    'divergence_factor': _Range('a finite number > 1', lambda v: v > 1),
+    'patience': _Range('a whole number >= 0 (steps)', lambda v: v >= 0, whole=True),
+    'fmax': _Range('a positive finite number (force units)', lambda v: v > 0),
+    'steps': _Range('a whole number >= 0', lambda v: v >= 0, whole=True),
+}
+
+
+def _keyword(name: str, value: Any) -> Any:
+    """``value`` as a float (an int for a whole number, or None where allowed),
+    or ValueError naming ``name``, the value and what :data:`KEYWORDS` accepts."""
+    accepted, test, whole, none = KEYWORDS[name]
+    if value is None and none:
+        return None
+    number = None
+    if isinstance(value, (bool, np.bool_)):
+        pass
+    elif isinstance(value, (int, np.integer)):
+        number = int(value)
+        if not whole:
+            number = float(number) if abs(number) < 2.0**1023 else None
+    elif isinstance(value, (float, np.floating)) and math.isfinite(value):
+        if not whole:
+            number = float(value)
+        elif float(value).is_integer():
+            number = int(value)
+    if number is not None and test(number):
+        return number
+    raise ValueError(f'{name} must be {accepted}, got {value!r}')
+
+
+def _default(value: Any, default: Any) -> Any:
+    return default if value is None else value
+
+
+def _run_arguments(fmax: Any, steps: Any) -> tuple[float, int]:
+    """Checked ``run``/``irun`` arguments (ValueError naming the bad one)."""
+    return _keyword('fmax', fmax), _keyword('steps', steps)
+
+
+def _check_files(restart: Any, logfile: Any, trajectory: Any,
+                 append_trajectory: Any) -> None:
+    """ValueError naming a file argument that could not be written: a type
+    that is not a file name (or open file), a directory, or a name in a
+    directory that does not exist or cannot be written."""
+    for name, value in (('restart', restart), ('logfile', logfile),
+                        ('trajectory', trajectory)):
+        if (value is None or (name != 'restart' and hasattr(value, 'write'))
+                or (name == 'logfile' and isinstance(value, str) and value == '-')):
+            continue
+        if not isinstance(value, (str, os.PathLike)):
+            opened = '' if name == 'restart' else ', an open file'
+            dash = ", '-' (standard output)" if name == 'logfile' else ''
+            raise ValueError(f'{name} must be None, a file name{opened}{dash}, '
+                             f'got {value!r}')
+        path = Path(value)
+        if path.is_dir():
+            raise ValueError(f'{name} {str(value)!r} is a directory; give a file name')
+        parent = path.parent
+        if not parent.is_dir():
+            raise ValueError(f'{name} {str(value)!r}: the directory {str(parent)!r} '
+                             'does not exist')
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise ValueError(f'{name} {str(value)!r}: the directory {str(parent)!r} '
+                             'is not writable')
+    if not isinstance(append_trajectory, (bool, np.bool_)):
+        raise ValueError(f'append_trajectory must be True or False, got '
+                         f'{append_trajectory!r}')
+
+
+def _image_size(system: Any) -> int | None:
+    """Points per image if ``system`` optimizes a band of images (ASE's
+    NEB optimizable, which has ``neb``), else None."""
+    neb = getattr(system, 'neb', None)
+    return None if neb is None else len(neb.images[0])

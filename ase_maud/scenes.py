@@ -3,7 +3,9 @@
 Every builder is ``builder(size=<default>, seed=0, a=1.0, Q=1.0)`` and returns
 an :class:`ase.Atoms` (``pbc=False``, no cell) with a :class:`MaudCalculator`
 attached and the scene's fixed points held by
-:class:`ase.constraints.FixAtoms`. Positions are drawn in units of ``a`` from
+:class:`ase.constraints.FixAtoms`; the planar scenes (``dim=2``) also hold
+every other point's z by :func:`keep_on_plane`, so that ASE's drivers
+(BasinHopping, MD, NEB) keep them on their plane. Positions are drawn in units of ``a`` from
 ``numpy.random.default_rng(seed)`` and multiplied by ``a`` last, so one seed
 gives the same shape at every ``a``. Starts are near the scale of the
 equilibrium but not at it, and no two points start closer than
@@ -17,7 +19,7 @@ import inspect
 import numpy as np
 from ase import Atoms
 from ase.build import molecule as g2_molecule
-from ase.constraints import FixAtoms
+from ase.constraints import FixAtoms, FixCartesian
 from ase.neighborlist import NeighborList, natural_cutoffs
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import laplacian
@@ -29,12 +31,40 @@ from .calculator import MaudCalculator
 MIN_DISTANCE = 0.2
 
 
+def keep_on_plane(atoms: Atoms) -> Atoms:
+    """Hold the z coordinate of every point of ``atoms`` that nothing holds
+    yet (``FixCartesian(indices, mask=[False, False, True])``; True is fixed)
+    and return ``atoms``.
+
+    A ``MaudCalculator(dim=2)`` needs every point on one plane z = const.
+    Maud's own steps never leave it (the z forces are exactly 0), but ASE's
+    drivers move z by themselves: BasinHopping's random jumps, MD's thermal
+    velocities, NEB's interpolation of images on different planes. With this
+    constraint they keep every point's z. Call it again after adding points
+    (it adds only what is missing); the existing constraints are kept.
+    """
+    held = np.zeros(len(atoms), dtype=bool)
+    for constraint in atoms.constraints:
+        if isinstance(constraint, FixAtoms):
+            held[constraint.index] = True
+        elif isinstance(constraint, FixCartesian) and constraint.mask[2]:
+            held[constraint.index] = True
+    if not held.all():
+        atoms.set_constraint([*atoms.constraints,
+                              FixCartesian(np.flatnonzero(~held),
+                                           mask=[False, False, True])])
+    return atoms
+
+
 def _scene(positions, springs, a, Q, dim=3, fixed=(), symbols=None):
-    """Atoms at ``a * positions`` with the calculator and fixed indices set."""
+    """Atoms at ``a * positions`` with the calculator and fixed indices set
+    (and, for ``dim=2``, every point kept on its plane)."""
     atoms = Atoms(symbols, positions=a * np.asarray(positions), pbc=False)
     atoms.calc = MaudCalculator(springs, a=a, Q=Q, dim=dim)
     if len(fixed):
         atoms.set_constraint(FixAtoms(indices=fixed))
+    if dim == 2:
+        keep_on_plane(atoms)
     return atoms
 
 

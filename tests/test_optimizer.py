@@ -159,13 +159,13 @@ def test_fixed_atoms_and_cartesian_components_stay(seed):
 def test_restart_reproduces_uninterrupted_run(tmp_path):
     straight = build('hanging_net', 6, seed=2)
     with Maud(straight, logfile=None) as opt:
-        opt.run(fmax=0, steps=30)
+        opt.run(fmax=1e-300, steps=30)
     interrupted = build('hanging_net', 6, seed=2)
     restart = tmp_path / 'maud.json'
     with Maud(interrupted, logfile=None, restart=restart) as opt:
-        opt.run(fmax=0, steps=17)
+        opt.run(fmax=1e-300, steps=17)
     with Maud(interrupted, logfile=None, restart=restart) as opt:
-        opt.run(fmax=0, steps=13)
+        opt.run(fmax=1e-300, steps=13)
     assert np.allclose(interrupted.positions, straight.positions,
                        rtol=0, atol=1e-12)
 

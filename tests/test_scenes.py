@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 from ase.collections import g2
-from ase.constraints import FixAtoms
+from ase.constraints import FixAtoms, FixCartesian
 from ase.optimize import BFGS, FIRE
 from scipy.optimize import minimize_scalar
 from scipy.sparse import coo_matrix
@@ -13,6 +13,7 @@ from scipy.spatial.distance import pdist
 from ase_maud import Maud
 from ase_maud.calculator import MaudCalculator
 from ase_maud.scenes import LARGE, SCENES, SUITE, SUITES, build
+from ase_maud.topology import fixed_atoms
 
 CASES = [(name, None) for name in SCENES] + SUITE
 UNITS = [(0, 1.0, 1.0), (3, 2.5, 0.3), (11, 0.04, 7.0)]  # seed, a, Q
@@ -23,7 +24,8 @@ def assert_held_together(atoms):
     n, springs = len(atoms), atoms.calc.springs
     graph = coo_matrix((np.ones(len(springs)), springs.T), shape=(n, n))
     count, labels = connected_components(graph, directed=False)
-    fixed = [i for c in atoms.constraints for i in c.get_indices()]
+    fixed = [i for c in atoms.constraints if isinstance(c, FixAtoms)
+             for i in c.get_indices()]
     if fixed:
         assert set(labels[fixed]) == set(range(count))
     else:
@@ -38,7 +40,9 @@ def test_start_is_valid_and_not_converged(name, size, seed, a, Q):
     assert isinstance(calc, MaudCalculator)
     assert calc.parameters['a'] == a and calc.parameters['Q'] == Q
     assert not atoms.pbc.any()
-    assert all(isinstance(c, FixAtoms) for c in atoms.constraints)
+    for c in atoms.constraints:   # fixed points; a plane's z (keep_on_plane)
+        assert isinstance(c, FixAtoms) or (calc.parameters['dim'] == 2 and isinstance(
+            c, FixCartesian) and c.mask.tolist() == [False, False, True])
     assert np.isfinite(atoms.get_potential_energy())
     forces = atoms.get_forces()
     assert np.isfinite(forces).all()
@@ -169,7 +173,7 @@ def test_wheel_is_a_hub_with_spokes_and_a_rim_at_its_planar_radius():
 def test_all_pairs2d_is_a_planar_cluster():
     atoms = build('all_pairs2d', 12, seed=2, a=0.5)
     assert atoms.calc.parameters['dim'] == 2
-    assert len(atoms.calc.springs) == 66 and not atoms.constraints
+    assert len(atoms.calc.springs) == 66 and not fixed_atoms(atoms).any()
     assert np.all(atoms.positions[:, 2] == 0)
     radius = np.linalg.norm(atoms.positions, axis=1).max()
     assert radius <= 0.5 * np.sqrt(12 / np.pi) and radius > 0.5

@@ -1,0 +1,355 @@
+"""Nothing silently wrong (issue 12): checked arguments, no non-finite value
+reaching the user, the atomic restart file, planar scenes under ASE drivers.
+
+The property test draws hostile run arguments, keyword values and scales
+(``a``, ``Q`` from 1e-12 to 1e12) and asserts a correct answer (the minimum
+BFGS finds from the same start, scaled) or a ValueError/MaudError with a
+message: never a non-finite position, never a raw TypeError, never a result
+the calculator would not give afresh. Threads: run pinned (see
+docs/hard_cases.md); the assertions do not depend on rounding.
+"""
+
+import functools
+import json
+import os
+import re
+
+import numpy as np
+import pytest
+from ase.calculators.calculator import Calculator, all_changes
+from ase.calculators.emt import EMT
+from ase.cluster import Icosahedron
+from ase.io import read
+from ase.optimize import BFGS
+from ase.optimize.basin import BasinHopping
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+
+from ase_maud import Maud, MaudCalculator, MaudError
+from ase_maud.optimizer import KEYWORDS, last_frame
+from ase_maud.scenes import SCENES, build, keep_on_plane
+
+EXAMPLES = int(os.environ.get('ASE_MAUD_EXAMPLES', 200))
+
+#: Hostile values: wrong types, non-finite, zero, signs, extremes.
+HOSTILE = st.one_of(
+    st.none(), st.booleans(), st.text(max_size=3), st.just([1.0]), st.just({}),
+    st.sampled_from([np.nan, np.inf, -np.inf, 0.0, -0.0, -1.0, 1e-300, 1e300,
+                     0.5, 1.0, 2.0, 10**400, np.float32(0.3), np.int64(7)]),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.integers(-10, 10**6))
+
+#: Maud's keywords beyond the numeric ones of KEYWORDS (the last value of
+#: each is refused).
+NAMED = {'model': ['auto', 'exact', 'global', 'nodal', 'secant', 'fast'],
+         'method': ['tensor', 'scalar', 'vector'],
+         'target': ['minimum', 'stationary', 'max']}
+
+#: Values each keyword accepts, drawn as often as hostile ones.
+VALID = {
+    'gamma': st.floats(0.05, 2.0), 'gamma_max': st.none() | st.floats(0.5, 2.0),
+    'gamma_growth': st.floats(1.0, 3.0), 'overshoot_shrink': st.floats(0.05, 1.0),
+    'beta_max': st.none() | st.floats(0.0, 0.99), 'memory': st.none() | st.integers(0, 40),
+    'floor': st.none() | st.floats(1e-12, 0.5), 'maxstep_nn': st.floats(0.01, 0.49),
+    'maxstep': st.none() | st.floats(1e-3, 1e3), 'kappa0': st.floats(1e-6, 1e6),
+    'divergence_factor': st.floats(1.5, 1e3), 'patience': st.integers(20, 5000),
+    **{name: st.sampled_from(values[:-1]) for name, values in NAMED.items()}}
+
+
+def mostly(valid, hostile=HOSTILE, share=3):
+    """``valid`` values ``share`` times as often as ``hostile`` ones."""
+    return st.integers(0, share).flatmap(lambda k: valid if k else hostile)
+
+
+KEYWORD_VALUES = st.sampled_from(sorted(VALID)).flatmap(
+    lambda name: st.tuples(st.just(name), mostly(VALID[name], share=1)))
+
+
+# -- 1. run arguments and keywords ---------------------------------------------------
+
+@pytest.mark.parametrize('call', ['run', 'irun'])
+@pytest.mark.parametrize('fmax, steps, bad', [
+    (0, 10, 'fmax'), (-1, 10, 'fmax'), (np.nan, 10, 'fmax'), (np.inf, 10, 'fmax'),
+    (None, 10, 'fmax'), ('x', 10, 'fmax'), (True, 10, 'fmax'), ([0.1], 10, 'fmax'),
+    (0.1, -1, 'steps'), (0.1, np.nan, 'steps'), (0.1, 1.5, 'steps'),
+    (0.1, 'x', 'steps'), (0.1, None, 'steps'), (0.1, True, 'steps'),
+    (0.1, np.inf, 'steps')])
+def test_bad_run_arguments_are_refused(call, fmax, steps, bad):
+    atoms = build('ring', 8, seed=1)
+    start = atoms.positions.copy()
+    accepted = {'fmax': 'a positive finite number', 'steps': 'a whole number >= 0'}[bad]
+    with Maud(atoms, logfile=None) as opt, pytest.raises(
+            ValueError, match=f'^{bad} must be {accepted}.*got {re.escape(repr(locals()[bad]))}'):
+        getattr(opt, call)(fmax=fmax, steps=steps)
+    assert np.array_equal(atoms.positions, start)
+
+
+@pytest.mark.parametrize('steps', [0, 2, 2.0, np.int64(2), 3e0])
+def test_whole_steps_are_accepted(steps):
+    with Maud(build('ring', 8, seed=1), logfile=None) as opt:
+        assert not opt.run(fmax=1e-12, steps=steps)
+    assert opt.nsteps == int(steps)
+
+
+BAD_KEYWORDS = [(name, value) for name in sorted(KEYWORDS) if name not in ('fmax', 'steps')
+                for value in (np.nan, np.inf, -np.inf, '1', True, [1], -1.0)
+                ] + [(name, None) for name in ('gamma', 'gamma_growth', 'overshoot_shrink',
+                                               'maxstep_nn', 'kappa0', 'divergence_factor',
+                                               'patience')
+                     ] + [('memory', 1.5), ('patience', 2.5), ('maxstep_nn', 0.5),
+                          ('beta_max', 1.0), ('gamma_growth', 0.9),
+                          ('divergence_factor', 1.0), ('floor', 1.0)
+                          ] + [(name, value) for name, values in NAMED.items()
+                               for value in (values[-1], 3, ['auto'])
+                               ] + [('model', None), ('method', None)]
+
+
+@pytest.mark.parametrize('name, value', BAD_KEYWORDS)
+def test_bad_keywords_are_refused_by_name(name, value):
+    with pytest.raises(ValueError, match=f'^{name} must be .*got {re.escape(repr(value))}'):
+        Maud(build('ring', 8, seed=1), logfile=None, **{name: value})
+
+
+@pytest.mark.parametrize('name, value, match', [
+    ('logfile', 1, "logfile must be None, a file name, an open file, '-'"),
+    ('logfile', True, 'logfile must be None'),
+    ('trajectory', 3.5, 'trajectory must be None, a file name, an open file'),
+    ('restart', object(), 'restart must be None, a file name, got'),
+    ('trajectory', 'missing/maud.traj', "directory 'missing' does not exist"),
+    ('logfile', 'missing/maud.log', "directory 'missing' does not exist"),
+    ('restart', 'missing/maud.json', "directory 'missing' does not exist"),
+    ('restart', '.', "restart '.' is a directory"),
+    ('trajectory', '', "trajectory '' is a directory"),
+    ('append_trajectory', 'yes', 'append_trajectory must be True or False'),
+])
+def test_bad_file_arguments_are_refused(tmp_path, monkeypatch, name, value, match):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ValueError, match=re.escape(match) if '(' in match else match):
+        Maud(build('ring', 8, seed=1), **{'logfile': None, name: value})
+
+
+@functools.cache
+def reference(seed):
+    """BFGS's minimum of the small scene at a = Q = 1: energy, sorted pair
+    distances."""
+    atoms = build('hanging_net', 4, seed=seed)
+    with BFGS(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-10, steps=5000)
+    return atoms.get_potential_energy(), np.sort(atoms.get_all_distances(), axis=None)
+
+
+@settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2), scale=st.tuples(st.floats(-12, 12), st.floats(-12, 12)),
+       fmax=mostly(st.floats(1e-9, 1e-5)), steps=mostly(st.integers(0, 400)),
+       keyword_value=KEYWORD_VALUES)
+def test_hostile_inputs_get_an_answer_or_a_clear_error(seed, scale, fmax, steps,
+                                                       keyword_value):
+    keyword, value = keyword_value
+    a, q = 10.0 ** scale[0], 10.0 ** scale[1]
+    atoms = build('hanging_net', 4, seed=seed, a=a, Q=q)
+    relative = isinstance(fmax, float) and 1e-9 <= fmax <= 1e-5
+    fmax = fmax * q * a if relative else fmax   # a relative fmax, or hostile
+    try:
+        with Maud(atoms, logfile=None, **{keyword: value}) as opt:
+            converged = opt.run(fmax=fmax, steps=steps)
+    except ValueError as error:
+        name = str(error).split()[0]
+        assert name in (keyword, 'fmax', 'steps', 'model=' + repr(value)), error
+        assert 'must be' in str(error) or 'needs' in str(error), error
+        event(f'ValueError: {name.split("=")[0]}')
+    except MaudError as error:
+        assert str(error), 'a MaudError without a message'
+        event(f'MaudError: {type(error).__name__}')
+    else:
+        forces = atoms.get_forces()
+        largest = np.linalg.norm(forces, axis=1).max()
+        assert converged == (largest < fmax), (converged, largest, fmax)
+        if converged and relative:   # (a huge fmax is met anywhere)
+            energy, distances = reference(seed)
+            assert atoms.get_potential_energy() / (q * a**2) == pytest.approx(
+                energy, rel=1e-8)
+            gap = np.sort(atoms.get_all_distances(), axis=None) / a - distances
+            assert np.abs(gap).max() < 1e-4
+        event(('converged to the minimum' if relative else 'converged (huge fmax)')
+              if converged else 'not converged within steps')
+    assert np.isfinite(atoms.positions).all()
+    # Never stale: a fresh calculator agrees with what the atoms hold.
+    fresh = MaudCalculator(**atoms.calc.parameters)
+    assert atoms.get_potential_energy() == pytest.approx(
+        fresh.get_potential_energy(atoms.copy()), rel=1e-12, abs=0)
+
+
+# -- 2. non-finite results of any calculator -----------------------------------------
+
+class Poisoned(Calculator):
+    """Any calculator ``inner`` (its properties, so MaudCalculator's model is
+    the exact one), with call number ``call`` returning ``value`` as the
+    energy or in atom 6's forces (free in both scenes)."""
+
+    def __init__(self, inner, call, what, value):
+        super().__init__()
+        self.implemented_properties = inner.implemented_properties
+        self.inner, self.call, self.what, self.value = inner, call, what, value
+        self.calls = 0
+
+    def calculate(self, atoms=None, properties=('energy',), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        self.calls += 1
+        copy = self.atoms.copy()
+        self.results = {name: np.copy(self.inner.get_property(name, copy))
+                        for name in {'energy', 'free_energy', 'forces', *properties}}
+        if self.calls == self.call:
+            if self.what == 'energy':
+                self.results['energy'] = self.results['free_energy'] = self.value
+            else:
+                self.results['forces'][6] = [self.value, 0.0, 0.0]
+
+
+def emt_cluster():
+    atoms = Icosahedron('Cu', 2)
+    atoms.rattle(0.05, seed=1)
+    return atoms, EMT()
+
+
+def maud_net():
+    atoms = build('hanging_net', 5, seed=1)
+    return atoms, MaudCalculator(**atoms.calc.parameters)
+
+
+@pytest.mark.parametrize('scene', [emt_cluster, maud_net])
+@pytest.mark.parametrize('what', ['energy', 'forces'])
+@pytest.mark.parametrize('value', [np.nan, np.inf, -np.inf])
+@pytest.mark.parametrize('call', [1, 4])
+def test_non_finite_results_stop_the_run_at_good_positions(tmp_path, scene, what, value,
+                                                           call):
+    atoms, inner = scene()
+    atoms.calc = Poisoned(inner, call, what, value)
+    traj = tmp_path / 'run.traj'
+    start = atoms.positions.copy()
+    step = call - 1   # one calculator call per step
+    text = ('a non-finite energy' if what == 'energy'
+            else rf'non-finite forces \(atom 6: \[{value}, 0, 0\]\)')
+    where = ('the atoms are at their start positions' if step == 0
+             else f'positions restored to step {step - 1}')
+    with pytest.raises(MaudError, match=f'calculator returned {text}.* at step {step}; '
+                                        f'{where}$'):
+        with Maud(atoms, logfile=None, trajectory=traj) as opt:
+            opt.run(fmax=1e-6)
+    assert np.isfinite(atoms.positions).all()
+    if step == 0:
+        assert np.array_equal(atoms.positions, start)
+        assert last_frame(traj) is None
+    else:
+        frames = read(traj, ':')
+        assert len(frames) == step   # frames 0 .. step - 1, none of the bad step
+        assert all(np.isfinite(f.get_potential_energy()) and np.isfinite(f.get_forces()).all()
+                   for f in frames)
+        assert np.array_equal(atoms.positions, frames[-1].positions)
+
+
+class PoisonedHessian(MaudCalculator):
+    """MaudCalculator whose third call returns a Hessian with a NaN."""
+
+    calls = 0
+
+    def calculate(self, atoms=None, properties=('energy',), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        self.calls += 1
+        if self.calls == 3:
+            self.results['hessian'][2, 3] = self.results['hessian'][3, 2] = np.nan
+
+
+def test_non_finite_stiffness_stops_the_run():
+    atoms = build('ring', 8, seed=2)
+    atoms.calc = PoisonedHessian(**atoms.calc.parameters)
+    with pytest.raises(MaudError, match=r'no finite step from step 2: the calculator '
+                                        r'returned a non-finite hessian \(entry \[2, 3\]'):
+        with Maud(atoms, logfile=None) as opt:
+            opt.run(fmax=1e-8)
+    assert np.isfinite(atoms.positions).all()
+
+
+# -- 3. the restart file -------------------------------------------------------------
+
+def test_restart_file_is_replaced_whole(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    atoms = build('hanging_net', 5, seed=1)
+    seen = []
+    with Maud(atoms, logfile=None, restart='maud.json') as opt:
+        opt.attach(lambda: seen.append(sorted(os.listdir('.'))))
+        opt.run(fmax=1e-6, steps=5)
+    assert all(names == ['maud.json'] for names in seen[1:])   # no temporary left
+    state = json.loads((tmp_path / 'maud.json').read_text())
+    assert state['step'] == opt.nsteps
+    x = np.array(state['x']['__ndarray__'][2]).reshape(-1, 3)
+    assert np.array_equal(x, atoms.positions)
+
+
+def test_restart_positions_win_and_are_logged(tmp_path):
+    restart, log = tmp_path / 'maud.json', tmp_path / 'maud.log'
+    straight = build('hanging_net', 5, seed=1)
+    with Maud(straight, logfile=None) as opt:
+        opt.run(fmax=1e-9)
+    atoms = build('hanging_net', 5, seed=1)
+    with Maud(atoms, logfile=None, restart=restart) as opt:
+        opt.run(fmax=1e-9, steps=6)
+    moved = build('hanging_net', 5, seed=1)   # the start, not step 6
+    with Maud(moved, logfile=log, restart=restart) as opt:
+        assert np.array_equal(moved.positions, atoms.positions)
+        opt.run(fmax=1e-9)
+    assert 'the atoms moved to the positions of step 6' in log.read_text()
+    assert np.abs(moved.positions - straight.positions).max() < 1e-12
+
+
+def test_restart_of_another_scene_is_refused(tmp_path):
+    restart = tmp_path / 'maud.json'
+    with Maud(build('hanging_net', 5, seed=1), logfile=None, restart=restart) as opt:
+        opt.run(fmax=1e-6, steps=2)
+    with pytest.raises(ValueError, match=r'holds 25 points, the atoms given 36'):
+        Maud(build('hanging_net', 6, seed=1), logfile=None, restart=restart)
+    restart.write_text('{"method": {}}')
+    with pytest.raises(ValueError, match='not written by this version of Maud'):
+        Maud(build('hanging_net', 5, seed=1), logfile=None, restart=restart)
+
+
+def test_resume_without_files_starts_afresh(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    atoms = build('ring', 8, seed=1)
+    start = atoms.positions.copy()
+    with Maud.resume(atoms, logfile=None) as opt:
+        assert np.array_equal(atoms.positions, start)
+        assert opt.run(fmax=1e-6)
+    assert len(read('maud.traj', ':')) == opt.nsteps + 1
+
+
+# -- 4. planar scenes under ASE's drivers ----------------------------------------------
+
+@pytest.mark.parametrize('name', [n for n in SCENES if build(n).calc.parameters['dim'] == 2])
+def test_planar_scenes_keep_z(name):
+    atoms = build(name, seed=1)
+    z = atoms.positions[:, 2].copy()
+    atoms.set_positions(atoms.positions + np.random.default_rng(1).normal(size=(len(atoms), 3)))
+    assert np.array_equal(atoms.positions[:, 2], z)
+    assert len(atoms.constraints) == len(keep_on_plane(atoms).constraints)   # idempotent
+
+
+def test_basin_hopping_on_a_plane(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    atoms = build('all_pairs2d', 7, seed=2)
+    np.random.seed(3)
+    with BasinHopping(atoms, temperature=1.0, dr=0.5, optimizer=Maud, fmax=1e-4,
+                      logfile=None, optimizer_logfile=None, trajectory=None,
+                      local_minima_trajectory=None) as hopping:
+        hopping.run(4)
+        energy, best = hopping.get_minimum()
+    assert np.isfinite(energy)
+    assert np.ptp(best.positions[:, 2]) == 0
+
+
+def test_off_plane_error_says_what_to_add():
+    atoms = build('ring', 8, seed=1)
+    del atoms.constraints
+    atoms.positions[2, 2] += 0.1
+    with pytest.raises(ValueError, match=r'atom 2 has z = 0.1.*keep_on_plane\(atoms\)'):
+        atoms.get_potential_energy()

@@ -22,8 +22,10 @@ stiffness solver ``K^-1`` (:mod:`ase_maud.stiffness`)::
   ``|f|**2`` for ``'stationary'``) is taken back at no extra calculator call:
   the rule returns to where the step began (whose forces and solver it kept),
   halves gamma and drops the momentum. Gamma grows by ``gamma_growth`` after
-  each accepted step, up to ``gamma_max``. Energies that agree within rounding
-  are told apart by the trapezoid estimate ``-(f_old + f) . dx / 2``.
+  each accepted step, up to ``gamma_max``. Energies that agree within their
+  error (rounding, or an approximate calculator's tolerance: :attr:`noise`)
+  are told apart by the trapezoid estimate ``-(f_old + f) . dx / 2``, which
+  needs forces only.
 - No point moves further in one step than ``maxstep_nn`` (< 1/2) times its
   distance to its nearest other point, nor than ``maxstep`` if given (length
   units): two points stepping towards each other keep at least
@@ -94,6 +96,9 @@ class MaudMethod:
     k: int = field(init=False, default=0)
     last: _Point | None = field(init=False, default=None)
     pairs: list[tuple[np.ndarray, np.ndarray]] = field(init=False, default_factory=list)
+    #: Relative error of the energies compared (1e-12: rounding; an
+    #: approximate calculator's tolerance, set by the optimizer).
+    noise: float = field(init=False, default=1e-12)
 
     def __post_init__(self):
         self.gamma = self.rule.gamma
@@ -105,7 +110,7 @@ class MaudMethod:
         last = self.last
         if last is None:
             return False
-        change, tol = merit - last.merit, merit_tolerance(last.merit)
+        change, tol = merit - last.merit, merit_tolerance(last.merit, self.noise)
         if self.rule.target != 'minimum' or abs(change) > tol:
             return change > tol
         return -0.5 * np.vdot(last.forces + forces, x - last.x) > 0
@@ -229,6 +234,7 @@ class MaudMethod:
         self.model.load(state['model'])
 
 
-def merit_tolerance(merit: float) -> float:
-    """Rounding slack when comparing merits (energies sum N**2 terms)."""
-    return 1e-12 * max(abs(merit), 1e-300)
+def merit_tolerance(merit: float, noise: float = 1e-12) -> float:
+    """Slack when comparing merits: ``noise`` (relative; 1e-12 is the
+    rounding of energies that sum N**2 terms) times ``|merit|``."""
+    return max(noise, 1e-12) * max(abs(merit), 1e-300)

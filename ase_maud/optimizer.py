@@ -15,6 +15,17 @@ checks.
 - ``target='minimum'`` makes every model positive definite (absolute
   eigenvalues, floored), so no step is meant uphill; ``'stationary'`` keeps the
   signs: saddles and maxima are fixed points too.
+- Accuracy follows the run: with a calculator that takes ``tol`` (the force
+  error allowed relative to its ``last_force_scale``, as MaudCalculator's
+  ``backend='auto'`` does), each evaluation asks for a force error of
+  :data:`ACCURACY_FRACTION` (0.1) of the larger of the requested ``fmax``
+  and the current one, at most :data:`MAX_RUN_TOL`: coarse, cheap sums far
+  from the answer, fine ones near it, and never a stall on evaluation noise.
+  The calculator keeps the last ``tol`` after the run. Energies compared to
+  accept or take back a step carry a relative error up to the calculator's
+  ``last_tolerance``: differences below it are decided by the trapezoid
+  estimate from the forces instead (:mod:`ase_maud.method`). Other
+  calculators are left alone.
 - A run never goes on for ever: a 3D scene whose spring graph has a free
   component beside others (no finite minimum) is reported in the log before
   the first step; :class:`DivergenceError` stops a run whose points spread
@@ -51,6 +62,13 @@ from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 from .method import MaudMethod, StepRule, _Point, merit_tolerance
 from .stiffness import METHODS, TARGETS, StiffnessModel, choose_model
 from .topology import describe_unbounded
+
+#: The force error a run asks of a ``tol``-aware calculator (MaudCalculator
+#: with ``backend='auto'``), as a fraction of the larger of the requested
+#: ``fmax`` and the current one (:meth:`Maud._ask_accuracy`).
+ACCURACY_FRACTION = 0.1
+#: The coarsest ``tol`` a run asks for (relative to the largest force).
+MAX_RUN_TOL = 1e-3
 
 
 class MaudError(RuntimeError):
@@ -137,10 +155,11 @@ class Maud(Optimizer):
         chosen_target = target is None
         if chosen_target:  # NEB forces are not the gradient of its energy
             target = 'minimum' if image_size is None else 'stationary'
-        for name, value, known in (('target', target, TARGETS),
-                                   ('method', method, METHODS)):
+        for name, value, known, default in (
+                ('target', target, TARGETS, ', or None (the default)'),
+                ('method', method, METHODS, '')):
             if not (isinstance(value, str) and value in known):
-                raise ValueError(f'{name} must be one of {known}, got {value!r}')
+                raise ValueError(f'{name} must be one of {known}{default}, got {value!r}')
         n = {name: _keyword(name, value) for name, value in (
             ('gamma', gamma), ('gamma_max', gamma_max),
             ('gamma_growth', gamma_growth), ('beta_max', beta_max),
@@ -201,6 +220,7 @@ class Maud(Optimizer):
         self.unbounded = []     # spring components that make E unbounded
         self.best = (np.inf, 0)  # best fmax so far, and the step it was seen
         self.lowest = (np.inf, 0)  # lowest merit so far ('minimum'), and step
+        self.fmax_now = np.inf   # largest force at the last step
 
     def read(self) -> None:
         """Take the restart file's state, and its positions (they win: the
@@ -227,6 +247,7 @@ class Maud(Optimizer):
         self.size0 = state['size0']
         self.best = (state['best'][0], state['best'][1] - step)
         self.lowest = (state['lowest'][0], state['lowest'][1] - step)
+        self.fmax_now = state['fmax_now']   # the accuracy of the next evaluation
 
     def call_observers(self) -> None:
         """ASE's observers (the trajectory first), then the restart file: it
@@ -235,7 +256,8 @@ class Maud(Optimizer):
         if self.restart is not None:
             self.dump({'x': self.optimizable.get_x(), 'step': self.nsteps,
                        'method': self.maud.state(), 'size0': self.size0,
-                       'best': list(self.best), 'lowest': list(self.lowest)})
+                       'best': list(self.best), 'lowest': list(self.lowest),
+                       'fmax_now': self.fmax_now})
 
     def dump(self, data: dict[str, Any]) -> None:
         """Replace the restart file atomically (a temporary file in the same
@@ -286,10 +308,25 @@ class Maud(Optimizer):
 
     def _evaluate(self) -> None:
         """One calculator call for the energy, the forces and what the model
-        needs (the nodal blocks, say), computed together."""
+        needs (the nodal blocks, say), computed together, at the accuracy the
+        run needs now."""
         atoms = self._atoms()
-        if atoms is not None and (prop := self.model.needs(atoms)) is not None:
+        if atoms is None:
+            return
+        self._ask_accuracy(atoms.calc)
+        if (prop := self.model.needs(atoms)) is not None:
             atoms.calc.get_property(prop, atoms)
+
+    def _ask_accuracy(self, calc: Any) -> None:
+        """Set a ``tol``-aware calculator's ``tol`` (force error relative to
+        its ``last_force_scale``) to :data:`ACCURACY_FRACTION` of the larger
+        of the run's ``fmax`` and the current one: coarse far from the
+        answer, fine near it. Other calculators are left alone."""
+        scale = getattr(calc, 'last_force_scale', None)
+        if not scale or 'tol' not in getattr(calc, 'parameters', {}):
+            return
+        wanted = ACCURACY_FRACTION * max(self.fmax, self.fmax_now) / scale
+        calc.set(tol=min(wanted, MAX_RUN_TOL))
 
     def _merit(self, forces: np.ndarray) -> float:
         if self.target == 'minimum':
@@ -302,6 +339,9 @@ class Maud(Optimizer):
         forces = -opt.get_gradient().reshape(-1, 3)
         merit = self._merit(forces)
         maud = self.maud
+        self.fmax_now = float(np.linalg.norm(forces, axis=1).max())
+        calc = getattr(self._atoms(), 'calc', None)
+        maud.noise = getattr(calc, 'last_tolerance', None) or 0.0
         if maud.uphill(x, merit, forces):
             here = maud.revert()
             if here.solver is None:  # resumed from a restart file
@@ -341,11 +381,13 @@ class Maud(Optimizer):
 
     def irun(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS):
         fmax, steps = _run_arguments(fmax, steps)
+        self.fmax = fmax
         self._preflight()
         return super().irun(fmax, steps)
 
     def run(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS) -> bool:
         fmax, steps = _run_arguments(fmax, steps)
+        self.fmax = fmax
         self._preflight()
         return super().run(fmax, steps)
 
@@ -383,7 +425,7 @@ class Maud(Optimizer):
         if fmax < (1 - 1e-3) * self.best[0]:
             self.best = (fmax, self.nsteps)
         if (self.target == 'minimum'
-                and merit < self.lowest[0] - merit_tolerance(merit)):
+                and merit < self.lowest[0] - merit_tolerance(merit, self.maud.noise)):
             self.lowest = (merit, self.nsteps)
         if self.nsteps - max(self.best[1], self.lowest[1]) > self.patience:
             self._stop(StagnationError,
@@ -392,7 +434,7 @@ class Maud(Optimizer):
                        f'{self.best[0]:.3g}{self._lowest_text()}; a requested '
                        'fmax below the rounding noise of the forces, or an '
                        'oscillation)')
-        if self.maud.gamma < 1e-12 * self.rule.gamma:
+        if self.maud.gamma < 1e-12 * min(self.rule.gamma, self.rule.gamma_max):
             self._stop(StagnationError,
                        f'stagnant at step {self.nsteps}: gamma fell to '
                        f'{self.maud.gamma:.3g}; every step raised the '

@@ -19,6 +19,7 @@ import inspect
 import numpy as np
 from ase import Atoms
 from ase.build import molecule as g2_molecule
+from ase.collections import g2
 from ase.constraints import FixAtoms, FixCartesian
 from ase.neighborlist import NeighborList, natural_cutoffs
 from scipy.sparse import coo_matrix
@@ -59,8 +60,9 @@ def keep_on_plane(atoms: Atoms) -> Atoms:
 def _scene(positions, springs, a, Q, dim=3, fixed=(), symbols=None):
     """Atoms at ``a * positions`` with the calculator and fixed indices set
     (and, for ``dim=2``, every point kept on its plane)."""
+    calc = MaudCalculator(springs, a=a, Q=Q, dim=dim)   # checks a and Q first
     atoms = Atoms(symbols, positions=a * np.asarray(positions), pbc=False)
-    atoms.calc = MaudCalculator(springs, a=a, Q=Q, dim=dim)
+    atoms.calc = calc
     if len(fixed):
         atoms.set_constraint(FixAtoms(indices=fixed))
     if dim == 2:
@@ -69,8 +71,11 @@ def _scene(positions, springs, a, Q, dim=3, fixed=(), symbols=None):
 
 
 def _count(size, least, scene):
-    """``size`` as an int, or ValueError if it is below ``least``."""
-    if int(size) != size or size < least:
+    """``size`` as an int, or ValueError if it is not a whole number
+    ``>= least``."""
+    whole = (isinstance(size, (int, np.integer)) and not isinstance(size, bool)) or (
+        isinstance(size, float) and size.is_integer())
+    if not whole or size < least:
         raise ValueError(f'{scene} needs an integer size >= {least}, '
                          f'got {size!r}')
     return int(size)
@@ -352,6 +357,9 @@ def molecule(size: str = 'C6H6', seed: int = 0, a: float = 1.0, Q: float = 1.0) 
     Positions are scaled so that the mean bond length is a, then each
     coordinate is moved by up to 0.1 a. Nothing fixed.
     """
+    if size not in g2.names:
+        raise ValueError(f'molecule needs the name of a molecule of '
+                         f"ase.collections.g2 (such as 'C6H6' or 'H2O'), got {size!r}")
     mol = g2_molecule(size)
     if len(mol) < 2:
         raise ValueError(f'molecule {size!r} has a single atom: no springs')
@@ -429,8 +437,14 @@ def scene_sizes(names: list[str] | None, sizes: list | None,
 def build(name: str, size: int | str | None = None, seed: int = 0, **kwargs: float) -> Atoms:
     """Build scene ``name`` (a key of :data:`SCENES`); ``size=None`` takes
     the builder's default. Other keywords (``a``, ``Q``) go to the builder."""
-    if name not in SCENES:
+    if not (isinstance(name, str) and name in SCENES):
         raise ValueError(f'unknown scene {name!r}; known: {", ".join(SCENES)}')
+    if not (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool)
+            and seed >= 0):
+        raise ValueError(f'seed must be a whole number >= 0, got {seed!r}')
+    if set(kwargs) - {'a', 'Q'}:
+        raise ValueError(f'build takes the keywords a and Q, got '
+                         f'{sorted(set(kwargs) - {"a", "Q"})}')
     if size is not None:
         kwargs['size'] = size
     return SCENES[name](seed=seed, **kwargs)

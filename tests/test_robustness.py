@@ -353,3 +353,21 @@ def test_off_plane_error_says_what_to_add():
     atoms.positions[2, 2] += 0.1
     with pytest.raises(ValueError, match=r'atom 2 has z = 0.1.*keep_on_plane\(atoms\)'):
         atoms.get_potential_energy()
+
+
+# -- 5. errors that name the input ------------------------------------------------------
+
+@pytest.mark.parametrize('args, keywords, match', [
+    (('ring', 'x'), {}, r"ring needs an integer size >= 3, got 'x'"),
+    (('ring', np.nan), {}, r'ring needs an integer size >= 3, got nan'),
+    (('chain', None), {'seed': 'x'}, r"seed must be a whole number >= 0, got 'x'"),
+    (('chain', None), {'seed': 1.5}, r'seed must be a whole number >= 0, got 1.5'),
+    (('ring', 8), {'a': 'x'}, r"a must be a positive finite number, got 'x'"),
+    (('ring', 8), {'b': 1}, r"build takes the keywords a and Q, got \['b'\]"),
+    (('molecule', 'XYZ'), {}, r"molecule needs the name of a molecule of ase.collections.g2 "
+                              r".*got 'XYZ'"),
+    ((3,), {}, r'unknown scene 3; known: dimer'),
+])
+def test_scene_errors_name_the_input(args, keywords, match):
+    with pytest.raises(ValueError, match=match):
+        build(*args, **keywords)

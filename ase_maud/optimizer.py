@@ -448,27 +448,37 @@ class Maud(Optimizer):
 
 
 class _CheckedOptimizable:
-    """The optimizable with every energy and gradient it returns checked
-    finite (everything else passes through): a non-finite one puts the
-    positions back to the last ones whose results were finite and stops the
-    run with a MaudError naming the step and the value. ASE asks for both
-    before it logs a step or writes its frame, so neither sees it."""
+    """The optimizable with its energy and gradient fetched together, once
+    per positions, and checked finite (everything else passes through).
+
+    ASE's loop and the step ask for both several times at the same
+    positions; they are kept with the positions ``x`` they belong to and
+    fetched again as soon as ``x`` differs in any bit (the calculator's own
+    change detection then decides what to recompute). A non-finite value
+    puts the positions back to the last ones whose results were finite and
+    stops the run with a MaudError naming the step and the value. ASE asks
+    for both before it logs a step or writes its frame, so neither sees it.
+    """
 
     def __init__(self, inner: Any, optimizer: Maud):
         self.inner = inner
         self.optimizer = optimizer
         self.good: tuple[np.ndarray, int] | None = None  # positions, step
+        self.held: tuple[np.ndarray, float, np.ndarray] | None = None  # x, E, gradient
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.inner, name)
 
     def get_value(self) -> float:
-        value = self.inner.get_value()
-        if not np.isfinite(value):
-            self._fail(f'a non-finite energy ({value})')
-        return value
+        return self._results()[1]
 
     def get_gradient(self) -> np.ndarray:
+        return self._results()[2].copy()
+
+    def _results(self) -> tuple[np.ndarray, float, np.ndarray]:
+        x = self.inner.get_x()
+        if self.held is not None and np.array_equal(x, self.held[0]):
+            return self.held
         gradient = self.inner.get_gradient()
         rows = gradient.reshape(-1, 3)
         bad = np.flatnonzero(~np.isfinite(rows).all(axis=1))
@@ -476,9 +486,12 @@ class _CheckedOptimizable:
             force = ', '.join(f'{v:.6g}' for v in 0.0 - rows[bad[0]])
             self._fail(f'non-finite forces (atom {bad[0]}: [{force}]'
                        f'{f" and {bad.size - 1} more atoms" if bad.size > 1 else ""})')
-        self.get_value()
-        self.good = (self.inner.get_x().copy(), self.optimizer.nsteps)
-        return gradient
+        value = self.inner.get_value()
+        if not np.isfinite(value):
+            self._fail(f'a non-finite energy ({value})')
+        self.good = (x.copy(), self.optimizer.nsteps)
+        self.held = (x.copy(), value, gradient)
+        return self.held
 
     def _fail(self, what: str) -> None:
         if self.good is None:

@@ -73,13 +73,15 @@ def test_reference_chunks_sum_the_same(random_points, chunk_pairs):
     assert_close(block6, ref_block6)
 
 
-@pytest.mark.parametrize('nchunks', [2, 3, 7])
-@pytest.mark.parametrize('n', [3, 8, 13, 50])
+@pytest.mark.parametrize('nchunks', [1, 2, 3, 7])
+@pytest.mark.parametrize('n', [3, 50, direct.TILE, direct.TILE + 1, 2 * direct.TILE + 3,
+                               4 * direct.TILE - 5])
 def test_chunks_share_rows(random_points, n, nchunks):
-    """Rows k and N-1-k go to chunk k % nchunks; every split sums the same.
+    """Tile rows k and T-1-k go to chunk k % nchunks; every split sums the same.
 
-    Calls the compiled kernels with more chunks than threads, so the split is
-    tested whatever ``NUMBA_NUM_THREADS`` is.
+    Sizes of one tile, a tile and one point, and several tiles with a part
+    tile at the end. Calls the compiled kernels with more chunks than threads,
+    so the split is tested whatever ``NUMBA_NUM_THREADS`` is.
     """
     points = random_points(n, 3, seed=n)
     ref_energy, ref_forces, ref_blocks = physics_sums(points)

@@ -5,7 +5,9 @@ The unit repulsion of :mod:`ase_maud.physics` (energy ``1 / L``, force on
 ``d = r_i - r_j``), summed over every unordered pair, is written out here in
 scalar code for speed; the tests compare it element-wise with the physics.
 Memory is O(threads * N): nothing of size N x N is ever formed. Each unordered
-pair is visited once and both points get their share (:func:`share`).
+pair is visited once and both points get their share, in a blocked loop that
+the compiler vectorises (:func:`_make_numba_kernel`; ``tools/kernel_throughput.py``
+measures it against a plain loop over every ordered pair).
 
 The same file holds the Hessian-vector product kernel of
 :mod:`ase_maud.hessian`, so that numba's cache, which checks only the file of
@@ -36,68 +38,126 @@ def share(sx: float, sy: float, sz: float, ox: np.ndarray, oy: np.ndarray,
     return sx + px, sy + py, sz + pz
 
 
+#: Points per tile of the blocked loop. A tile's coordinates, accumulators and
+#: reciprocal distances (at most 12 rows of TILE doubles, 24 KiB) stay in a
+#: 32 KiB L1 cache; 512 is slower (rows 4 KiB apart alias in the cache).
+TILE = 256
+
+
 def _make_numba_kernel(with_blocks):
     """Compile the direct sum, with or without the nodal blocks.
 
     ``with_blocks`` is a closure constant, so numba removes the block code from
     the energy-and-forces variant instead of testing it in the inner loop.
-    Rows ``k`` and ``N-1-k`` (which hold ``N-1`` pairs together) go to the same
-    chunk, so every thread gets the same amount of work; each chunk adds into a
-    buffer of its own, summed at the end (no races, O(threads * N) memory).
-    """
 
-    @numba.njit(parallel=True, fastmath=True, cache=True)
+    The points are cut into tiles of :data:`TILE`; tile ``a`` meets tiles
+    ``b >= a`` (within the diagonal tile, only ``j > i``). Tile ``b``'s
+    coordinates and its share of every pair sum are copied into a buffer of
+    contiguous rows, and each row ``i`` of tile ``a`` makes two passes over it:
+    the first computes ``1 / L`` (sqrt and division, the slow instructions,
+    alone in their loop), the second everything else, adding the pair terms to
+    row ``i``'s running sums and to tile ``b``'s buffer. Both inner loops
+    vectorise: their indices are unsigned (numba does not wrap them as negative
+    indices) and the buffer rows are one array. Only ``xx``, ``yy`` of the
+    diagonal of a block are summed: each pair block is traceless, so ``zz =
+    -(xx + yy)`` for the sums too.
+
+    Tile rows ``k`` and ``ntiles-1-k`` (which hold ``ntiles+1`` tile pairs
+    together) go to the same chunk, so every thread gets the same amount of
+    work; each chunk adds into a buffer of its own, summed at the end (no
+    races, O(threads * N) memory).
+    """
+    nacc = 8 if with_blocks else 3  # fx fy fz [kxx kyy kxy kxz kyz]
+    inv_row = 3 + nacc  # buffer rows: x y z, the nacc sums, 1 / L
+
+    @numba.njit(parallel=True, fastmath=True, error_model='numpy', cache=True)
     def kernel(x, y, z, nchunks):
         n = x.size
+        ntiles = (n + TILE - 1) // TILE
         energy = np.zeros(nchunks)
-        force = np.zeros((nchunks, 3, n))
-        nb = n if with_blocks else 0
-        block = np.zeros((nchunks, 6, nb))
-        half = (n + 1) // 2
+        acc = np.zeros((nchunks, nacc, n))
         for t in numba.prange(nchunks):
-            fx, fy, fz = force[t, 0], force[t, 1], force[t, 2]
-            kxx, kyy, kzz = block[t, 0], block[t, 1], block[t, 2]
-            kxy, kxz, kyz = block[t, 3], block[t, 4], block[t, 5]
+            out = acc[t]
+            buf = np.empty((inv_row + 1, TILE))
             e = 0.0
-            for k in range(t, half, nchunks):
+            for k in range(t, (ntiles + 1) // 2, nchunks):
                 for r in range(2):
-                    i = k if r == 0 else n - 1 - k
-                    if r == 1 and i == k:
-                        continue  # odd n: the middle row is visited once
-                    xi, yi, zi = x[i], y[i], z[i]
-                    gx = gy = gz = 0.0
-                    bxx = byy = bzz = bxy = bxz = byz = 0.0
-                    for j in range(i + 1, n):
-                        dx = xi - x[j]
-                        dy = yi - y[j]
-                        dz = zi - z[j]
-                        inv = 1.0 / np.sqrt(dx * dx + dy * dy + dz * dz)
-                        inv3 = inv * inv * inv
-                        e += inv
-                        px, py, pz = dx * inv3, dy * inv3, dz * inv3
-                        gx, gy, gz = share(gx, gy, gz, fx, fy, fz, j,
-                                           px, py, pz, -1.0)
-                        if with_blocks:
-                            s = 3.0 * inv * inv
-                            bxx, byy, bzz = share(
-                                bxx, byy, bzz, kxx, kyy, kzz, j,
-                                s * dx * px - inv3, s * dy * py - inv3,
-                                s * dz * pz - inv3, 1.0)
-                            bxy, bxz, byz = share(
-                                bxy, bxz, byz, kxy, kxz, kyz, j,
-                                s * dx * py, s * dx * pz, s * dy * pz, 1.0)
-                    fx[i] += gx
-                    fy[i] += gy
-                    fz[i] += gz
-                    if with_blocks:
-                        kxx[i] += bxx
-                        kyy[i] += byy
-                        kzz[i] += bzz
-                        kxy[i] += bxy
-                        kxz[i] += bxz
-                        kyz[i] += byz
+                    a = k if r == 0 else ntiles - 1 - k
+                    if r == 1 and a == k:
+                        continue  # odd ntiles: the middle tile row is visited once
+                    for b in range(a, ntiles):
+                        j0 = b * TILE
+                        m = min(TILE, n - j0)
+                        for jj in range(m):
+                            buf[0, jj] = x[j0 + jj]
+                            buf[1, jj] = y[j0 + jj]
+                            buf[2, jj] = z[j0 + jj]
+                            for c in range(3, inv_row):
+                                buf[c, jj] = 0.0
+                        for i in range(a * TILE, min(a * TILE + TILE, n)):
+                            xi, yi, zi = x[i], y[i], z[i]
+                            # j > i: in the diagonal tile from i + 1, else all of it
+                            lo, hi = np.uint64(max(i + 1 - j0, 0)), np.uint64(m)
+                            for jj in range(lo, hi):
+                                dx = xi - buf[0, jj]
+                                dy = yi - buf[1, jj]
+                                dz = zi - buf[2, jj]
+                                buf[inv_row, jj] = 1.0 / np.sqrt(dx * dx + dy * dy + dz * dz)
+                            gx = gy = gz = 0.0
+                            bxx = byy = bxy = bxz = byz = 0.0
+                            for jj in range(lo, hi):
+                                dx = xi - buf[0, jj]
+                                dy = yi - buf[1, jj]
+                                dz = zi - buf[2, jj]
+                                inv = buf[inv_row, jj]
+                                inv2 = inv * inv
+                                inv3 = inv2 * inv
+                                e += inv
+                                px, py, pz = dx * inv3, dy * inv3, dz * inv3
+                                gx += px
+                                gy += py
+                                gz += pz
+                                buf[3, jj] -= px
+                                buf[4, jj] -= py
+                                buf[5, jj] -= pz
+                                if with_blocks:
+                                    sx, sy = 3.0 * inv2 * dx, 3.0 * inv2 * dy
+                                    qxx = sx * px - inv3
+                                    qyy = sy * py - inv3
+                                    qxy, qxz, qyz = sx * py, sx * pz, sy * pz
+                                    bxx += qxx
+                                    byy += qyy
+                                    bxy += qxy
+                                    bxz += qxz
+                                    byz += qyz
+                                    buf[6, jj] += qxx
+                                    buf[7, jj] += qyy
+                                    buf[8, jj] += qxy
+                                    buf[9, jj] += qxz
+                                    buf[10, jj] += qyz
+                            out[0, i] += gx
+                            out[1, i] += gy
+                            out[2, i] += gz
+                            if with_blocks:
+                                out[3, i] += bxx
+                                out[4, i] += byy
+                                out[5, i] += bxy
+                                out[6, i] += bxz
+                                out[7, i] += byz
+                        for c in range(nacc):
+                            for jj in range(m):
+                                out[c, j0 + jj] += buf[3 + c, jj]
             energy[t] = e
-        return energy.sum(), force.sum(axis=0).T.copy(), block.sum(axis=0).T.copy()
+        total = acc.sum(axis=0)
+        block6 = np.empty((n, 6 if with_blocks else 0))
+        if with_blocks:
+            block6[:, 0] = total[3]
+            block6[:, 1] = total[4]
+            block6[:, 2] = -(total[3] + total[4])  # traceless
+            block6[:, 3] = total[5]
+            block6[:, 4] = total[6]
+            block6[:, 5] = total[7]
+        return energy.sum(), total[:3].T.copy(), block6
 
     return kernel
 

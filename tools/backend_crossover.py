@@ -67,10 +67,19 @@ def crossover(sizes, t_fmm, alpha):
     return t_fmm[-1] / (alpha * sizes[-1])   # FMM linear beyond
 
 
-def timing(sizes, direct_max, repeats):
+def fmm_seconds(p, blocks, eps, repeats):
+    """CPU seconds per FMM call, inf if it refuses the scene (too many near
+    points at this eps: ``auto`` would use the direct sum)."""
+    try:
+        return seconds(partial(fmm.evaluate, p, blocks, fmm_eps=eps), repeats)
+    except fmm.BeyondTolerance:
+        return np.inf
+
+
+def timing(sizes, direct_max, repeats, dims):
     """Rows of seconds per call, and crossover[(dim, blocks)][eps]."""
     rows, table = [], {}
-    for dim in (3, 2):
+    for dim in dims:
         for blocks in (False, True):
             alphas = []
             fmm_times = {eps: [] for eps in EPS}
@@ -81,8 +90,7 @@ def timing(sizes, direct_max, repeats):
                     alphas.append(t / n**2)
                     rows.append((dim, blocks, n, 'numba', t))
                 for eps in EPS:
-                    t = seconds(partial(fmm.evaluate, p, blocks, fmm_eps=eps),
-                                repeats if n < 20000 else 1)
+                    t = fmm_seconds(p, blocks, eps, repeats if n < 20000 else 1)
                     fmm_times[eps].append(t)
                     rows.append((dim, blocks, n, f'fmm {eps:g}', t))
                 print(*rows[-len(EPS) - 1:], sep='\n', flush=True)
@@ -134,7 +142,7 @@ def errors(n, seeds, eps_list):
                     table[name, eps] = max(old[0], f_err), max(old[1], b_err)
     for (name, eps), value in table.items():
         if value is None:
-            lines.append(f'| {name} | {eps:g} | refused (BeyondTolerance) | | |')
+            lines.append(f'| {name} | {eps:g} | refused | | |')
             continue
         worst = max(worst, value[0] / eps)
         lines.append(f'| {name} | {eps:g} | {value[0]:.2g} | '
@@ -170,6 +178,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--sizes', type=int, nargs='+', default=SIZES)
     parser.add_argument('--direct-max', type=int, default=16000)
+    parser.add_argument('--dims', type=int, nargs='+', default=(3, 2))
     parser.add_argument('--repeats', type=int, default=2)
     parser.add_argument('--errors', action='store_true',
                         help='also measure the error table')
@@ -187,7 +196,7 @@ def main():
         lines += errors(args.error_points, range(3), EPS) + ['']
     if not args.no_timing:
         lines += timing_section(*timing(args.sizes, args.direct_max,
-                                        args.repeats))
+                                        args.repeats, args.dims))
     header = (f'# Backend crossovers\n\nMeasured {time.strftime("%Y-%m-%d")}, '
               f'numba threads {numba.get_num_threads()}, fmm3dpy wheel (one '
               'thread): `NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 '

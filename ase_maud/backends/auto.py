@@ -30,21 +30,24 @@ import numpy as np
 from . import direct, fmm
 from .base import Backend, Choice, Result, evaluate_first
 
-#: Default ``tol``: forces to 1e-8 of the largest repulsive force, far below
-#: what a relaxation to an ``fmax`` of 1e-6 of it resolves, and still coarse
-#: enough for the FMM from a few ten thousand points (docs/calculator.md).
+#: Default ``tol``: forces to 1e-8 of the largest repulsive force, a hundred
+#: times below an ``fmax`` of 1e-6 of it, and still coarse enough for the FMM
+#: (at ``fmm_eps = 1e-7``) from 12000 to 21000 points on one thread
+#: (docs/calculator.md).
 DEFAULT_TOL = 1e-8
 
 #: Points from which the FMM (rows: its ``fmm_eps``) is faster than the numba
-#: direct sum on one thread, by (dim, with blocks). Measured 2026-12-01 by
-#: ``python tools/backend_crossover.py``; an ``fmm_eps`` between two rows
+#: direct sum on one thread, by (dim, with blocks), in CPU seconds. Measured
+#: 2026-12-01 by ``python tools/backend_crossover.py --dims 3`` and ``--dims
+#: 2`` (docs/bench/crossover_backends.md); an ``fmm_eps`` between two rows
 #: takes the tighter row's crossover, one below the last row never uses the
-#: FMM.
+#: FMM (in 2D at 1e-12 the FMM refuses random scenes of 64000 points: too
+#: many near pairs for that precision).
 CROSSOVER: dict[tuple[int, bool], dict[float, int]] = {
-    (3, False): {1e-3: 4000, 1e-6: 12000, 1e-9: 30000, 1e-12: 60000},
-    (3, True): {1e-3: 4000, 1e-6: 12000, 1e-9: 30000, 1e-12: 60000},
-    (2, False): {1e-3: 4000, 1e-6: 12000, 1e-9: 30000, 1e-12: 60000},
-    (2, True): {1e-3: 4000, 1e-6: 12000, 1e-9: 30000, 1e-12: 60000},
+    (3, False): {0.001: 4100, 1e-06: 14000, 1e-09: 21000, 1e-12: 85000},
+    (3, True): {0.001: 2500, 1e-06: 7600, 1e-09: 15000, 1e-12: 60000},
+    (2, False): {0.001: 3700, 1e-06: 12000, 1e-09: 20000},
+    (2, True): {0.001: 2200, 1e-06: 6300, 1e-09: 12000},
 }
 #: The coarsest ``fmm_eps`` used: a larger ``tol`` gains little more speed.
 MAX_EPS = 1e-3

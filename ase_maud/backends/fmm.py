@@ -175,7 +175,7 @@ def _near_points(p, eps):
     count = (int(tree.count_neighbors(tree, radius)) - len(p)) // 2
     if count == 0:
         return np.zeros(0, dtype=int)
-    if count <= MAX_NEAR_POINTS**2 // 2:
+    if count <= 64 * MAX_NEAR_POINTS:   # at most 4 MB of pairs
         pairs = tree.query_pairs(radius, output_type='ndarray')
         near = np.unique(pairs)
         if near.size <= MAX_NEAR_POINTS:

@@ -86,8 +86,8 @@ def test_chunks_share_rows(random_points, n, nchunks):
     points = random_points(n, 3, seed=n)
     ref_energy, ref_forces, ref_blocks = physics_sums(points)
     xyz = [points[:, k].copy() for k in range(3)]
-    for kernel in (direct._numba_forces, direct._numba_blocks):
-        energy, forces, block6 = kernel(*xyz, nchunks)
+    for want_blocks in (False, True):
+        energy, forces, block6 = direct.direct_sum(*xyz, nchunks, want_blocks)
         assert energy == pytest.approx(ref_energy, rel=RTOL, abs=0)
         assert_close(forces, ref_forces)
     assert_close(voigt_to_blocks(block6, 3), ref_blocks)

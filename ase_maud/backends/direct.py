@@ -62,20 +62,22 @@ def _make_numba_kernel(with_blocks):
     diagonal of a block are summed: each pair block is traceless, so ``zz =
     -(xx + yy)`` for the sums too.
 
-    Tile rows ``k`` and ``ntiles-1-k`` (which hold ``ntiles+1`` tile pairs
-    together) go to the same chunk, so every thread gets the same amount of
-    work; each chunk adds into a buffer of its own, summed at the end (no
-    races, O(threads * N) memory).
+    ``kernel(x, y, z, energy, acc)`` runs ``energy.size`` chunks: tile rows
+    ``k`` and ``ntiles-1-k`` (which hold ``ntiles+1`` tile pairs together) go
+    to the same chunk, so every thread gets the same amount of work; chunk
+    ``t`` adds its energy to ``energy[t]`` and its sums to ``acc[t]`` (rows
+    fx, fy, fz and, with blocks, kxx, kyy, kxy, kxz, kyz), summed by
+    :func:`direct_sum` (no races, O(threads * N) memory). ``error_model='numpy'``:
+    a division by zero (coincident points) gives inf instead of raising, and
+    the check for it would keep the loops from vectorising.
     """
     nacc = 8 if with_blocks else 3  # fx fy fz [kxx kyy kxy kxz kyz]
     inv_row = 3 + nacc  # buffer rows: x y z, the nacc sums, 1 / L
 
     @numba.njit(parallel=True, fastmath=True, error_model='numpy', cache=True)
-    def kernel(x, y, z, nchunks):
-        n = x.size
+    def kernel(x, y, z, energy, acc):
+        n, nchunks = x.size, energy.size
         ntiles = (n + TILE - 1) // TILE
-        energy = np.zeros(nchunks)
-        acc = np.zeros((nchunks, nacc, n))
         for t in numba.prange(nchunks):
             out = acc[t]
             buf = np.empty((inv_row + 1, TILE))
@@ -148,16 +150,6 @@ def _make_numba_kernel(with_blocks):
                             for jj in range(m):
                                 out[c, j0 + jj] += buf[3 + c, jj]
             energy[t] = e
-        total = acc.sum(axis=0)
-        block6 = np.empty((n, 6 if with_blocks else 0))
-        if with_blocks:
-            block6[:, 0] = total[3]
-            block6[:, 1] = total[4]
-            block6[:, 2] = -(total[3] + total[4])  # traceless
-            block6[:, 3] = total[5]
-            block6[:, 4] = total[6]
-            block6[:, 5] = total[7]
-        return energy.sum(), total[:3].T.copy(), block6
 
     return kernel
 
@@ -166,14 +158,32 @@ _numba_forces = _make_numba_kernel(False)
 _numba_blocks = _make_numba_kernel(True)
 
 
+def direct_sum(x: np.ndarray, y: np.ndarray, z: np.ndarray, nchunks: int,
+               want_blocks: bool) -> Result:
+    """The compiled sum over ``nchunks`` chunks (any number, whatever the
+    thread count), from coordinate arrays; see :mod:`.base` for the result.
+
+    The buffers are made and summed here, outside the compiled kernel: in a
+    parallel numba function every array expression is a parallel region of its
+    own, whose start and end cost a thread wake-up each on a busy machine.
+    """
+    n = x.size
+    energy = np.zeros(nchunks)
+    acc = np.zeros((nchunks, 8 if want_blocks else 3, n))
+    (_numba_blocks if want_blocks else _numba_forces)(x, y, z, energy, acc)
+    total = acc.sum(axis=0)
+    if not want_blocks:
+        return energy.sum(), total.T.copy(), None
+    kxx, kyy, kxy, kxz, kyz = total[3:]
+    block6 = np.stack([kxx, kyy, -(kxx + kyy), kxy, kxz, kyz], axis=1)  # traceless
+    return energy.sum(), total[:3].T.copy(), block6
+
+
 def evaluate(positions: np.ndarray, want_blocks: bool = False) -> Result:
     """Unit repulsion by the compiled direct sum; see :mod:`.base`."""
     p = np.ascontiguousarray(positions, dtype=float)
-    kernel = _numba_blocks if want_blocks else _numba_forces
-    nchunks = numba.get_num_threads()
-    energy, forces, block6 = kernel(p[:, 0].copy(), p[:, 1].copy(),
-                                    p[:, 2].copy(), nchunks)
-    return energy, forces, (block6 if want_blocks else None)
+    return direct_sum(p[:, 0].copy(), p[:, 1].copy(), p[:, 2].copy(),
+                      numba.get_num_threads(), want_blocks)
 
 
 @numba.njit(parallel=True, fastmath=True, cache=True)

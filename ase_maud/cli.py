@@ -387,9 +387,9 @@ def build_parser() -> argparse.ArgumentParser:
                       for b in map(registry.get, registry.names())
                       if b.requires)
     p.add_argument('--backends', nargs='+', choices=registry.names(),
-                   default=registry.installed(), metavar='NAME',
+                   metavar='NAME',
                    help=f'of: {", ".join(registry.names())} (default: all '
-                   f'that are installed; {needs})')
+                   f"that are installed but auto, which picks one of them; {needs})")
     p.add_argument('--repeats', type=int, default=3,
                    help='timed calls per point, the best kept '
                    '(default: %(default)s)')

@@ -49,10 +49,13 @@ def measure_backends(natoms: Sequence[int] = (100, 300, 1000),
     throughput ``pairs_per_s`` (N (N - 1) / 2 pairs per call) and
     ``rel_error`` (0 for the reference itself), with numba's thread count.
 
-    ``backends`` defaults to every installed one; an approximate backend is
-    run at each of ``tolerances``.
+    ``backends`` defaults to every installed one that computes rather than
+    delegates (not ``auto``, which picks one of the others); an approximate
+    backend is run at each of ``tolerances``.
     """
-    names = registry.installed() if backends is None else backends
+    names = ([name for name in registry.installed()   # kernels, not 'auto'
+              if registry.get(name).choose is None]
+             if backends is None else backends)
     variants = {}  # backend name in the rows: calculator parameters
     for name in dict.fromkeys([reference, *names]):
         backend = registry.get(name)

@@ -74,8 +74,8 @@ class MaudCalculator(Calculator):
         repulsive force ``max_i |f_i|`` of the repulsion alone (for a scene
         without springs, the largest force; the springs are always exact).
         Default :data:`~.backends.auto.DEFAULT_TOL` = 1e-8, far below what
-        a relaxation resolves, yet coarse enough for the FMM from 12000 to
-        21000 points (one thread); 0 asks for the exact direct sum. Ignored by the
+        a relaxation resolves, yet coarse enough for the FMM from about
+        40000 points (one thread); 0 asks for the exact direct sum. Ignored by the
         explicit backends.
     crossover : int or None
         For ``auto``: the number of points from which the FMM is used,

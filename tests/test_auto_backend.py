@@ -86,7 +86,8 @@ def test_choices_follow_n_tol_and_threads(monkeypatch):
     exact = ('numba', {})
     assert picked(199, tol=1e-4) == [exact]          # 100 points x 2 threads
     assert picked(200, tol=1e-4) == [('fmm', {'fmm_eps': 1e-3}), exact]
-    assert picked(200, tol=1e-9) == [exact]          # eps 1e-8: the 1e-9 row
+    assert picked(200, tol=1e-9) == [exact]          # eps 1e-8: 681 x 2
+    assert auto.crossover_points(1e-6, 3, False) == 2 * 316   # log-log
     assert picked(2000, tol=1e-10)[0] == ('fmm', {'fmm_eps': 1e-9})
     assert picked(10**9, tol=1e-11) == [exact]       # below the table
     assert picked(100, blocks=True, tol=1e-4)[0][0] == 'fmm'

@@ -32,22 +32,23 @@ from .base import Backend, Choice, Result, evaluate_first
 
 #: Default ``tol``: forces to 1e-8 of the largest repulsive force, a hundred
 #: times below an ``fmax`` of 1e-6 of it, and still coarse enough for the FMM
-#: (at ``fmm_eps = 1e-7``) from 12000 to 21000 points on one thread
+#: (at ``fmm_eps = 1e-7``) from about 33000-45000 points on one thread
 #: (docs/calculator.md).
 DEFAULT_TOL = 1e-8
 
 #: Points from which the FMM (rows: its ``fmm_eps``) is faster than the numba
 #: direct sum on one thread, by (dim, with blocks), in CPU seconds. Measured
 #: 2026-12-01 by ``python tools/backend_crossover.py --dims 3`` and ``--dims
-#: 2`` (docs/bench/crossover_backends.md); an ``fmm_eps`` between two rows
-#: takes the tighter row's crossover, one below the last row never uses the
-#: FMM (in 2D at 1e-12 the FMM refuses random scenes of 64000 points: too
-#: many near pairs for that precision).
+#: 2`` (docs/bench/crossover_backends.md), with the blocked direct kernel of
+#: that day (a faster one moves them up). Between two rows the crossover is
+#: interpolated in log-log; below the last row the FMM is never used (in 2D
+#: at 1e-12 the FMM refuses random scenes of 64000 points: too many near
+#: pairs for that precision).
 CROSSOVER: dict[tuple[int, bool], dict[float, int]] = {
-    (3, False): {0.001: 4100, 1e-06: 14000, 1e-09: 21000, 1e-12: 85000},
-    (3, True): {0.001: 2500, 1e-06: 7600, 1e-09: 15000, 1e-12: 60000},
-    (2, False): {0.001: 3700, 1e-06: 12000, 1e-09: 20000},
-    (2, True): {0.001: 2200, 1e-06: 6300, 1e-09: 12000},
+    (3, False): {0.001: 12000, 1e-06: 29000, 1e-09: 53000, 1e-12: 190000},
+    (3, True): {0.001: 14000, 1e-06: 38000, 1e-09: 65000, 1e-12: 272000},
+    (2, False): {0.001: 11000, 1e-06: 27000, 1e-09: 49000},
+    (2, True): {0.001: 12000, 1e-06: 33000, 1e-09: 64000},
 }
 #: The coarsest ``fmm_eps`` used: a larger ``tol`` gains little more speed.
 MAX_EPS = 1e-3
@@ -74,13 +75,16 @@ def check_crossover(crossover: object) -> None:
 
 def crossover_points(eps: float, dim: int, want_blocks: bool) -> float:
     """Points from which the FMM at ``eps`` beats the direct sum here: the
-    :data:`CROSSOVER` entry, times numba's thread count (inf below the
-    table's tightest ``fmm_eps``)."""
-    rows = CROSSOVER[dim, want_blocks]
-    tighter = [row for row in rows if row <= eps]
-    if not tighter:
+    :data:`CROSSOVER` row of ``eps`` (log-log interpolated between rows, the
+    coarsest row above it), times numba's thread count; inf below the
+    tightest row."""
+    rows = sorted(CROSSOVER[dim, want_blocks].items())   # tightest first
+    if eps < rows[0][0]:
         return np.inf
-    return rows[max(tighter)] * numba.get_num_threads()
+    log_eps, log_n = np.log([row[0] for row in rows]), np.log(
+        [row[1] for row in rows])
+    points = round(float(np.exp(np.interp(np.log(eps), log_eps, log_n))))
+    return points * numba.get_num_threads()
 
 
 def choose(natoms: int, dim: int, want_blocks: bool,

@@ -19,7 +19,9 @@ A backend that cannot meet its tolerance on a scene raises
 
 from __future__ import annotations
 
+import functools
 import importlib.util
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -78,9 +80,9 @@ class Backend:
 
     @property
     def installed(self) -> bool:
-        """Whether every module in ``requires`` can be imported."""
-        return all(importlib.util.find_spec(module) is not None
-                   for module in self.requires)
+        """Whether every module in ``requires`` can be imported (looked up
+        once per process: the ``auto`` backend asks at every call)."""
+        return all(map(_importable, self.requires))
 
     def options(self, parameters: Mapping[str, Any]) -> dict[str, Any]:
         """The keywords of ``evaluate``, taken from calculator parameters."""
@@ -122,6 +124,19 @@ def evaluate_first(choices: list[Choice], positions: np.ndarray,
             continue
     last = choices[-1]
     return last.backend.evaluate(positions, want_blocks, **last.options), last
+
+
+def _importable(module: str) -> bool:
+    """Whether ``module`` can be imported, without importing it: an entry
+    of ``sys.modules`` (None: blocked) decides, else one lookup per process."""
+    if module in sys.modules:
+        return sys.modules[module] is not None
+    return _findable(module)
+
+
+@functools.cache
+def _findable(module: str) -> bool:
+    return importlib.util.find_spec(module) is not None
 
 
 def voigt_to_blocks(block6: np.ndarray, dim: int) -> np.ndarray:

@@ -137,7 +137,7 @@ class MaudMethod:
         """The bounded move from ``here``; ``here`` becomes :attr:`last`."""
         direction = self._direction(here)
         limit = self._limits(here.x)
-        if self.rule.trust_region and hasattr(here.solver, 'shifted'):
+        if self.rule.trust_region and hasattr(here.solver, 'shifted_solve'):
             direction = self._trust_region(here, direction, limit)
         if (self.rule.beta_max > 0 and self.v is not None
                 and np.vdot(self.v, direction) < 0):
@@ -188,21 +188,24 @@ class MaudMethod:
         """``K^-1 f`` damped to ``(K + mu I)^-1 f`` with the smallest ``mu``
         (to 1 %, by bisection in log mu) at which ``gamma`` times it keeps
         every point within ``limit``."""
-        def excess(move):
-            return (self.gamma * np.linalg.norm(move, axis=1) / limit).max()
+        solver, forces = here.solver, here.forces
 
-        if excess(direction) <= 1:
+        def outside(mu):
+            move = solver.shifted_solve(forces, [mu])[0]
+            return (self.gamma * np.linalg.norm(move, axis=1) / limit).max() > 1
+
+        if (self.gamma * np.linalg.norm(direction, axis=1) / limit).max() <= 1:
             return direction
-        low, high = 0.0, np.abs(here.solver.values).max()
-        while excess(here.solver.shifted(high).solve(here.forces)) > 1:
+        low, high = 0.0, np.abs(solver.values).max()
+        while outside(high):
             low, high = high, 10.0 * high
         while high > 1.01 * max(low, high / 1e12):
             middle = np.sqrt(max(low, high / 1e12) * high)
-            if excess(here.solver.shifted(middle).solve(here.forces)) > 1:
+            if outside(middle):
                 low = middle
             else:
                 high = middle
-        return here.solver.shifted(high).solve(here.forces)
+        return solver.shifted_solve(forces, [high])[0]
 
     def _bound(self, step: np.ndarray, limit: np.ndarray) -> np.ndarray:
         """Scale each point's move down to its allowed length."""

@@ -341,24 +341,27 @@ class ExactModel(StiffnessModel):
 
 class _EigenSolver(_DofSolver):
     """``K^-1`` from its eigen-decomposition; also the damped
-    ``(K + mu I)^-1`` of a trust-region step (:meth:`shifted`)."""
+    ``(K + mu I)^-1`` of trust-region steps, for many ``mu`` at once
+    (:meth:`shifted_solve`)."""
 
     def __init__(self, vectors, values, free):
         super().__init__(free)
         self.vectors, self.values = vectors, values
-        self.shift = 0.0
 
     def _solve(self, rhs):
-        damped = self.values + np.sign(self.values) * self.shift
-        return self.vectors @ ((self.vectors.T @ rhs) / damped)
+        return self.vectors @ ((self.vectors.T @ rhs) / self.values)
 
-    def shifted(self, shift: float) -> _EigenSolver:
-        """The same solver with every eigenvalue moved ``shift >= 0`` away
-        from zero (``K + shift I`` for a positive ``K``): shorter moves,
-        turned towards the forces."""
-        other = _EigenSolver(self.vectors, self.values, self.free)
-        other.shift = shift
-        return other
+    def shifted_solve(self, forces: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+        """The moves ``(K + mu I)^-1 f`` (each eigenvalue moved ``mu >= 0``
+        away from zero: shorter moves, turned towards the forces), one per
+        ``mu`` in ``shifts``: shape (len(shifts), N, 3)."""
+        shifts = np.asarray(shifts, dtype=float)
+        rhs = np.asarray(forces, dtype=float).reshape(-1, 3)[:, :self.dim][self.free]
+        damped = self.values + np.sign(self.values) * shifts[:, None]
+        moves = np.zeros((len(shifts), len(self.free), 3))
+        moves[:, :, :self.dim][:, self.free] = (
+            (self.vectors.T @ rhs) / damped) @ self.vectors.T
+        return moves
 
 
 # -- global sparse -------------------------------------------------------------

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 from ase import Atoms
+from ase.constraints import FixCartesian
 from ase.vibrations import VibrationsData
 from numpy.typing import ArrayLike
 from phonopy import Phonopy
@@ -138,12 +139,17 @@ def vibrations(atoms: Atoms, masses: ArrayLike | None = None) -> VibrationsData:
     """The same modes as an ASE :class:`~ase.vibrations.VibrationsData`.
 
     Atoms left out follow ASE's rule (any atom under FixAtoms or
-    FixCartesian). ``masses`` (default 1) are set on the copy the object
-    keeps; its energies assume ASE's units (eV, Angstrom, amu).
+    FixCartesian), except that the z mask :func:`ase_maud.scenes.keep_on_plane`
+    puts on a planar scene is not counted: its points keep all three
+    coordinates, as the 3D Hessian does. ``masses`` (default 1) are set on
+    the copy the object keeps; its energies assume ASE's units (eV,
+    Angstrom, amu).
     """
     copy = atoms.copy()
     copy.set_masses(np.ones(len(atoms)) if masses is None else masses)
-    indices = VibrationsData.indices_from_constraints(atoms)
+    copy.set_constraint([c for c in atoms.constraints if not (
+        isinstance(c, FixCartesian) and list(c.mask) == [False, False, True])])
+    indices = VibrationsData.indices_from_constraints(copy)
     dofs = (3 * np.asarray(indices, dtype=int)[:, None] + np.arange(3)).ravel()
     hessian = calculator_3d(atoms.calc).get_hessian(atoms)
     return VibrationsData.from_2d(copy, hessian[np.ix_(dofs, dofs)], indices)

@@ -12,6 +12,7 @@ from ase_maud.modes import (
     gamma_modes,
     vibrations,
 )
+from ase_maud.scenes import build
 
 
 def scene(random_points, n, dim, seed):
@@ -79,3 +80,13 @@ def test_vibrations_data_leaves_out_fixed_atoms(random_points):
     data = vibrations(atoms)
     assert list(data.get_indices()) == [1, 2, 4, 5, 6, 7]
     assert data.get_hessian_2d().shape == (18, 18)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_vibrations_of_a_planar_scene_keep_every_point(seed):
+    """keep_on_plane's z mask (for ASE's drivers) does not empty the modes."""
+    atoms = build('ring', 12, seed=seed)
+    assert atoms.constraints                      # the plane's FixCartesian
+    data = vibrations(atoms)
+    assert list(data.get_indices()) == list(range(len(atoms)))
+    assert len(data.get_energies()) == 3 * len(atoms)

@@ -28,7 +28,6 @@ import scipy.sparse as sp
 from ase import Atoms
 from ase.calculators.calculator import Calculator, all_changes
 from numpy.typing import ArrayLike
-from scipy.spatial import cKDTree
 
 from . import backends, physics, topology
 from .backends.auto import DEFAULT_TOL
@@ -281,10 +280,12 @@ class MaudCalculator(Calculator):
         if dim == 2:
             results['forces'][:, 2] = 0.0
         results['energy'] = float(results['energy'])
+        # results of a call at other positions are gone by now (ASE clears
+        # them without reset): only those still held count
+        held = self.last_tolerance if self.results else None
         self.results.update(results, free_energy=results['energy'])
         self.last_backend = choice.backend.name
-        self.last_tolerance = max(self.last_tolerance or 0.0,
-                                  choice.tolerance)
+        self.last_tolerance = max(held or 0.0, choice.tolerance)
         self.last_force_scale = aq * float(
             np.sqrt(np.einsum('ij,ij->i', f_rep, f_rep).max(initial=0.0)))
 
@@ -377,12 +378,10 @@ def raise_on_closest(scaled: np.ndarray, a: float) -> None:
     than :data:`CLOSEST_REDUCED_DISTANCE` ``a`` (``scaled`` is ``x / a``)."""
     if len(scaled) < 2:
         return
-    distance, index = cKDTree(scaled).query(scaled, k=2)
-    i = int(np.argmin(distance[:, 1]))
-    if distance[i, 1] < CLOSEST_REDUCED_DISTANCE:
-        j = int(index[i, 1])
+    i, j, distance = physics.closest_pair(scaled)
+    if distance < CLOSEST_REDUCED_DISTANCE:
         raise ValueError(
-            f'atoms {min(i, j)} and {max(i, j)} are {distance[i, 1]:.3g} a '
+            f'atoms {i} and {j} are {distance:.3g} a '
             f'apart (a = {a!r}): 1/L**3 overflows float64 below about '
             f'{CLOSEST_REDUCED_DISTANCE:g} a; move them apart or choose a '
             'smaller a')

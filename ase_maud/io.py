@@ -57,7 +57,7 @@ from .stiffness import free_dofs
 
 PathLike = str | os.PathLike
 #: Parameters of :class:`MaudCalculator` that a trajectory brings back.
-CALC_PARAMETERS = ('springs', 'a', 'Q', 'dim', 'backend', 'fmm_eps')
+CALC_PARAMETERS = ('springs', 'a', 'Q', 'dim', 'backend', 'fmm_eps', 'tol', 'crossover')
 #: The name under which ASE's trajectory stores a MaudCalculator.
 CALC_NAME = 'maudcalculator'
 #: Vertex (node) attributes of COMPAS data that fix a point when true.

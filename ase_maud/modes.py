@@ -140,15 +140,17 @@ def vibrations(atoms: Atoms, masses: ArrayLike | None = None) -> VibrationsData:
 
     Atoms left out follow ASE's rule (any atom under FixAtoms or
     FixCartesian), except that the z mask :func:`ase_maud.scenes.keep_on_plane`
-    puts on a planar scene is not counted: its points keep all three
+    puts on a planar (``dim=2``) scene is not counted: its points keep all three
     coordinates, as the 3D Hessian does. ``masses`` (default 1) are set on
     the copy the object keeps; its energies assume ASE's units (eV,
     Angstrom, amu).
     """
     copy = atoms.copy()
     copy.set_masses(np.ones(len(atoms)) if masses is None else masses)
+    planar = getattr(atoms.calc, 'dim', 3) == 2
     copy.set_constraint([c for c in atoms.constraints if not (
-        isinstance(c, FixCartesian) and list(c.mask) == [False, False, True])])
+        planar and isinstance(c, FixCartesian)
+        and list(c.mask) == [False, False, True])])
     indices = VibrationsData.indices_from_constraints(copy)
     dofs = (3 * np.asarray(indices, dtype=int)[:, None] + np.arange(3)).ravel()
     hessian = calculator_3d(atoms.calc).get_hessian(atoms)

@@ -226,9 +226,12 @@ class Maud(Optimizer):
         """Take the restart file's state, and its positions (they win: the
         state belongs to them; a line in the log says if the atoms moved)."""
         state = self.load()
-        if not {'x', 'step', 'method'} <= set(state):
+        missing = {'x', 'step', 'method', 'size0', 'best', 'lowest',
+                   'fmax_now'} - set(state)
+        if missing:
             raise ValueError(f'restart file {str(self.restart)!r} was not written by '
-                             'this version of Maud (no positions); delete it')
+                             f'this version of Maud (no {", ".join(sorted(missing))}); '
+                             'delete it')
         x, here = np.asarray(state['x'], float), self.optimizable.get_x()
         if x.shape != here.shape:
             raise ValueError(
@@ -392,7 +395,10 @@ class Maud(Optimizer):
         return super().run(fmax, steps)
 
     def _preflight(self) -> None:
-        """Say in the log if the scene has no finite minimum; evaluate."""
+        """Say in the log if the scene has no finite minimum; evaluate.
+        Energy and forces held from an earlier run are dropped (the
+        calculator or the band may have changed since)."""
+        self.optimizable.held = None
         atoms = self._atoms()
         calc = getattr(atoms, 'calc', None)
         if hasattr(calc, 'unbounded_components') and self.target == 'minimum':

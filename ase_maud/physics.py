@@ -143,3 +143,22 @@ def pair_chunks(natoms: int,
         j = i + 1 + np.arange(len(i)) - start_of_row
         yield i, j
         row = stop
+
+
+def closest_pair(points: np.ndarray) -> tuple[int, int, float]:
+    """The two nearest distinct points ``(i, j, L)``, ``i < j``, of (N, d)
+    ``points`` (N >= 2), with their distance exact even where its square
+    underflows (below about 1e-154 of the coordinates' unit)."""
+    from scipy.spatial import cKDTree
+
+    index = cKDTree(points).query(points, k=2)[1]
+    itself = index[:, 0] == np.arange(len(points))
+    other = np.where(itself, index[:, 1], index[:, 0])
+    gap = points - points[other]
+    scale = np.abs(gap).max(axis=1)
+    unit = np.divide(gap, scale[:, None], out=np.zeros_like(gap),
+                     where=scale[:, None] > 0)
+    distance = scale * np.linalg.norm(unit, axis=1)
+    i = int(np.argmin(distance))
+    j = int(other[i])
+    return min(i, j), max(i, j), float(distance[i])

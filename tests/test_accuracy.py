@@ -53,7 +53,7 @@ def test_asked_tolerance_is_a_fraction_of_fmax():
     atoms = build('hanging_net', 10, seed=2)
     seen = _record_tolerances(atoms.calc)
     with Maud(atoms, logfile=None) as opt:
-        opt.run(fmax=1e-4, steps=500)
+        assert opt.run(fmax=1e-4, steps=500)
     _, tol, scale = seen[-1]
     # Near the end the run asks for a force error of a tenth of fmax.
     assert tol * scale == pytest.approx(

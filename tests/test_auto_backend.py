@@ -93,6 +93,7 @@ def test_choices_follow_n_tol_and_threads(monkeypatch):
     assert picked(100, blocks=True, tol=1e-4)[0][0] == 'fmm'
     assert picked(10**9, tol=0.0) == [exact]         # 0: exact
     assert picked(3, tol=1e-11, crossover=3)[0][0] == 'fmm'
+    assert picked(10**6, tol=1e-300, crossover=3) == [exact]   # beyond FMM3D
     monkeypatch.setitem(sys.modules, 'fmm3dpy', None)   # not installed
     assert picked(10**9, tol=1e-4) == [exact]
 
@@ -194,3 +195,16 @@ def test_no_dense_array_above_the_crossover(random_points):
         tracemalloc.stop()
     assert atoms.calc.last_backend == 'fmm'
     assert peak < n * n * 8 / 20      # 3.6 MB; an N x N array is 72 MB
+
+
+def test_last_tolerance_is_the_held_results(random_points):
+    """An FMM call, then an exact one at new positions: the results held
+    are exact, and last_tolerance says so."""
+    atoms = Atoms(f'H{N}', random_points(N, 3, 4))
+    atoms.calc = calc = MaudCalculator(tol=1e-4, crossover=CROSSOVER)
+    atoms.get_forces()
+    assert calc.last_backend == 'fmm' and calc.last_tolerance > 0
+    calc.set(crossover=10 * N)            # the direct sum from now on
+    atoms.positions[0] += 0.1
+    atoms.get_forces()
+    assert calc.last_backend == 'numba' and calc.last_tolerance == 0.0

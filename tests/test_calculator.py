@@ -482,3 +482,15 @@ def test_separation_1e_110_names_the_pair_or_scales():
     far.calc = MaudCalculator(a=1e-10)
     with pytest.raises(ValueError, match='atom 1 .* beyond the float64 range'):
         far.get_forces()
+
+
+@pytest.mark.parametrize('gap', [1e-120, 1e-200, 1e-300])
+def test_pairs_closer_than_float64_allows_name_two_atoms(gap):
+    rng = np.random.default_rng(int(-np.log10(gap)))
+    positions = rng.uniform(0, 5, (6, 3))
+    positions[1] = 0.0                        # a gap representable beside it
+    positions[4] = [gap, 0, 0]
+    atoms = Atoms('H6', positions)
+    atoms.calc = MaudCalculator()
+    with pytest.raises(ValueError, match=r'atoms 1 and 4 are 1e-\d+ a apart'):
+        atoms.get_forces()

@@ -371,3 +371,19 @@ def test_off_plane_error_says_what_to_add():
 def test_scene_errors_name_the_input(args, keywords, match):
     with pytest.raises(ValueError, match=match):
         build(*args, **keywords)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_second_run_sees_a_changed_calculator(seed):
+    """Energy and forces held by the optimiser are not reused after the
+    calculator changed between runs."""
+    atoms = build('hanging_net', 5, seed=seed)
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-6)
+        atoms.calc.set(Q=2.0)                 # the old minimum is no longer one
+        assert opt.run(fmax=1e-6)
+    reference = build('hanging_net', 5, seed=seed)
+    reference.calc.set(Q=2.0)
+    BFGS(reference, logfile=None).run(fmax=1e-7, steps=2000)
+    assert atoms.get_potential_energy() == pytest.approx(
+        reference.get_potential_energy(), rel=1e-9)

@@ -50,6 +50,9 @@ CROSSOVER: dict[tuple[int, bool], dict[float, int]] = {
     (2, False): {0.001: 11000, 1e-06: 27000, 1e-09: 49000},
     (2, True): {0.001: 12000, 1e-06: 33000, 1e-09: 64000},
 }
+#: The finest ``fmm_eps`` asked of the FMM (a ``tol`` below 10 times it, even
+#: with ``crossover`` set, takes the direct sum: FMM3D cannot promise it).
+MIN_EPS = 1e-13
 #: The coarsest ``fmm_eps`` used: a larger ``tol`` gains little more speed.
 MAX_EPS = 1e-3
 
@@ -97,7 +100,7 @@ def choose(natoms: int, dim: int, want_blocks: bool,
     eps = min(fmm.eps_for(tol), MAX_EPS)
     start = (crossover_points(eps, dim, want_blocks) if crossover is None
              else crossover)
-    if natoms < max(start, 2):
+    if natoms < max(start, 2) or eps < MIN_EPS:
         return [exact]
     return [Choice(fmm.BACKEND, {'fmm_eps': eps}, fmm.force_tolerance(eps)),
             exact]

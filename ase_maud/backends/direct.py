@@ -232,8 +232,8 @@ def repulsion_hvp(x: np.ndarray, v: np.ndarray, nchunks: int) -> np.ndarray:
     return out.sum(axis=0)
 
 
-#: The compiled direct sum, the default backend.
+#: The compiled direct sum (what ``auto`` runs below its crossover).
 BACKEND = Backend(
     name='numba', evaluate=evaluate, cost='N^2',
     summary='compiled direct sum over every pair, parallel over '
-    'NUMBA_NUM_THREADS (the default)')
+    'NUMBA_NUM_THREADS')

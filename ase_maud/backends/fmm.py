@@ -47,6 +47,7 @@ from numbers import Real
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..physics import closest_pair
 from . import direct
 from .base import Backend, BeyondTolerance, Result
 
@@ -180,12 +181,10 @@ def _near_points(p, eps):
         near = np.unique(pairs)
         if near.size <= MAX_NEAR_POINTS:
             return near
-    distance, index = tree.query(p, k=2)
-    i = int(np.argmin(distance[:, 1]))
-    j = int(index[i, 1])
+    i, j, distance = closest_pair(p)
     raise BeyondTolerance(
         f'{count} pairs are closer than {radius:.3g}, among them atoms '
-        f'{min(i, j)} and {max(i, j)} at {distance[i, 1]:.3g}: FMM3D rounds '
+        f'{i} and {j} at {distance:.3g}: FMM3D rounds '
         f'such pairs beyond fmm_eps = {eps:g} and more than '
         f'{MAX_NEAR_POINTS} points are too many to sum exactly; use '
         "backend='numba' (exact) or a larger fmm_eps")

@@ -53,7 +53,7 @@ from ase import Atoms
 from ase.constraints import FixAtoms
 
 from .calculator import MaudCalculator
-from .stiffness import free_dofs
+from .topology import fixed_atoms
 
 PathLike = str | os.PathLike
 #: Parameters of :class:`MaudCalculator` that a trajectory brings back.
@@ -369,12 +369,6 @@ def read_compas(path: PathLike) -> tuple[np.ndarray, np.ndarray, list[int]]:
             anchors)
 
 
-def fixed_points(atoms: Atoms) -> np.ndarray:
-    """Indices of the points whose every coordinate is held (FixAtoms, or
-    FixCartesian on x, y and z)."""
-    return np.flatnonzero(~free_dofs(atoms, 3).any(axis=1))
-
-
 def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None) -> list[Path]:
     """Write the net ``atoms`` (with a MaudCalculator) to ``path``; return
     the files written.
@@ -422,7 +416,7 @@ def _coordinates(x):
 def _extxyz_text(atoms):
     """Extended XYZ of the symbols, positions (shortest exact repr) and,
     if any point is fixed, ``move_mask`` (F for fixed), as ASE reads it."""
-    fixed = np.isin(np.arange(len(atoms)), fixed_points(atoms))
+    fixed = fixed_atoms(atoms)
     mask = ':move_mask:L:1' if fixed.any() else ''
     rows = [f'{symbol} {_coordinates(x)}{" F" if held else " T" if mask else ""}\n'
             for symbol, x, held in zip(atoms.get_chemical_symbols(), atoms.positions,
@@ -455,7 +449,7 @@ def _compas_document(atoms, like):
     """The COMPAS JSON document of ``atoms``: ``like``'s with new x, y, z,
     or a COMPAS 2.x graph."""
     if like is None:
-        fixed = set(fixed_points(atoms).tolist())
+        fixed = set(np.flatnonzero(fixed_atoms(atoms)).tolist())
         node = {str(n): {'x': float(x), 'y': float(y), 'z': float(z),
                          **({'is_anchor': True} if n in fixed else {})}
                 for n, (x, y, z) in enumerate(atoms.positions)}

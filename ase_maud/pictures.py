@@ -24,7 +24,7 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
-from .io import fixed_points
+from .topology import fixed_atoms
 
 #: Longest force arrow, as a fraction of the picture's largest extent.
 ARROW = 0.1
@@ -55,7 +55,7 @@ def draw(ax: Axes, atoms: Atoms, limits: tuple[np.ndarray, np.ndarray] | None = 
     x = atoms.positions[:, :dim]
     forces = atoms.get_forces()[:, :dim]
     size = np.linalg.norm(forces, axis=1)
-    fixed = np.isin(np.arange(len(atoms)), fixed_points(atoms))
+    fixed = fixed_atoms(atoms)
     low, high = _limits([atoms]) if limits is None else limits
     norm = Normalize(0, max(size.max(), 1e-300)) if norm is None else norm
     segments = x[calc.springs]

@@ -275,10 +275,24 @@ def test_non_finite_stiffness_stops_the_run():
 def test_restart_file_is_replaced_whole(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     atoms = build('hanging_net', 5, seed=1)
-    seen = []
+    seen, replaced = [], []
+    real_replace = os.replace
+
+    def checked_replace(source, destination):
+        """At the moment of the swap: the new state is whole, in the same
+        folder, and the old file (if any) is whole too."""
+        assert os.path.dirname(os.path.abspath(source)) == str(tmp_path)
+        json.loads(open(source).read())
+        if os.path.exists(destination):
+            json.loads(open(destination).read())
+        replaced.append(destination)
+        real_replace(source, destination)
+
+    monkeypatch.setattr('ase_maud.optimizer.os.replace', checked_replace)
     with Maud(atoms, logfile=None, restart='maud.json') as opt:
         opt.attach(lambda: seen.append(sorted(os.listdir('.'))))
         opt.run(fmax=1e-6, steps=5)
+    assert len(replaced) == opt.nsteps + 1                     # one swap per frame
     assert all(names == ['maud.json'] for names in seen[1:])   # no temporary left
     state = json.loads((tmp_path / 'maud.json').read_text())
     assert state['step'] == opt.nsteps

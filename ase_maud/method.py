@@ -71,13 +71,15 @@ class StepRule:
 
 @dataclass
 class _Point:
-    """Where a step began: positions, merit, forces and the solver there
-    (None after a restart from file: recomputed if needed)."""
+    """Where a step began: positions, merit, forces, the solver there (None
+    after a restart from file: recomputed if needed) and the merit's
+    relative error (the calculator's tolerance when it was computed)."""
 
     x: np.ndarray
     merit: float
     forces: np.ndarray
     solver: Solver | None = None
+    noise: float = 0.0
 
 
 @dataclass
@@ -96,8 +98,9 @@ class MaudMethod:
     k: int = field(init=False, default=0)
     last: _Point | None = field(init=False, default=None)
     pairs: list[tuple[np.ndarray, np.ndarray]] = field(init=False, default_factory=list)
-    #: Relative error of the energies compared (1e-12: rounding; an
-    #: approximate calculator's tolerance, set by the optimizer).
+    #: Relative error of the merit just computed (1e-12: rounding; an
+    #: approximate calculator's tolerance, set by the optimizer); the larger
+    #: of it and :attr:`last`'s counts when the two are compared.
     noise: float = field(init=False, default=1e-12)
 
     def __post_init__(self):
@@ -110,7 +113,8 @@ class MaudMethod:
         last = self.last
         if last is None:
             return False
-        change, tol = merit - last.merit, merit_tolerance(last.merit, self.noise)
+        change = merit - last.merit
+        tol = merit_tolerance(last.merit, max(self.noise, last.noise))
         if self.rule.target != 'minimum' or abs(change) > tol:
             return change > tol
         return -0.5 * np.vdot(last.forces + forces, x - last.x) > 0
@@ -219,7 +223,8 @@ class MaudMethod:
     def state(self) -> dict[str, Any]:
         """What a restart file holds (the solver is recomputed on demand)."""
         last = None if self.last is None else {
-            'x': self.last.x, 'merit': self.last.merit, 'forces': self.last.forces}
+            'x': self.last.x, 'merit': self.last.merit, 'forces': self.last.forces,
+            'noise': self.last.noise}
         return {'gamma': self.gamma, 'k': self.k, 'v': self.v, 'last': last,
                 'pairs': [list(pair) for pair in self.pairs],
                 'model': self.model.state()}
@@ -231,7 +236,7 @@ class MaudMethod:
         last = state['last']
         self.last = None if last is None else _Point(
             np.asarray(last['x'], float), float(last['merit']),
-            np.asarray(last['forces'], float))
+            np.asarray(last['forces'], float), noise=float(last['noise']))
         self.pairs = [(np.asarray(s, float), np.asarray(y, float))
                       for s, y in state['pairs']]
         self.model.load(state['model'])

@@ -352,7 +352,7 @@ class Maud(Optimizer):
                 here.solver = self._solver()
         else:
             maud.accept(x, forces)
-            here = _Point(x.copy(), merit, forces.copy(), self._solver())
+            here = _Point(x.copy(), merit, forces.copy(), self._solver(), maud.noise)
         self._check_progress(here.x, here.merit, here.forces)
         move = maud.move(here)
         if not np.isfinite(move).all():

@@ -53,6 +53,7 @@ from ase import Atoms
 from ase.constraints import FixAtoms
 
 from .calculator import MaudCalculator
+from .checks import as_whole
 from .topology import fixed_atoms
 
 PathLike = str | os.PathLike
@@ -197,11 +198,13 @@ def _check_index(path, number, i, natoms):
 
 def _fixed_indices(indices, natoms):
     """``indices`` as a list of ints in ``range(natoms)``, or ValueError."""
-    indices = [int(i) for i in indices]
-    for i in indices:
+    checked = [as_whole(i) for i in indices]
+    for given, i in zip(indices, checked, strict=True):
+        if i is None:
+            raise ValueError(f'fixed point {given!r} is not a whole number (0-based index)')
         if not 0 <= i < natoms:
             raise ValueError(f'fixed point {i} out of range ({natoms} points, 0-based)')
-    return indices
+    return checked
 
 
 def read_edges(path: PathLike, natoms: int) -> np.ndarray:

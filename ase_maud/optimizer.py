@@ -59,6 +59,7 @@ from ase import Atoms
 from ase.io.jsonio import write_json
 from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 
+from .checks import as_whole
 from .method import MaudMethod, StepRule, _Point, merit_tolerance
 from .stiffness import METHODS, TARGETS, StiffnessModel, choose_model
 from .topology import describe_unbounded
@@ -566,17 +567,14 @@ def _keyword(name: str, value: Any) -> Any:
     if value is None and none:
         return None
     number = None
-    if isinstance(value, (bool, np.bool_)):
+    if whole:
+        number = as_whole(value)
+    elif isinstance(value, (bool, np.bool_)):
         pass
     elif isinstance(value, (int, np.integer)):
-        number = int(value)
-        if not whole:
-            number = float(number) if abs(number) < 2.0**1023 else None
+        number = float(value) if abs(value) < 2.0**1023 else None
     elif isinstance(value, (float, np.floating)) and math.isfinite(value):
-        if not whole:
-            number = float(value)
-        elif float(value).is_integer():
-            number = int(value)
+        number = float(value)
     if number is not None and test(number):
         return number
     raise ValueError(f'{name} must be {accepted}, got {value!r}')

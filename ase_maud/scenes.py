@@ -27,6 +27,7 @@ from scipy.sparse.csgraph import laplacian
 from scipy.spatial import cKDTree
 
 from .calculator import MaudCalculator
+from .checks import as_whole
 
 #: Closest start of two points, in units of ``a``.
 MIN_DISTANCE = 0.2
@@ -73,12 +74,11 @@ def _scene(positions, springs, a, Q, dim=3, fixed=(), symbols=None):
 def _count(size, least, scene):
     """``size`` as an int, or ValueError if it is not a whole number
     ``>= least``."""
-    whole = (isinstance(size, (int, np.integer)) and not isinstance(size, bool)) or (
-        isinstance(size, float) and size.is_integer())
-    if not whole or size < least:
+    whole = as_whole(size)
+    if whole is None or whole < least:
         raise ValueError(f'{scene} needs an integer size >= {least}, '
                          f'got {size!r}')
-    return int(size)
+    return whole
 
 
 def _path(n):
@@ -439,9 +439,10 @@ def build(name: str, size: int | str | None = None, seed: int = 0, **kwargs: flo
     the builder's default. Other keywords (``a``, ``Q``) go to the builder."""
     if not (isinstance(name, str) and name in SCENES):
         raise ValueError(f'unknown scene {name!r}; known: {", ".join(SCENES)}')
-    if not (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool)
-            and seed >= 0):
+    whole_seed = as_whole(seed)
+    if whole_seed is None or whole_seed < 0:
         raise ValueError(f'seed must be a whole number >= 0, got {seed!r}')
+    seed = whole_seed
     if set(kwargs) - {'a', 'Q'}:
         raise ValueError(f'build takes the keywords a and Q, got '
                          f'{sorted(set(kwargs) - {"a", "Q"})}')

@@ -22,11 +22,12 @@ whatever the thread count (``None``, the default: the table).
 
 from __future__ import annotations
 
-from numbers import Integral, Real
+from numbers import Real
 
 import numba
 import numpy as np
 
+from ..checks import as_whole
 from . import direct, fmm
 from .base import Backend, Choice, Result, evaluate_first
 
@@ -68,9 +69,7 @@ def check_tol(tol: object) -> None:
 def check_crossover(crossover: object) -> None:
     """Raise ValueError unless ``crossover`` is None or a number of points
     (an integer >= 0)."""
-    if crossover is not None and not (isinstance(crossover, Integral)
-                                      and not isinstance(crossover, bool)
-                                      and crossover >= 0):
+    if crossover is not None and (as_whole(crossover) is None or crossover < 0):
         raise ValueError('crossover must be None (the measured table) or '
                          'the number of points from which the FMM is used, '
                          f'an integer >= 0, got {crossover!r}')

@@ -16,7 +16,7 @@ import re
 
 import numpy as np
 import pytest
-from ase.calculators.calculator import Calculator, all_changes
+from ase.calculators.calculator import all_changes
 from ase.calculators.emt import EMT
 from ase.cluster import Icosahedron
 from ase.io import read
@@ -26,6 +26,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from ase_maud import Maud, MaudCalculator, MaudError
+from ase_maud.hardcases import PoisonedCalculator
 from ase_maud.optimizer import KEYWORDS, last_frame
 from ase_maud.scenes import SCENES, build, keep_on_plane
 
@@ -180,30 +181,7 @@ def test_hostile_inputs_get_an_answer_or_a_clear_error(seed, scale, fmax, steps,
         fresh.get_potential_energy(atoms.copy()), rel=1e-12, abs=0)
 
 
-# -- 2. non-finite results of any calculator -----------------------------------------
-
-class Poisoned(Calculator):
-    """Any calculator ``inner`` (its properties, so MaudCalculator's model is
-    the exact one), with call number ``call`` returning ``value`` as the
-    energy or in atom 6's forces (free in both scenes)."""
-
-    def __init__(self, inner, call, what, value):
-        super().__init__()
-        self.implemented_properties = inner.implemented_properties
-        self.inner, self.call, self.what, self.value = inner, call, what, value
-        self.calls = 0
-
-    def calculate(self, atoms=None, properties=('energy',), system_changes=all_changes):
-        super().calculate(atoms, properties, system_changes)
-        self.calls += 1
-        copy = self.atoms.copy()
-        self.results = {name: np.copy(self.inner.get_property(name, copy))
-                        for name in {'energy', 'free_energy', 'forces', *properties}}
-        if self.calls == self.call:
-            if self.what == 'energy':
-                self.results['energy'] = self.results['free_energy'] = self.value
-            else:
-                self.results['forces'][6] = [self.value, 0.0, 0.0]
+# -- 2. non-finite results of any calculator (hardcases.PoisonedCalculator) ---------
 
 
 def emt_cluster():
@@ -224,7 +202,7 @@ def maud_net():
 def test_non_finite_results_stop_the_run_at_good_positions(tmp_path, scene, what, value,
                                                            call):
     atoms, inner = scene()
-    atoms.calc = Poisoned(inner, call, what, value)
+    atoms.calc = PoisonedCalculator(inner, call, what, value)
     traj = tmp_path / 'run.traj'
     start = atoms.positions.copy()
     step = call - 1   # one calculator call per step

@@ -19,7 +19,6 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
-from ase.calculators.calculator import Calculator, all_changes
 from ase.calculators.emt import EMT
 from ase.cluster import Icosahedron
 from ase.io import read
@@ -28,6 +27,7 @@ from ase.optimize import BFGS
 from ase.optimize.basin import BasinHopping
 
 from ase_maud import Maud, MaudCalculator, MaudError
+from ase_maud.hardcases import PoisonedCalculator
 from ase_maud.optimizer import KEYWORDS
 from ase_maud.scenes import build
 
@@ -107,28 +107,6 @@ def small_scales():
     return [(lambda a=a: moved(a)) for a in (1e-12, 1e-10, 1e-6, 1.0, 1e6, 1e12)]
 
 
-class Poisoned(Calculator):
-    """``inner`` with call number ``call`` returning ``value`` as the energy
-    or in atom 6's forces."""
-
-    def __init__(self, inner, call, what, value):
-        super().__init__()
-        self.implemented_properties = inner.implemented_properties
-        self.inner, self.call, self.what, self.value, self.calls = inner, call, what, value, 0
-
-    def calculate(self, atoms=None, properties=('energy',), system_changes=all_changes):
-        super().calculate(atoms, properties, system_changes)
-        self.calls += 1
-        copy = self.atoms.copy()
-        self.results = {name: np.copy(self.inner.get_property(name, copy))
-                        for name in {'energy', 'free_energy', 'forces', *properties}}
-        if self.calls == self.call:
-            if self.what == 'energy':
-                self.results['energy'] = self.results['free_energy'] = self.value
-            else:
-                self.results['forces'][6] = [self.value, 0.0, 0.0]
-
-
 def non_finite(directory: Path):
     def case(scene, what, value, call):
         if scene == 'emt':
@@ -138,7 +116,7 @@ def non_finite(directory: Path):
         else:
             atoms = build('hanging_net', 5, seed=1)
             inner = MaudCalculator(**atoms.calc.parameters)
-        atoms.calc = Poisoned(inner, call, what, value)
+        atoms.calc = PoisonedCalculator(inner, call, what, value)
         traj = directory / f'{scene}{what}{value}{call}.traj'
         try:
             with Maud(atoms, logfile=None, trajectory=traj) as opt:

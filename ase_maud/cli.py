@@ -180,6 +180,13 @@ def backends(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_file(parser):
+    """FILE and --frame: the net (or trajectory frame) a command reads."""
+    parser.add_argument('file', metavar='FILE', help='net or trajectory')
+    parser.add_argument('--frame', type=int, default=-1,
+                        help='frame of a trajectory (default: the last)')
+
+
 def _add_net_options(parser):
     """--edges, --fixed, --a, --Q and --dim of a command that reads a net."""
     parser.add_argument('--edges', metavar='EDGES_FILE',
@@ -290,11 +297,9 @@ def build_parser() -> argparse.ArgumentParser:
         ['ase-maud show net.obj                 # net.png',
          'ase-maud show maud.traj --frame 0 -o start.png',
          'ase-maud show maud.traj --gif         # maud.gif'])
-    p.add_argument('file', metavar='FILE', help='net or trajectory')
+    _add_file(p)
     p.add_argument('-o', '--output', metavar='PICTURE',
                    help='image file (default: FILE with .png, or .gif with --gif)')
-    p.add_argument('--frame', type=int, default=-1,
-                   help='frame of a trajectory (default: the last)')
     p.add_argument('--gif', action='store_true', help='animate the frames to a GIF')
     p.add_argument('--fps', type=int, default=8,
                    help='frames per second of the GIF (default: %(default)s)')
@@ -312,9 +317,7 @@ def build_parser() -> argparse.ArgumentParser:
         'Exit status 0 if stationary, 1 if not.',
         ['ase-maud classify maud.traj',
          'ase-maud classify relaxed.obj --fixed fixed.txt -k 10'])
-    p.add_argument('file', metavar='FILE', help='net or trajectory')
-    p.add_argument('--frame', type=int, default=-1,
-                   help='frame of a trajectory (default: the last)')
+    _add_file(p)
     p.add_argument('-k', type=int, default=6,
                    help='eigenvalues to print (and to compute, above 2000 free '
                    'coordinates) (default: %(default)s)')

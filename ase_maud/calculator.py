@@ -253,7 +253,6 @@ class MaudCalculator(Calculator):
             p, scaled, dim, want_blocks)
         if not (np.isfinite(e_rep) and np.isfinite(f_rep).all() and (
                 block6 is None or np.isfinite(block6).all())):
-            raise_on_coincident(scaled)
             raise_on_closest(scaled, a)
         e_spr, f_spr = physics.spring_terms(scaled, self.springs, 1.0)
         # E = a^2 Q e(x'), F = a Q f(x'), K = Q k(x') (module docstring)
@@ -375,25 +374,18 @@ def reduced_positions(positions: np.ndarray, a: float,
 
 def raise_on_closest(scaled: np.ndarray, a: float) -> None:
     """Raise ValueError naming the closest pair of points if it is closer
-    than :data:`CLOSEST_REDUCED_DISTANCE` ``a`` (``scaled`` is ``x / a``)."""
+    than :data:`CLOSEST_REDUCED_DISTANCE` ``a`` (``scaled`` is ``x / a``),
+    or at the same position."""
     if len(scaled) < 2:
         return
     i, j, distance = physics.closest_pair(scaled)
+    if distance == 0:
+        raise ValueError(f'atoms {i} and {j} are at the same position '
+                         f'{(a * scaled[i]).tolist()}: the repulsion a^3 Q / L '
+                         'is infinite there')
     if distance < CLOSEST_REDUCED_DISTANCE:
         raise ValueError(
             f'atoms {i} and {j} are {distance:.3g} a '
             f'apart (a = {a!r}): 1/L**3 overflows float64 below about '
             f'{CLOSEST_REDUCED_DISTANCE:g} a; move them apart or choose a '
             'smaller a')
-
-
-def raise_on_coincident(positions: np.ndarray) -> None:
-    """Raise ValueError naming two points at the same position, if any."""
-    order = np.lexsort(positions.T[::-1])
-    same = np.all(positions[order[1:]] == positions[order[:-1]], axis=1)
-    if np.any(same):
-        k = int(np.argmax(same))
-        i, j = sorted((int(order[k]), int(order[k + 1])))
-        raise ValueError(f'atoms {i} and {j} are at the same position '
-                         f'{positions[i].tolist()}: the repulsion a^3 Q / L '
-                         'is infinite there')

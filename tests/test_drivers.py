@@ -1,61 +1,29 @@
 """Maud under ASE's drivers and constraints: NEB (ASE's Au on Al(100)
-tutorial), MinimaHopping, and FixedPlane / Hookean, each checked against an
+tutorial, tools/neb_tutorial.py), MinimaHopping, and FixedPlane / Hookean, each checked against an
 ASE optimiser from the same start."""
 
-import warnings
+import importlib.util
+from pathlib import Path
 
 import numpy as np
 import pytest
-from ase.build import add_adsorbate, fcc100
-from ase.calculators.emt import EMT
-from ase.constraints import FixAtoms, FixedPlane, Hookean
-from ase.mep import NEB
-from ase.optimize import BFGS, FIRE, QuasiNewton
+from ase.constraints import FixedPlane, Hookean
+from ase.optimize import BFGS, FIRE
 
 from ase_maud import Maud
 from ase_maud.scenes import build
 
-
-def _tutorial_band(jitter_seed):
-    """ASE's NEB tutorial: Au hopping between hollow sites of Al(100), EMT,
-    three moving images; the middle images jittered by up to 0.02 A so that
-    each seed is a fresh start."""
-    slab = fcc100('Al', size=(2, 2, 3))
-    add_adsorbate(slab, 'Au', 1.7, 'hollow')
-    slab.center(axis=2, vacuum=4.0)
-    slab.set_constraint(FixAtoms(mask=[atom.tag > 1 for atom in slab]))
-    slab.calc = EMT()
-    QuasiNewton(slab, logfile=None).run(fmax=0.05)
-    initial = slab.copy()
-    slab[-1].x += slab.get_cell()[0, 0] / 2
-    QuasiNewton(slab, logfile=None).run(fmax=0.05)
-    final = slab.copy()
-    images = [initial] + [initial.copy() for _ in range(3)] + [final]
-    for image in images:
-        image.calc = EMT()
-    rng = np.random.default_rng(jitter_seed)
-    band = NEB(images, method='improvedtangent')
-    band.interpolate()
-    for image in images[1:-1]:
-        image.positions[-1] += rng.uniform(-0.02, 0.02, 3)
-    return band, images
-
-
-def _relax_band(optimizer, seed, **kwargs):
-    band, images = _tutorial_band(seed)
-    opt = optimizer(band, logfile=None, **kwargs)
-    with warnings.catch_warnings():
-        warnings.simplefilter('ignore', UserWarning)
-        converged = opt.run(fmax=0.05, steps=300)
-    barrier = max(image.get_potential_energy() for image in images)
-    return converged, opt.nsteps, barrier - images[0].get_potential_energy()
+_SPEC = importlib.util.spec_from_file_location(
+    'neb_tutorial', Path(__file__).parent.parent / 'tools' / 'neb_tutorial.py')
+neb_tutorial = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(neb_tutorial)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize('seed', [0, 1])
 def test_neb_tutorial_converges_in_no_more_steps_than_fire(seed):
-    fire = _relax_band(FIRE, seed)
-    maud = _relax_band(Maud, seed)
+    fire = neb_tutorial.relax_band(FIRE, seed)
+    maud = neb_tutorial.relax_band(Maud, seed)
     assert fire[0] and maud[0]
     assert maud[1] <= fire[1]
     # The same band: the barrier agrees to the resolution fmax 0.05 allows.
@@ -63,7 +31,7 @@ def test_neb_tutorial_converges_in_no_more_steps_than_fire(seed):
 
 
 def test_neb_gets_the_stationary_target_and_says_so(tmp_path):
-    band, _ = _tutorial_band(0)
+    band, _ = neb_tutorial.tutorial_band(0)
     log = tmp_path / 'neb.log'
     opt = Maud(band, logfile=str(log))
     assert opt.target == 'stationary'

@@ -9,15 +9,13 @@ verdict. Two paths give the same answer:
   ``numpy.linalg.eigh``; for up to :data:`DENSE_MAX_DOFS` free degrees of
   freedom.
 - ``iterative``: the lowest ``k`` eigenvalues by LOBPCG on Hessian-vector
-  products (:func:`ase_maud.hessian.hessian_vector_product`), O(N) memory,
+  products (:meth:`ase_maud.potential.MaudPotential.hvp`), O(N) memory,
   O(N**2) time per product, a block of vectors per pass over the pairs. The
   preconditioner is :func:`near_field_stiffness`, a sparse positive model of
-  ``H`` (springs and close pairs), factorised once. On a relaxed free square
-  net of 50 x 50 points ``eigsh(which='SA')`` without it needed about 900
-  products for the lowest 6; LOBPCG with it about 130, and about as many on
-  20 x 20 (the near field carries the conditioning; the count hardly grows
-  with N). ``eigsh`` with a shift-invert needs a factorisation of ``H``,
-  which is dense.
+  ``H`` (springs and close pairs), factorised once: the near field carries
+  the conditioning, so the number of products hardly grows with N.
+  ``eigsh`` with a shift-invert needs a factorisation of
+  ``H``, which is dense.
 
 Removed modes. Fixed degrees of freedom (:class:`~ase.constraints.FixAtoms`,
 :class:`~ase.constraints.FixCartesian`) are projected out by keeping only the
@@ -53,7 +51,6 @@ from scipy.sparse.linalg import LinearOperator, eigsh, lobpcg, splu
 from scipy.spatial import cKDTree
 
 from . import physics
-from .hessian import hessian_vector_product
 from .stiffness import free_dofs
 
 #: Eigenvalues with ``|lambda| <= RTOL * max|lambda|`` count as zero.
@@ -148,11 +145,11 @@ def hessian_operator(atoms: Atoms, free: np.ndarray | None = None,
     eigenvalue 0. A block of vectors is multiplied in one pass over the pairs.
     """
     calc = atoms.calc
-    p = calc.parameters
+    potential = calc.potential
     positions = calc.check_atoms(atoms)
-    free = free_mask(atoms, p['dim']) if free is None else free
+    free = free_mask(atoms, potential.dim) if free is None else free
     if rigid is None:
-        rigid = rigid_body_modes(positions, free, p['dim'])
+        rigid = rigid_body_modes(positions, free, potential.dim)
     flat = free.ravel()
 
     def project(x):
@@ -161,8 +158,7 @@ def hessian_operator(atoms: Atoms, free: np.ndarray | None = None,
     def matmat(x):
         full = np.zeros((flat.size, x.shape[1]))
         full[flat] = project(x)
-        hx = hessian_vector_product(positions, calc.springs, p['a'], p['Q'],
-                                    p['dim'], full.T.reshape(-1, *free.shape))
+        hx = potential.hvp(positions, full.T.reshape(-1, *free.shape))
         return project(hx.reshape(x.shape[1], -1).T[flat])
 
     n = int(flat.sum())
@@ -188,8 +184,8 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
         about as not stationary; default :data:`FTOL` ``* Q a``.
     """
     calc = atoms.calc
-    p = calc.parameters
-    dim = p['dim']
+    potential = calc.potential
+    dim = potential.dim
     positions = calc.check_atoms(atoms)
     free = free_mask(atoms, dim)
     rigid = rigid_body_modes(positions, free, dim)
@@ -224,7 +220,7 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
     modes = np.zeros((len(values), len(atoms), 3))
     modes[:, :, :dim][:, free] = vectors.T
     fmax = float(np.linalg.norm(atoms.get_forces(), axis=1).max(initial=0.0))
-    ftol = FTOL * p['Q'] * p['a'] if ftol is None else ftol
+    ftol = FTOL * potential.force_unit if ftol is None else ftol
     if fmax > ftol:
         warnings.warn(f'not a stationary point: fmax = {fmax:.3g} > '
                       f'{ftol:.3g}; the verdict {verdict!r} describes the '
@@ -291,15 +287,14 @@ def near_field_stiffness(atoms: Atoms, cutoff: float = 1.5) -> sp.csr_matrix:
     construction, with the translations as its null space. It equals the near
     field's Hessian wherever every pair block is already positive.
     """
-    calc = atoms.calc
-    p = calc.parameters
-    dim = p['dim']
-    x = atoms.positions[:, :dim] / p['a']   # units of a: Q times unit blocks
+    potential = atoms.calc.potential
+    dim = potential.dim
+    x = potential.reduced(atoms.positions)[:, :dim]   # units of a: Q times unit blocks
     n = len(x)
     tree = cKDTree(x)
     spacing = np.median(tree.query(x, k=2)[0][:, 1])
     close = tree.query_pairs(cutoff * spacing, output_type='ndarray')
-    springs = np.sort(calc.springs, axis=1)
+    springs = np.sort(potential.springs, axis=1)
     pairs, where = np.unique(np.vstack([springs, np.sort(close, axis=1)]),
                              axis=0, return_inverse=True)
     i, j = pairs.T
@@ -307,7 +302,7 @@ def near_field_stiffness(atoms: Atoms, cutoff: float = 1.5) -> sp.csr_matrix:
     blocks = physics.repulsion_block(d)
     sprung = where[:len(springs)]
     blocks[sprung] += physics.spring_block(d[sprung], 1.0)
-    blocks *= p['Q']
+    blocks *= potential.Q
     values, vectors = np.linalg.eigh(blocks)
     blocks = np.einsum('pak,pk,pbk->pab', vectors, np.abs(values), vectors)
     axis = np.arange(dim)
@@ -333,7 +328,7 @@ def displace_along_mode(atoms: Atoms, point: StationaryPoint, mode: int = 0,
         raise ValueError(f'mode {mode} is not unstable: the point has '
                          f'{point.n_negative} negative eigenvalues')
     calc = atoms.calc
-    step = 0.1 * calc.parameters['a'] if step is None else step
+    step = 0.1 * calc.potential.a if step is None else step
     vector = point.modes[mode]
     vector = step * vector / np.linalg.norm(vector, axis=1).max()
     copies = []

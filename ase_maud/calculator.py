@@ -10,17 +10,17 @@ Forces follow ASE's sign, ``f = -dE/dr``. The property ``stiffness`` holds the
 nodal blocks ``K_mm = d2E/dr_m2`` (N, dim, dim), the Hessian's diagonal blocks:
 the stiffness at point m with every other point held fixed.
 
-Scale. Everything is computed for the scene measured in ``a`` (``x' = x /
-a``) at ``a = Q = 1`` and scaled back: ``E = a**2 Q e(x')``, ``F = a Q
-f(x')``, ``K = Q k(x')``, so no power of ``a`` is formed and every result
-is finite wherever it is representable; where it is not, a ValueError names
-the atoms (or ``a`` and ``Q``), never a NaN.
+The potential itself, its reduced units (everything is computed at ``a = Q
+= 1`` for the scene measured in ``a`` and scaled back) and its exact spring
+Hessian are :attr:`MaudCalculator.potential`, a
+:class:`~ase_maud.potential.MaudPotential`; the sum over pairs is a backend's
+(:mod:`ase_maud.backends`). Where a result is not representable, a ValueError
+names the atoms (or ``a`` and ``Q``), never a NaN.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from numbers import Integral, Real
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -30,9 +30,8 @@ from ase.calculators.calculator import Calculator, all_changes
 from numpy.typing import ArrayLike
 
 from . import backends, physics, topology
-from .backends.auto import DEFAULT_TOL
-from .hessian import dense_hessian
-from .springs import check_range, check_springs
+from .potential import MaudPotential
+from .springs import check_range
 
 #: Relative tolerance on the spread of z for a ``dim=2`` scene.
 PLANE_TOLERANCE = 1e-10
@@ -68,24 +67,21 @@ class MaudCalculator(Calculator):
         threads), ``numpy`` (the slow reference) or ``fmm`` (FMM3D's fast
         multipole method at ``fmm_eps``, O(N);
         ``pip install 'ase-maud[fmm]'``).
-    tol : float in [0, 1)
-        For ``auto``: the force error allowed, relative to the largest
-        repulsive force ``max_i |f_i|`` of the repulsion alone (for a scene
-        without springs, the largest force; the springs are always exact).
-        Default :data:`~.backends.auto.DEFAULT_TOL` = 1e-8, far below what
-        a relaxation resolves, yet coarse enough for the FMM from about
-        40000 points (one thread); 0 asks for the exact direct sum. Ignored by the
-        explicit backends.
-    crossover : int or None
-        For ``auto``: the number of points from which the FMM is used,
-        whatever ``tol`` and the thread count; ``None``
-        (default) uses the measured table
-        :data:`ase_maud.backends.auto.CROSSOVER` (assign to it to change
-        it for every calculator).
-    fmm_eps : float in (0, 1)
-        Requested relative precision of the explicit ``fmm`` backend
-        (default 1e-6); its forces are good to ``0.1 fmm_eps`` of the
-        largest repulsive force.
+    **kwargs
+        The backends' parameters (each backend declares its own, with its
+        default, in :mod:`.backends`; each is checked whichever backend is
+        chosen): ``tol`` (``auto``: the force error allowed, relative to the
+        largest repulsive force ``max_i |f_i|`` of the repulsion alone; the
+        springs are always exact; default
+        :data:`~.backends.auto.DEFAULT_TOL`, 1e-8, far below what a
+        relaxation resolves yet coarse enough for the FMM on large scenes; 0
+        asks for the exact direct sum), ``crossover`` (``auto``: the number
+        of points from which the FMM is used whatever ``tol``; ``None``, the
+        default, uses the measured table
+        :data:`ase_maud.backends.auto.CROSSOVER`), ``fmm_eps`` (the explicit
+        ``fmm`` backend's requested relative precision, default 1e-6; its
+        forces are good to ``0.1 fmm_eps`` of the largest repulsive force);
+        and ASE's own calculator keywords.
 
     Notes
     -----
@@ -118,10 +114,12 @@ class MaudCalculator(Calculator):
     implemented_properties = ['energy', 'free_energy', 'forces', 'stiffness',
                               'hessian']
     # springs default to a tuple: Calculator.todict compares each parameter
-    # with its default by ``!=``, which fails on an ndarray default.
+    # with its default by ``!=``, which fails on an ndarray default. The
+    # potential's parameters, then the backends' (from their registry).
     default_parameters = {'springs': (), 'a': 1.0, 'Q': 1.0, 'dim': 3,
-                          'backend': 'auto', 'tol': DEFAULT_TOL,
-                          'crossover': None, 'fmm_eps': 1e-6}
+                          'backend': 'auto', **backends.parameter_defaults()}
+    #: The parameters that make the potential (the rest choose how to sum it).
+    potential_parameters = ('springs', 'a', 'Q', 'dim')
     discard_results_on_any_change = True
     nolabel = True
 
@@ -135,14 +133,12 @@ class MaudCalculator(Calculator):
 
     def __init__(self, springs: ArrayLike = (), a: float = 1.0,
                  Q: float = 1.0, dim: int = 3, backend: str = 'auto',
-                 tol: float = DEFAULT_TOL, crossover: int | None = None,
-                 fmm_eps: float = 1e-6, **kwargs: Any) -> None:
-        self._spring_hessian: tuple[tuple, sp.csr_matrix] | None = None
+                 **kwargs: Any) -> None:
+        self.potential: MaudPotential = MaudPotential(np.zeros((0, 2), int))
         self.last_backend: str | None = None
         self.last_tolerance: float | None = None
         self.last_force_scale: float | None = None
         super().__init__(springs=springs, a=a, Q=Q, dim=dim, backend=backend,
-                         tol=tol, crossover=crossover, fmm_eps=fmm_eps,
                          **kwargs)
 
     def set(self, **kwargs: Any) -> dict[str, Any]:
@@ -152,9 +148,20 @@ class MaudCalculator(Calculator):
         ``crossover`` alone that the results held already meet
         (:attr:`last_tolerance` ``<=`` the new ``tol``).
         """
-        if 'springs' in kwargs:
-            kwargs['springs'] = check_springs(kwargs['springs'])
-        _check_parameters({**self.parameters, **kwargs})
+        unknown = sorted(set(kwargs) - set(self.default_parameters))
+        if unknown:
+            raise ValueError(f'MaudCalculator takes no parameter {unknown[0]!r}; '
+                             f'its parameters are {", ".join(self.default_parameters)}')
+        merged = {**self.parameters, **kwargs}
+        if set(kwargs) & set(self.potential_parameters):
+            potential = MaudPotential(**{name: merged[name]
+                                         for name in self.potential_parameters})
+            backends.check_parameters(merged)
+            self.potential = potential
+            kwargs.update({name: getattr(potential, name) for name in kwargs
+                           if name in self.potential_parameters})
+        else:
+            backends.check_parameters(merged)
         if (kwargs and set(kwargs) <= self.accuracy_parameters
                 and self.last_tolerance is not None
                 and self.last_tolerance <= kwargs.get(
@@ -165,6 +172,10 @@ class MaudCalculator(Calculator):
             return changed
         return super().set(**kwargs)
 
+    def set_tolerance(self, tol: float) -> None:
+        """Set ``tol`` for the next calls (:class:`ase_maud.accuracy.ToleranceAware`)."""
+        self.set(tol=tol)
+
     def reset(self) -> None:
         """Clear the results and what is known of their accuracy."""
         super().reset()
@@ -174,18 +185,18 @@ class MaudCalculator(Calculator):
     @property
     def springs(self) -> np.ndarray:
         """The (K, 2) int array of sprung pairs."""
-        return self.parameters['springs']
+        return self.potential.springs
 
     @property
     def dim(self) -> int:
         """2 (points on a plane z = const, 2x2 blocks) or 3."""
-        return self.parameters['dim']
+        return self.potential.dim
 
     @property
     def length_scale(self) -> float:
         """The length ``a`` of the repulsion ``a**3 Q / L`` (a dimer with
         one spring rests at ``L = a``)."""
-        return self.parameters['a']
+        return self.potential.a
 
     def check_state(self, atoms: Atoms, tol: float = 1e-15) -> list[str]:
         """What changed since the last calculation, compared exactly.
@@ -228,9 +239,9 @@ class MaudCalculator(Calculator):
         if bad.size:
             raise ValueError(f'atom {bad[0]} has a non-finite position '
                              f'{positions[bad[0]].tolist()}')
-        if self.parameters['dim'] == 2 and natoms > 1:
+        if self.dim == 2 and natoms > 1:
             z = positions[:, 2]
-            extent = max(np.ptp(positions[:, :2]), self.parameters['a'])
+            extent = max(np.ptp(positions[:, :2]), self.length_scale)
             off = np.abs(z - z[0])
             if off.max() > PLANE_TOLERANCE * extent:
                 k = int(np.argmax(off))
@@ -245,20 +256,18 @@ class MaudCalculator(Calculator):
                   system_changes: Sequence[str] = all_changes) -> None:
         super().calculate(atoms, properties, system_changes)
         positions = self.check_atoms(self.atoms)
-        p = self.parameters
-        dim, a, Q = p['dim'], p['a'], p['Q']
+        potential = self.potential
+        dim, a, Q = potential.dim, potential.a, potential.Q
         want_blocks = 'stiffness' in properties
-        scaled = reduced_positions(positions, a, dim)
+        scaled = potential.reduced(positions)
         (e_rep, f_rep, block6), choice = backends.evaluate(
-            p, scaled, dim, want_blocks)
+            self.parameters, scaled, dim, want_blocks)
         if not (np.isfinite(e_rep) and np.isfinite(f_rep).all() and (
                 block6 is None or np.isfinite(block6).all())):
             raise_on_closest(scaled, a)
         e_spr, f_spr = physics.spring_terms(scaled, self.springs, 1.0)
-        # E = a^2 Q e(x'), F = a Q f(x'), K = Q k(x') (module docstring)
-        aq = a * Q
-        results = {'energy': (aq * a) * (e_rep + e_spr),
-                   'forces': aq * (f_rep + f_spr)}
+        results = {'energy': potential.energy_unit * (e_rep + e_spr),
+                   'forces': potential.force_unit * (f_rep + f_spr)}
         if want_blocks:
             blocks = backends.voigt_to_blocks(block6, dim)
             blocks += physics.spring_nodal_blocks(self.springs, len(scaled),
@@ -266,9 +275,7 @@ class MaudCalculator(Calculator):
             results['stiffness'] = Q * blocks
         if 'hessian' in properties:
             self.check_hessian_size(len(scaled))
-            results['hessian'] = dense_hessian(
-                scaled, self.springs, 1.0, Q, dim,
-                spring_part=self.get_spring_hessian(self.atoms))
+            results['hessian'] = potential.hessian(positions)
         bad = [name for name, value in results.items()
                if not np.all(np.isfinite(value))]
         if bad:
@@ -285,7 +292,7 @@ class MaudCalculator(Calculator):
         self.results.update(results, free_energy=results['energy'])
         self.last_backend = choice.backend.name
         self.last_tolerance = max(held or 0.0, choice.tolerance)
-        self.last_force_scale = aq * float(
+        self.last_force_scale = potential.force_unit * float(
             np.sqrt(np.einsum('ij,ij->i', f_rep, f_rep).max(initial=0.0)))
 
     def get_stiffness(self, atoms: Atoms | None = None) -> np.ndarray:
@@ -310,66 +317,23 @@ class MaudCalculator(Calculator):
             raise ValueError(
                 f'{what}: {natoms} atoms exceed max_hessian_atoms = '
                 f'{self.max_hessian_atoms} (the dense matrix would hold '
-                f'{(self.parameters["dim"] * natoms)**2:.2e} entries); use'
-                ' Hessian-vector products (ase_maud.hessian.'
-                'hessian_vector_product, or ase_maud.analysis.hessian_operator'
+                f'{(self.dim * natoms)**2:.2e} entries); use'
+                ' Hessian-vector products (calc.potential.hvp, or '
+                'ase_maud.analysis.hessian_operator'
                 " and classify(atoms, method='iterative') for the lowest "
                 'modes) instead')
 
     def get_spring_hessian(self, atoms: Atoms | None = None) -> sp.csr_matrix:
         """The springs' exact, constant Hessian ``Q (L (x) I_dim)``, shape
-        (dim N, dim N) (:func:`.physics.spring_hessian`).
-
-        It depends on the springs, the number of atoms, ``Q`` and ``dim``
-        only, not on the positions: it is built once and kept until one of
-        them changes. A spring index beyond the last atom is a ValueError.
-        """
+        (dim N, dim N), kept by :attr:`potential` (built once per number of
+        atoms). A spring index beyond the last atom is a ValueError."""
         atoms = atoms if atoms is not None else self.atoms
-        natoms = len(atoms)
-        check_range(self.springs, natoms)
-        p = self.parameters
-        key = (self.springs.tobytes(), self.springs.shape, natoms, p['Q'],
-               p['dim'])
-        if self._spring_hessian is None or self._spring_hessian[0] != key:
-            matrix = physics.spring_hessian(self.springs, natoms, p['Q'],
-                                            p['dim'])
-            self._spring_hessian = key, matrix
-        return self._spring_hessian[1]
+        return self.potential.spring_hessian(len(atoms))
 
     def unbounded_components(self, atoms: Atoms) -> list[list[int]]:
         """Spring components of ``atoms`` proved to fly away for ever
         (:func:`.topology.unbounded_components`); empty if there are none."""
         return topology.unbounded_components(atoms, self.springs, self.dim)
-
-
-def _check_parameters(p: Mapping[str, Any]) -> None:
-    """Raise ValueError unless a, Q, dim, the backend and the backends'
-    parameters (:func:`.backends.check_parameters`) in ``p`` are valid."""
-    for name in ('a', 'Q'):
-        value = p[name]
-        if not (isinstance(value, Real) and np.isfinite(value)
-                and value > 0):
-            raise ValueError(f'{name} must be a positive finite number, '
-                             f'got {value!r}')
-    if not (isinstance(p['dim'], Integral) and p['dim'] in (2, 3)):
-        raise ValueError(f"dim must be 2 or 3, got {p['dim']!r}")
-    backends.check_parameters(p)
-
-
-def reduced_positions(positions: np.ndarray, a: float,
-                      dim: int) -> np.ndarray:
-    """The positions in units of ``a``, ``x / a``, with ``z = 0`` for
-    ``dim=2``; a ValueError names an atom whose ``x / a`` overflows."""
-    with np.errstate(over='ignore'):
-        scaled = positions / a
-    bad = np.flatnonzero(~np.isfinite(scaled).all(axis=1))
-    if bad.size:
-        raise ValueError(f'atom {bad[0]} at {positions[bad[0]].tolist()} is '
-                         f'beyond the float64 range in units of a = {a!r}; '
-                         'choose a nearer the size of the scene')
-    if dim == 2:
-        scaled[:, 2] = 0.0
-    return scaled
 
 
 def raise_on_closest(scaled: np.ndarray, a: float) -> None:

@@ -1,8 +1,18 @@
-"""Checks of user input that several modules share."""
+"""Every user setting's rule, in one table, and the one function that checks it.
+
+:data:`RULES` says what each keyword of the package accepts: the optimiser's
+(:class:`ase_maud.Maud` and its ``run``), the stiffness models', the
+calculator's and the backends'. :func:`check` is the only place a value is
+tested against its rule: a bad value is a ValueError that names the keyword,
+the value and what is accepted. Each keyword is checked where it enters (the
+object that keeps it), nowhere else.
+"""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from numbers import Integral, Real
 from typing import Any
 
@@ -15,3 +25,113 @@ def as_whole(value: Any) -> int | None:
     if isinstance(value, Integral):
         return int(value)
     return int(value) if math.isfinite(value) and float(value).is_integer() else None
+
+
+def as_number(value: Any) -> float | None:
+    """``value`` as a finite float (never a bool), else None."""
+    if isinstance(value, bool) or not isinstance(value, Real):
+        return None
+    if isinstance(value, Integral):
+        return float(value) if abs(value) < 2.0**1023 else None
+    return float(value) if math.isfinite(value) else None
+
+
+@dataclass(frozen=True)
+class Rule:
+    """What a keyword accepts.
+
+    ``accepted``: the words of the error message. Either ``choices`` (the
+    values allowed, compared by equality with a value of the same type) or a
+    number: ``test`` on the float (or, if ``whole``, on the int) value.
+    ``none``: None is accepted too (a default decided elsewhere).
+    """
+
+    accepted: str
+    test: Callable[[float], bool] | None = None
+    whole: bool = False
+    none: bool = False
+    choices: tuple[Any, ...] = ()
+
+
+def _choice(*choices: Any, none: bool = False, words: str = '') -> Rule:
+    accepted = f'one of {choices}' + (words or (', or None' if none else ''))
+    return Rule(accepted, none=none, choices=choices)
+
+
+#: Each keyword's rule (see :func:`check`).
+RULES: dict[str, Rule] = {
+    # the optimiser's step rule and run
+    'gamma': Rule('a positive finite number', lambda v: v > 0),
+    'gamma_max': Rule("a positive finite number, or None (the model's)",
+                      lambda v: v > 0, none=True),
+    'gamma_growth': Rule("a finite number >= 1, or None (the model's)",
+                         lambda v: v >= 1, none=True),
+    'overshoot_shrink': Rule('a number in (0, 1]', lambda v: 0 < v <= 1),
+    'beta_max': Rule("a number in [0, 1), or None (the model's)",
+                     lambda v: 0 <= v < 1, none=True),
+    'memory': Rule("a whole number >= 0, or None (the model's)",
+                   lambda v: v >= 0, whole=True, none=True),
+    'maxstep_nn': Rule("a number in (0, 0.5) (at 0.5 two points could meet), "
+                       "or None (the model's)", lambda v: 0 < v < 0.5, none=True),
+    'maxstep': Rule('a positive finite length, or None (no bound)',
+                    lambda v: v > 0, none=True),
+    'divergence_factor': Rule('a finite number > 1', lambda v: v > 1),
+    'patience': Rule('a whole number >= 0 (steps)', lambda v: v >= 0, whole=True),
+    'fmax': Rule('a positive finite number (force units)', lambda v: v > 0),
+    'steps': Rule('a whole number >= 0', lambda v: v >= 0, whole=True),
+    # the stiffness models
+    'target': _choice('minimum', 'stationary', none=True,
+                      words=", or None (the default: 'minimum', 'stationary' "
+                      'for a band of images)'),
+    'method': _choice('tensor', 'scalar'),
+    'floor': Rule("a number in (0, 1), or None (the model's)",
+                  lambda v: 0 < v < 1, none=True),
+    'kappa0': Rule('a positive finite number (force per length)', lambda v: v > 0),
+    'refresh': Rule('a finite number >= 0 (a fraction of the nearest-neighbour '
+                    'distance; 0 rebuilds at every step)', lambda v: v >= 0),
+    # the calculator
+    'a': Rule('a positive finite number', lambda v: v > 0),
+    'Q': Rule('a positive finite number', lambda v: v > 0),
+    'dim': Rule('2 or 3', choices=(2, 3)),
+    # the backends
+    'tol': Rule('a number in [0, 1), the force error allowed relative to the '
+                'largest repulsive force (0: exact)', lambda v: 0 <= v < 1),
+    'crossover': Rule('None (the measured table) or the number of points from '
+                      'which the FMM is used, an integer >= 0',
+                      lambda v: v >= 0, whole=True, none=True),
+    'fmm_eps': Rule('a number in (0, 1), the requested relative precision',
+                    lambda v: 0 < v < 1),
+}
+
+
+def check(name: str, value: Any) -> Any:
+    """``value`` checked against ``RULES[name]``: returned as a float (an int
+    for a whole number or an integer choice, the value itself for a string
+    choice, None where allowed), or a ValueError naming ``name``, the value
+    and what is accepted."""
+    rule = RULES[name]
+    if value is None and rule.none:
+        return None
+    if rule.choices:
+        for choice in rule.choices:
+            if _matches(value, choice):
+                return choice
+    else:
+        number = as_whole(value) if rule.whole else as_number(value)
+        if number is not None and rule.test(number):
+            return number
+    raise ValueError(f'{name} must be {rule.accepted}, got {value!r}')
+
+
+def _matches(value: Any, choice: Any) -> bool:
+    """A string equal to a string ``choice``, or an integer (not a float, not
+    a bool) equal to an integer one."""
+    if isinstance(choice, str):
+        return isinstance(value, str) and value == choice
+    return (as_whole(value) is not None and not isinstance(value, float)
+            and value == choice)
+
+
+def check_all(**values: Any) -> dict[str, Any]:
+    """:func:`check` of each keyword, as a dict of the checked values."""
+    return {name: check(name, value) for name, value in values.items()}

@@ -224,8 +224,9 @@ def build_parser() -> argparse.ArgumentParser:
     """The argparse parser of ``ase-maud`` and its three commands."""
     from . import backends as registry
     from .bench.optimizers import OPTIMIZERS
+    from .checks import RULES
     from .scenes import SCENES, SUITES
-    from .stiffness import METHODS, MODELS
+    from .stiffness import MODELS
 
     parser = argparse.ArgumentParser(
         prog='ase-maud', description='The Maud algorithm for points that '
@@ -268,7 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--model', default='auto',
                    choices=('auto', *MODELS),
                    help='stiffness model of the step (default: %(default)s)')
-    p.add_argument('--method', default='tensor', choices=METHODS,
+    p.add_argument('--method', default='tensor', choices=RULES['method'].choices,
                    help='nodal Maud step (default: %(default)s)')
     p.add_argument('--fmax', type=float, default=1e-3,
                    help='largest atomic force norm at convergence '

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import numpy as np
 from ase import Atoms
-from ase.calculators.calculator import Calculator, all_changes
 from ase.constraints import FixCartesian
 
 from .calculator import MaudCalculator
@@ -208,30 +207,3 @@ HARD_CASES = {f.__name__: f for f in (close_pair, no_springs, islands,
                                       ring_with_centre, stiff_soft,
                                       tangled_net, tangled_hanging_net,
                                       flat_cluster)}
-
-
-class PoisonedCalculator(Calculator):
-    """Any ASE calculator ``inner``, except that its call number ``call``
-    returns ``value`` (NaN or inf, say) as the energy (``what='energy'``) or
-    as the x force on atom ``atom`` (``what='forces'``): the hard input of a
-    calculator that fails mid-run."""
-
-    def __init__(self, inner: Calculator, call: int, what: str, value: float,
-                 atom: int = 6) -> None:
-        super().__init__()
-        self.implemented_properties = inner.implemented_properties
-        self.inner, self.call, self.what, self.value = inner, call, what, value
-        self.atom, self.calls = atom, 0
-
-    def calculate(self, atoms=None, properties=('energy',),
-                  system_changes=all_changes):
-        super().calculate(atoms, properties, system_changes)
-        self.calls += 1
-        copy = self.atoms.copy()
-        self.results = {name: np.copy(self.inner.get_property(name, copy))
-                        for name in {'energy', 'free_energy', 'forces', *properties}}
-        if self.calls == self.call:
-            if self.what == 'energy':
-                self.results['energy'] = self.results['free_energy'] = self.value
-            else:
-                self.results['forces'][self.atom] = [self.value, 0.0, 0.0]

@@ -29,7 +29,7 @@ Formats, chosen by the file name's suffix:
   default ``NAME.edges.txt`` beside ``NAME.xyz``; :func:`write_net` writes it
   there.
 
-Reader choice: our own OBJ parser (about 40 lines). meshio's OBJ reader skips
+Reader choice: our own OBJ parser. meshio's OBJ reader skips
 ``l`` lines and reports no line numbers; trimesh triangulates quads, adding
 a diagonal spring to every quad. Neither keeps the rest of the file for
 writing back. COMPAS's JSON is plain JSON: the standard library reads it.

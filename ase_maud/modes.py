@@ -66,7 +66,7 @@ def phonopy_cell(atoms: Atoms, masses: ArrayLike | None = None) -> PhonopyAtoms:
     1, is what counts).
     """
     positions = atoms.get_positions()
-    extent = max(np.ptp(positions, axis=0).max(), atoms.calc.parameters['a'])
+    extent = max(np.ptp(positions, axis=0).max(), atoms.calc.length_scale)
     side = (1 + 2 * BOX_MARGIN) * extent
     centred = positions - positions.mean(axis=0) + side / 2
     masses = np.ones(len(atoms)) if masses is None else masses
@@ -113,7 +113,7 @@ def finite_difference_force_constants(atoms: Atoms,
 
     Phonopy displaces every point by ``distance`` (default ``1e-4`` times the
     shortest pair distance) along +-x, +-y, +-z; a ``dim=3`` MaudCalculator
-    with the exact direct sum (``backend='numba'``, whatever ``atoms`` uses)
+    with the exact direct sum (``tol=0``, whatever ``atoms`` uses)
     gives the forces; phonopy fits the force constants (N, N, 3, 3). The
     central differences leave errors of order ``distance**2``.
     """
@@ -125,7 +125,7 @@ def finite_difference_force_constants(atoms: Atoms,
     phonon = make_phonopy(atoms)
     phonon.generate_displacements(distance=distance, is_plusminus=True)
     probe = atoms.copy()
-    probe.calc = calculator_3d(atoms.calc, backend='numba')
+    probe.calc = calculator_3d(atoms.calc, backend='auto', tol=0.0)
     forces = []
     for cell in phonon.supercells_with_displacements:
         probe.positions = cell.positions  # the box shifts every point alike

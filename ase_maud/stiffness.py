@@ -34,14 +34,10 @@ held by :class:`~ase.constraints.FixAtoms` and
 other constraints are left to ASE (the optimizer applies them to every move).
 A ``dim=2`` scene works with 2x2 blocks and never moves ``z``.
 
-Each model also names the defaults of the step rule that suit it
-(:attr:`StiffnessModel.step_defaults`, chosen by measurement, see
-docs/optimizer.md): the Newton-like global and exact models take gamma = 1
-with no momentum (the exact one with no memory and a trust-region bound: a
-move too long for some point is damped, ``(K + mu I)^-1 f``, until it fits;
-the global one with an L-BFGS memory over ``P`` and each point's move scaled
-down on its own); the nodal and secant models keep Day's momentum, as the
-specification has it.
+A model is stateless but for caches: what it learns in a run (the secant
+curvature) is handed back to the step rule (:meth:`StiffnessModel.observe`),
+which keeps it in its state and passes it to :meth:`StiffnessModel.at`. The
+step rule's defaults for each model are in :data:`ase_maud.method.STEP_DEFAULTS`.
 """
 
 from __future__ import annotations
@@ -54,7 +50,9 @@ import scipy.sparse as sp
 from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian, FixedLine, FixedPlane
 from scipy.sparse.linalg import LinearOperator, cg, splu
-from scipy.spatial import cKDTree
+
+from .checks import check
+from .neighbours import NearestDistances
 
 #: ``model='auto'`` takes the exact model up to this many free degrees of
 #: freedom (dense eigen-decomposition cost against a calculator call; see
@@ -70,14 +68,6 @@ DENSE_MIN_DOFS = 300
 #: Relative residual of the iterative solves (CG, multigrid).
 SOLVE_RTOL = 1e-10
 
-#: What a model may be asked to reach, and the nodal step's two forms.
-TARGETS = ('minimum', 'stationary')
-METHODS = ('tensor', 'scalar')
-
-#: Step-rule defaults of the nodal and secant models: Day's dynamic
-#: relaxation as tuned for the nodal step (docs/optimizer.md).
-DYNAMIC_RELAXATION = {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0,
-                      'trust_region': False}
 
 
 class Solver(ABC):
@@ -85,37 +75,33 @@ class Solver(ABC):
 
     @abstractmethod
     def solve(self, forces: np.ndarray) -> np.ndarray:
-        """The move ``d`` with ``K d = forces``, shape (N, 3), zero on fixed
-        degrees of freedom and on ``z`` in 2D."""
+        """The move ``d`` with ``K d = forces``, shape (N, 3), zero on the
+        degrees of freedom FixAtoms and FixCartesian hold and on ``z`` in 2D."""
 
 
 class StiffnessModel(ABC):
     """What the Maud step divides the forces by; see the module docstring.
 
-    ``prop`` names the calculator property whose request computes, in the
-    same calculator call as the energy and forces, what :meth:`at` needs
-    (None: nothing beyond the forces).
+    ``target`` ('minimum' or 'stationary') and ``floor`` (relative
+    eigenvalue floor; None: the model's :attr:`default_floor`) are checked
+    here. ``prop`` names the calculator property whose request computes, in
+    the same calculator call as the energy and forces, what :meth:`at`
+    needs (None: nothing beyond the forces).
     """
 
     name: str = ''
     prop: str | None = None
-    #: Step-rule defaults suited to this model (keywords of ``Maud``).
-    step_defaults: dict[str, Any] = {}
-
-    def __init__(self, target: str = 'minimum', floor: float | None = None):
-        if target not in TARGETS:
-            raise ValueError(f'target must be one of {TARGETS}, got {target!r}')
-        floor = self.default_floor if floor is None else floor
-        if not (isinstance(floor, (int, float)) and 0 < floor < 1):
-            raise ValueError(f'floor must be a number in (0, 1), got {floor!r}')
-        self.target = target
-        self.floor = float(floor)
-
     default_floor = 1e-2
 
+    def __init__(self, target: str = 'minimum', floor: float | None = None):
+        self.target = check('target', target) or 'minimum'
+        floor = check('floor', floor)
+        self.floor = self.default_floor if floor is None else floor
+
     @abstractmethod
-    def at(self, atoms: Atoms) -> Solver:
-        """The model at ``atoms``' current positions."""
+    def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
+        """The model at ``atoms``' current positions, with what it has learnt
+        in the run so far (:meth:`observe`)."""
 
     def needs(self, atoms: Atoms) -> str | None:
         """The calculator property :meth:`at` will ask for at ``atoms``'
@@ -123,16 +109,12 @@ class StiffnessModel(ABC):
         asks for it together with the forces, in one calculator call."""
         return self.prop
 
-    def observe(self, step: np.ndarray, force_drop: np.ndarray) -> None:  # noqa: B027 (optional hook)
-        """Learn from an accepted step ``s`` and ``y = f_old - f_new``
-        (both (N, 3)); only the secant model uses it."""
-
-    def state(self) -> dict[str, Any]:
-        """What the model has learnt, for a restart file."""
-        return {}
-
-    def load(self, state: dict[str, Any]) -> None:  # noqa: B027 (optional hook)
-        """Take back what :meth:`state` gave."""
+    def observe(self, step: np.ndarray, force_drop: np.ndarray,
+                learnt: dict[str, Any]) -> dict[str, Any]:
+        """What the model learns from an accepted step ``s`` and ``y = f_old
+        - f_new`` (both (N, 3)), given what it had learnt; only the secant
+        model learns."""
+        return learnt
 
     def _absolute(self, values: np.ndarray) -> np.ndarray:
         """Eigenvalues made safe to divide by: ``|lambda|`` (or signed, for
@@ -202,6 +184,23 @@ class _DofSolver(Solver):
         """``K_ff^-1 rhs`` on the free degrees of freedom (1D arrays)."""
 
 
+def _held_at_zero(move: np.ndarray, free: np.ndarray | None) -> np.ndarray:
+    """``move`` (N, 3) with the components outside ``free`` (N, dim) set to
+    zero (``z`` too, for dim 2); unchanged if ``free`` is None (no atoms)."""
+    if free is not None:
+        move[:, free.shape[1]:] = 0.0
+        move[:, :free.shape[1]][~free] = 0.0
+    return move
+
+
+def _free_or_none(atoms: Atoms | None) -> np.ndarray | None:
+    """The free mask of ``atoms`` (:func:`free_dofs`) in its calculator's
+    dimension, or None if there are no atoms to ask (a band of images)."""
+    if atoms is None or len(atoms) == 0:
+        return None
+    return free_dofs(atoms, 2 if getattr(atoms.calc, 'dim', 3) == 2 else 3)
+
+
 # -- secant ------------------------------------------------------------------
 
 
@@ -213,40 +212,31 @@ class SecantModel(StiffnessModel):
     """
 
     name = 'secant'
-    step_defaults = DYNAMIC_RELAXATION
 
     def __init__(self, target: str = 'minimum', floor: float | None = None,
                  kappa0: float = 70.0):
         super().__init__(target, floor)
-        if not (isinstance(kappa0, (int, float)) and np.isfinite(kappa0)
-                and kappa0 > 0):
-            raise ValueError(f'kappa0 must be a positive number, got {kappa0!r}')
-        self.kappa = float(kappa0)
+        self.kappa0 = check('kappa0', kappa0)
 
-    def at(self, atoms: Atoms) -> Solver:
-        return _ScaledSolver(self)
+    def at(self, atoms: Atoms | None, learnt: dict[str, Any] | None = None) -> Solver:
+        kappa = (learnt or {}).get('kappa', self.kappa0)
+        return _ScaledSolver(float(kappa), _free_or_none(atoms))
 
-    def observe(self, step: np.ndarray, force_drop: np.ndarray) -> None:
+    def observe(self, step: np.ndarray, force_drop: np.ndarray,
+                learnt: dict[str, Any]) -> dict[str, Any]:
         sy, ss = np.vdot(step, force_drop), np.vdot(step, step)
-        if sy > 0 and ss > 0:
-            self.kappa = sy / ss
-
-    def state(self) -> dict[str, Any]:
-        return {'kappa': self.kappa}
-
-    def load(self, state: dict[str, Any]) -> None:
-        self.kappa = float(state['kappa'])
+        return {**learnt, 'kappa': sy / ss} if sy > 0 and ss > 0 else learnt
 
 
 class _ScaledSolver(Solver):
-    """``f / kappa``; ``kappa`` is read at solve time (the model learns it
-    from the step that led here, after the solver was made)."""
+    """``f / kappa``."""
 
-    def __init__(self, model: SecantModel):
-        self.model = model
+    def __init__(self, kappa: float, free: np.ndarray | None):
+        self.kappa, self.free = kappa, free
 
     def solve(self, forces):
-        return np.asarray(forces) / self.model.kappa
+        return _held_at_zero(np.asarray(forces, dtype=float).reshape(-1, 3)
+                             / self.kappa, self.free)
 
 
 # -- nodal -------------------------------------------------------------------
@@ -262,44 +252,44 @@ class NodalModel(StiffnessModel):
 
     name = 'nodal'
     prop = 'stiffness'
-    step_defaults = DYNAMIC_RELAXATION
 
     def __init__(self, target: str = 'minimum', floor: float | None = None,
                  method: str = 'tensor'):
         super().__init__(target, floor)
-        if method not in METHODS:
-            raise ValueError(f'method must be one of {METHODS}, got {method!r}')
-        self.method = method
+        self.method = check('method', method)
 
-    def at(self, atoms: Atoms) -> Solver:
+    def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
         blocks = atoms.calc.get_property('stiffness', atoms)
+        free = free_dofs(atoms, blocks.shape[1])
         values, vectors = np.linalg.eigh(blocks)
         size = np.abs(values)
         if self.method == 'scalar':
             floor = np.maximum(self.floor * size.max(axis=1), np.finfo(float).tiny)
             total = (size if self.target == 'minimum' else values).sum(axis=1)
             trace = np.where(total < 0, -1.0, 1.0) * np.maximum(np.abs(total), floor)
-            return _TraceSolver(trace)
-        return _BlockSolver(vectors, self._absolute(values))
+            return _TraceSolver(trace, free)
+        return _BlockSolver(vectors, self._absolute(values), free)
 
 
 class _TraceSolver(Solver):
     """``d_m = f_m / Tr K_mm``."""
 
-    def __init__(self, trace: np.ndarray):
-        self.trace = trace  # (N,)
+    def __init__(self, trace: np.ndarray, free: np.ndarray):
+        self.trace, self.free = trace, free  # (N,), (N, dim)
 
     def solve(self, forces):
-        return np.asarray(forces).reshape(-1, 3) / self.trace[:, None]
+        move = np.asarray(forces, dtype=float).reshape(-1, 3) / self.trace[:, None]
+        return _held_at_zero(move, self.free)
 
 
 class _BlockSolver(Solver):
-    """``d_m = V_m |Lambda_m|^-1 V_m^T f_m`` point by point. Constraints are
-    applied afterwards, by ASE, to the move (as the specification's nodal
-    step has it)."""
+    """``d_m = V_m |Lambda_m|^-1 V_m^T f_m`` point by point. Other
+    constraints than FixAtoms and FixCartesian are applied afterwards, by
+    ASE, to the move (as the specification's nodal step has it)."""
 
-    def __init__(self, vectors: np.ndarray, values: np.ndarray):
+    def __init__(self, vectors: np.ndarray, values: np.ndarray, free: np.ndarray):
         self.vectors, self.values = vectors, values  # (N, dim, dim), (N, dim)
+        self.free = free
 
     def solve(self, forces):
         dim = self.values.shape[1]
@@ -307,7 +297,7 @@ class _BlockSolver(Solver):
         f = np.asarray(forces).reshape(-1, 3)[:, :dim]
         proj = np.einsum('nij,ni->nj', self.vectors, f) / self.values
         move[:, :dim] = np.einsum('nij,nj->ni', self.vectors, proj)
-        return move
+        return _held_at_zero(move, self.free)
 
 
 # -- exact -------------------------------------------------------------------
@@ -327,10 +317,8 @@ class ExactModel(StiffnessModel):
     name = 'exact'
     prop = 'hessian'
     default_floor = 1e-8
-    step_defaults = {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 0,
-                     'trust_region': True}
 
-    def at(self, atoms: Atoms) -> Solver:
+    def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
         hessian = atoms.calc.get_property('hessian', atoms)
         dim = hessian.shape[0] // len(atoms)
         basis = allowed_basis(atoms, dim)
@@ -370,34 +358,30 @@ class _EigenSolver(_DofSolver):
 class GlobalModel(StiffnessModel):
     """``P = Q (L (x) I_dim) + blockdiag(|K_mm - Q deg(m) I|)``, sparse.
 
-    Needs a calculator with the nodal blocks (property ``stiffness``) and
-    ``get_spring_hessian(atoms)`` (the constant ``Q (L (x) I_dim)``), as
-    :class:`~ase_maud.MaudCalculator` has. The repulsion part of each nodal
-    block is made positive (``'minimum'``) block by block.
+    Needs a calculator with the nodal blocks (property ``stiffness``) and a
+    :class:`~ase_maud.potential.MaudPotential` (``calc.potential``: the
+    constant ``Q (L (x) I_dim)``), as :class:`~ase_maud.MaudCalculator` has.
+    The repulsion part of each nodal block is made positive (``'minimum'``)
+    block by block.
 
     ``P`` and its factorisation are kept while no point has moved more than
-    ``refresh`` times its nearest-neighbour distance since they were built
-    (the springs' part is exact everywhere; only the repulsion blocks age):
-    the calculator is then asked for energy and forces alone (see
-    :meth:`needs`). ``refresh=0`` rebuilds at every step.
-
-    ``memory`` in :attr:`step_defaults`: the Maud step with this model takes
-    an L-BFGS correction over ``P^-1`` (the secant pairs of the last accepted
-    steps), which learns the far-field repulsion that ``P`` leaves out and
-    the ageing of a kept ``P``.
+    ``refresh`` times its nearest-neighbour distance (``nearest``, shared
+    with the step bound) since they were built (the springs' part is exact
+    everywhere; only the repulsion blocks age): the calculator is then asked
+    for energy and forces alone (see :meth:`needs`). ``refresh=0`` rebuilds
+    at every step. The Maud step with this model takes an L-BFGS correction
+    over ``P^-1``, which learns the far-field repulsion that ``P`` leaves
+    out and the ageing of a kept ``P``.
     """
 
     name = 'global'
     prop = 'stiffness'
-    step_defaults = {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 30,
-                     'trust_region': False}
 
     def __init__(self, target: str = 'minimum', floor: float | None = None,
-                 refresh: float = 0.5):
+                 refresh: float = 0.5, nearest: NearestDistances | None = None):
         super().__init__(target, floor)
-        if not (isinstance(refresh, (int, float)) and refresh >= 0):
-            raise ValueError(f'refresh must be a number >= 0, got {refresh!r}')
-        self.refresh = float(refresh)
+        self.refresh = check('refresh', refresh)
+        self.nearest = nearest or NearestDistances()
         self._kept: tuple[np.ndarray, _SparseSolver] | None = None
 
     def needs(self, atoms: Atoms) -> str | None:
@@ -410,10 +394,9 @@ class GlobalModel(StiffnessModel):
         moved = np.linalg.norm(positions - self._kept[0], axis=1)
         if len(positions) < 2 or self.refresh == 0:
             return bool(moved.max() > 0)
-        nearest = cKDTree(positions).query(positions, k=2)[0][:, 1]
-        return bool(np.any(moved > self.refresh * nearest))
+        return bool(np.any(moved > self.refresh * self.nearest(positions)))
 
-    def at(self, atoms: Atoms) -> Solver:
+    def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
         if not self._stale(atoms):
             return self._kept[1]
         matrix, free, diagonal = self.assemble(atoms)
@@ -432,8 +415,8 @@ class GlobalModel(StiffnessModel):
         those, and ``P``'s diagonal blocks (N, dim, dim)."""
         calc = atoms.calc
         blocks = calc.get_property('stiffness', atoms)
-        springs = calc.get_spring_hessian(atoms)
         n, dim = blocks.shape[:2]
+        springs = calc.potential.spring_hessian(n)
         degree = springs.diagonal()[::dim, None, None] * np.eye(dim)  # Q deg(m) I
         values, vectors = np.linalg.eigh(blocks - degree)
         repulsion = np.einsum('nik,nk,njk->nij', vectors,
@@ -507,17 +490,20 @@ MODELS: dict[str, type[StiffnessModel]] = {
 
 
 def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
+                 nearest: NearestDistances | None = None,
                  **options: Any) -> StiffnessModel:
     """The stiffness model ``name`` for ``atoms``' calculator.
 
     ``'auto'``: ``exact`` while the free degrees of freedom are at most
     :data:`EXACT_MAX_DOFS`, the calculator has a ``hessian`` and every
     constraint is one of :data:`PROJECTIONS` (a Hookean tether, say, adds
-    stiffness the Hessian does not hold); else
-    ``global`` if it has the nodal blocks and ``get_spring_hessian``; else
-    ``nodal`` if it has the blocks; else ``secant``. ``options`` go to the
-    model (``floor``; ``method`` for nodal; ``kappa0`` for secant); options
-    that the chosen model does not take are dropped.
+    stiffness the Hessian does not hold); else ``global`` if it has the nodal
+    blocks and a ``potential`` (a :class:`~ase_maud.potential.MaudPotential`);
+    else ``nodal`` if it has the blocks; else ``secant``. ``options`` go to
+    the model (``floor``; ``method`` for nodal; ``kappa0`` for secant), and
+    each is checked there; an option the chosen model does not take is
+    checked here and dropped. ``nearest`` is shared with a model that ages
+    with the positions.
     """
     calc = getattr(atoms, 'calc', None)
     offers = set(getattr(calc, 'implemented_properties', ()))
@@ -526,21 +512,26 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
         if ('hessian' in offers and free_dofs(atoms, dim).sum() <= EXACT_MAX_DOFS
                 and all(isinstance(c, PROJECTIONS) for c in atoms.constraints)):
             name = 'exact'
-        elif 'stiffness' in offers and hasattr(calc, 'get_spring_hessian'):
+        elif 'stiffness' in offers and hasattr(calc, 'potential'):
             name = 'global'
         elif 'stiffness' in offers:
             name = 'nodal'
         else:
             name = 'secant'
-    if name not in MODELS:
-        raise ValueError(f"model must be 'auto' or one of {sorted(MODELS)}, "
-                         f'got {name!r}')
+    if not (isinstance(name, str) and name in MODELS):
+        raise ValueError(f"model must be 'auto', one of {sorted(MODELS)} or a "
+                         f'StiffnessModel, got {name!r}')
     cls = MODELS[name]
     if cls.prop is not None and cls.prop not in offers:
         raise ValueError(f'model={name!r} needs a calculator with the property '
                          f'{cls.prop!r} (such as MaudCalculator); this one '
                          f'offers {sorted(offers)}')
     taken = {'floor', *_EXTRA_OPTIONS.get(cls, ())}
+    for option in set(options) - taken:
+        check(option, options[option])
+    if cls is GlobalModel:
+        options['nearest'] = nearest
+        taken.add('nearest')
     return cls(target=target, **{k: v for k, v in options.items() if k in taken})
 
 

@@ -1,7 +1,25 @@
-"""Shared test helpers."""
+"""Shared test helpers, and the two test tiers.
+
+Tests of whole workflows (a command line, a relaxation compared with other
+optimisers over a suite, a killed run resumed, a benchmark) are marked
+``integration``: every test of the modules in :data:`INTEGRATION_MODULES`,
+and any test marked so by hand. ``pytest -m "not integration"`` is the unit
+tier (README.md gives its time); ``pytest`` runs both.
+"""
 
 import numpy as np
 import pytest
+
+#: Test modules whose every test is an integration test.
+INTEGRATION_MODULES = {'test_accuracy', 'test_bench', 'test_cli', 'test_drivers',
+                       'test_examples', 'test_restart_kill'}
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark every test of :data:`INTEGRATION_MODULES` ``integration``."""
+    for item in items:
+        if item.module.__name__.rpartition('.')[2] in INTEGRATION_MODULES:
+            item.add_marker(pytest.mark.integration)
 
 
 def _random_points(n, dim=3, seed=0, spacing=1.0):

@@ -8,7 +8,7 @@ from ase.calculators.emt import EMT
 from ase.cluster import Icosahedron
 
 from ase_maud import Maud
-from ase_maud.optimizer import ACCURACY_FRACTION
+from ase_maud.accuracy import ACCURACY_FRACTION
 from ase_maud.scenes import build
 
 pytest.importorskip('fmm3dpy')

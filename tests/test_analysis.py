@@ -18,7 +18,7 @@ from ase_maud.analysis import (
     rigid_body_modes,
 )
 from ase_maud.calculator import MaudCalculator
-from ase_maud.hessian import dense_hessian, hessian_vector_product
+from ase_maud.potential import MaudPotential
 
 
 def scene(positions, springs, dim=3, a=1.0, Q=1.0):
@@ -59,13 +59,13 @@ def test_hessian_vector_product_matches_dense(random_points, dim, seed):
     n = 30
     positions = random_points(n, dim, seed)
     springs = np.array([(i, (i + 3) % n) for i in range(n)])
-    hessian = dense_hessian(positions, springs, 1.3, 0.7, dim)
+    hessian = MaudPotential(springs, 1.3, 0.7, dim).hessian(positions)
     v = np.random.default_rng(seed).standard_normal((4, n, dim))
-    hv = hessian_vector_product(positions, springs, 1.3, 0.7, dim, v)
+    hv = MaudPotential(springs, 1.3, 0.7, dim).hvp(positions, v)
     expected = (v.reshape(4, -1) @ hessian).reshape(v.shape)
     np.testing.assert_allclose(hv, expected,
                                atol=1e-12 * np.abs(hessian).max())
-    single = hessian_vector_product(positions, springs, 1.3, 0.7, dim, v[0])
+    single = MaudPotential(springs, 1.3, 0.7, dim).hvp(positions, v[0])
     np.testing.assert_allclose(single, hv[0], rtol=1e-13, atol=1e-13)
 
 
@@ -77,7 +77,7 @@ def test_hessian_vector_product_matches_physics(random_points, dim, seed):
     positions = random_points(n, dim, seed)[:, :dim]
     springs = np.array([(i, (i + 4) % n) for i in range(n)])
     v = np.random.default_rng(seed).standard_normal((3, n, dim))
-    hv = hessian_vector_product(positions, springs, 1.3, 0.7, dim, v)
+    hv = MaudPotential(springs, 1.3, 0.7, dim).hvp(positions, v)
     i, j = np.nonzero(~np.eye(n, dtype=bool))
     blocks = 1.3**3 * 0.7 * physics.repulsion_block(positions[i]
                                                     - positions[j])

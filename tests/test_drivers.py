@@ -19,7 +19,7 @@ neb_tutorial = importlib.util.module_from_spec(_SPEC)
 _SPEC.loader.exec_module(neb_tutorial)
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.parametrize('seed', [0, 1])
 def test_neb_tutorial_converges_in_no_more_steps_than_fire(seed):
     fire = neb_tutorial.relax_band(FIRE, seed)
@@ -73,7 +73,7 @@ def test_hookean_tether_gives_bfgs_minimum(seed):
     _same_minimum_as_bfgs(atoms)
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 def test_minima_hopping_runs_with_maud(tmp_path, monkeypatch):
     from ase.optimize.minimahopping import MinimaHopping
 

@@ -18,7 +18,7 @@ def run_example(name, argv, monkeypatch, tmp_path, folder='examples'):
     runpy.run_path(str(ROOT / folder / name), run_name='__main__')
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 def test_saddle_and_minima(monkeypatch, tmp_path, capsys):
     run_example('saddle_and_minima.py', [], monkeypatch, tmp_path)
     out = capsys.readouterr().out
@@ -72,7 +72,7 @@ def test_user_numba_cache_dir_is_kept(tmp_path):
         mine, 'False']
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 def test_quick_start_relax_compiles_once_into_the_user_cache(tmp_path):
     """README's first command on a small net, twice in fresh processes: one
     notice before compiling, machine code in the user's cache (none beside the

@@ -95,7 +95,7 @@ def test_builders_are_seeded_and_scale(name):
 
 # -- two points very close, or on top of each other ---------------------------
 
-@pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.parametrize('seed', [0, 5])
 def test_close_pair_is_finite_and_relaxes(seed):
     a = 0.6
@@ -236,7 +236,7 @@ def test_free_islands_in_2d_diverge_unannounced():
     assert dyn.nsteps <= 3000
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.parametrize('seed', [0, 4])
 def test_anchored_islands_agree_with_fire_and_bfgs(seed):
     results = []
@@ -251,7 +251,7 @@ def test_anchored_islands_agree_with_fire_and_bfgs(seed):
     assert_same_shape(maud, bfgs)
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 def test_singly_anchored_islands_converge():
     # Very soft: fmax wanders above its best for thousands of steps while the
     # energy keeps falling, which counts as progress (9415 steps measured).
@@ -269,7 +269,7 @@ def test_singly_anchored_islands_converge():
 SCALES = [(1e-6, 1e-9), (1e-6, 1e9), (1e6, 1e-9), (1e6, 1e9)]
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.parametrize('name, size, same_steps', [
     ('hanging_net', 5, True), ('ring', 12, True), ('random_graph', 12, True),
     # At a = 1e-6 a rounding-level difference flips one step decision here:
@@ -301,7 +301,7 @@ def test_large_scale_runs_without_warnings():
     assert relax(build('chain', 12, seed=0, a=1e6), fmax=1e-2)[0] is True
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.parametrize('name, size', [('ring', 16), ('all_pairs', 8)])
 @pytest.mark.parametrize('factor', [1e-6, 1e6])
 def test_tiny_and_huge_starts_find_the_same_minimum(name, size, factor):
@@ -318,7 +318,7 @@ def test_tiny_and_huge_starts_find_the_same_minimum(name, size, factor):
 
 # -- stiff against soft, long chains, dense clusters --------------------------
 
-@pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.parametrize('size', [10, 40])
 def test_stiff_soft_agrees_with_bfgs(size):
     atoms = stiff_soft(size, seed=0)
@@ -333,7 +333,7 @@ def test_stiff_soft_agrees_with_bfgs(size):
         reference.get_potential_energy(), rel=1e-9)
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 def test_stiff_soft_with_a_larger_cluster():
     # The energy falls steadily while fmax wanders: progress, not stagnation
     # (13425 steps measured).
@@ -344,7 +344,7 @@ def test_stiff_soft_with_a_larger_cluster():
     assert outcome is True
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.parametrize('n, bound', [(50, 2000), (100, 5000)])
 def test_long_chain_converges(n, bound):
     # Steps grow about as N**1.8 (docs/hard_cases.md): 602 and 2506 measured.
@@ -355,7 +355,7 @@ def test_long_chain_converges(n, bound):
     assert np.array_equal(atoms.positions[[0, -1]], ends)
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 def test_dense_all_pairs_cluster_is_a_minimum():
     # 19900 springs; 1884 steps measured (300 points: 2369 steps).
     atoms = build('all_pairs', 200, seed=0)
@@ -389,7 +389,7 @@ def test_planar_net_stays_planar_and_is_a_minimum():
 
 @pytest.mark.parametrize('builder, size, seed', [
     (tangled_net, 6, 0), (tangled_net, 6, 7), (tangled_hanging_net, 6, 0),
-    pytest.param(tangled_hanging_net, 10, 3, marks=pytest.mark.slow)])
+    pytest.param(tangled_hanging_net, 10, 3, marks=pytest.mark.integration)])
 def test_tangled_net_ends_at_a_minimum(builder, size, seed):
     atoms = builder(size, seed=seed)
     outcome, _, _ = relax(atoms)
@@ -406,7 +406,7 @@ def test_tangled_net_ends_at_a_minimum(builder, size, seed):
 
 # -- a requested fmax below the rounding noise --------------------------------
 
-@pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.parametrize('name, size', [('ring', 16), ('all_pairs', 10),
                                         ('hanging_net', 6)])
 def test_fmax_below_rounding_noise_converges_or_stagnates(name, size):
@@ -427,7 +427,7 @@ def test_fmax_below_rounding_noise_converges_or_stagnates(name, size):
 
 # -- the default model on every case -------------------------------------------
 
-@pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.parametrize('name', sorted(HARD_CASES))
 @pytest.mark.parametrize('seed', [0, 1])
 def test_default_model_on_every_hard_case(name, seed):

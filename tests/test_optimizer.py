@@ -1,8 +1,6 @@
 """Maud against independent answers: FIRE/BFGS from the same start, analytic
 minima, ASE's own optimizer tests, and the ASE machinery around an optimizer."""
 
-import functools
-
 import numpy as np
 import pytest
 from ase import Atoms
@@ -50,10 +48,13 @@ def relax(atoms, opt, fmax=FMAX, steps=20000, **kwargs):
     return atoms
 
 
-@functools.cache
-def reference_minima(name, size, seed):
-    """BFGS's and FIRE's minima (fmax 1e-8) from the same start; FIRE's only
-    if it converges within the step budget (it crawls on trees)."""
+@pytest.fixture(scope='session', params=SUITE, ids=[f'{n}-{s}' for n, s in SUITE])
+def suite_start(request):
+    """A scene of the suite with a fresh seed, and BFGS's and FIRE's minima
+    (fmax 1e-8) from its start; FIRE's only if it converges within the step
+    budget (it crawls on trees). Computed once per session."""
+    name, size = request.param
+    seed = sum(map(ord, name)) % 97   # a fresh seed per scene
     found = []
     for opt in (BFGS, FIRE):
         atoms = build(name, size, seed=seed)
@@ -61,22 +62,21 @@ def reference_minima(name, size, seed):
             if dyn.run(fmax=1e-8, steps=20000):
                 found.append(atoms)
     assert found, f'neither BFGS nor FIRE converged on {name} {size}'
-    return found
+    return name, size, seed, found
 
 
 MODELS = [('exact', 'tensor'), ('global', 'tensor'), ('nodal', 'tensor'),
           ('nodal', 'scalar'), ('auto', 'tensor')]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize('model,method', MODELS)
-@pytest.mark.parametrize('name,size', SUITE)
-def test_same_minimum_as_fire_and_bfgs(name, size, model, method):
-    seed = sum(map(ord, name)) % 97   # a fresh seed per scene
+def test_same_minimum_as_fire_and_bfgs(suite_start, model, method):
+    name, size, seed, references = suite_start
     # fmax 1e-8: positions then sit within ~1e-7 a of the minimum even
     # along the soft modes of a ring or a chain.
     maud = relax(build(name, size, seed=seed), Maud, fmax=1e-8, model=model,
                  method=method)
-    references = reference_minima(name, size, seed)
     agree = [same_minimum(maud, ref) for ref in references]
     energies = [ref.get_potential_energy() for ref in references]
     if all(agree) or (not all(same_minimum(references[0], ref) for ref in references)
@@ -247,11 +247,12 @@ def test_bad_parameters_are_refused(bad):
 
 
 def test_todict_reports_the_method():
-    opt = Maud(build('dimer'), method='scalar', target='stationary',
+    opt = Maud(build('dimer'), model='nodal', method='scalar', target='stationary',
                logfile=None)
     d = opt.todict()
     assert d['optimizer'] == 'Maud'
-    assert (d['method'], d['target']) == ('scalar', 'stationary')
+    assert (d['model'], d['method'], d['target']) == ('nodal', 'scalar', 'stationary')
+    assert 'method' not in Maud(build('dimer'), model='exact', logfile=None).todict()
 
 
 @pytest.mark.parametrize('model', ['nodal', 'exact'])

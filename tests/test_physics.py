@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ase_maud import physics
-from ase_maud.hessian import dense_hessian
+from ase_maud.potential import MaudPotential
 
 #: Central-difference step and tolerance for pair vectors of length ~1.
 STEP = 1e-5
@@ -139,8 +139,8 @@ def test_spring_hessian_is_the_spring_part_of_the_hessian(random_points, dim,
     n = 10
     positions = random_points(n, dim, seed)
     springs = random_springs(n, 15, seed)
-    full = dense_hessian(positions, springs, 1.3, 0.7, dim)
-    repulsion = dense_hessian(positions, np.zeros((0, 2), int), 1.3, 0.7, dim)
+    full = MaudPotential(springs, 1.3, 0.7, dim).hessian(positions)
+    repulsion = MaudPotential(np.zeros((0, 2), int), 1.3, 0.7, dim).hessian(positions)
     spring = physics.spring_hessian(springs, n, 0.7, dim)
     assert spring.shape == (dim * n, dim * n)
     np.testing.assert_allclose(spring.toarray(), full - repulsion, rtol=0,

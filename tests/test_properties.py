@@ -71,7 +71,7 @@ def test_calculator_is_finite(atoms):
         forces).max()
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 @BUDGET
 @given(scenes())
 def test_forces_are_minus_the_energy_gradient(atoms):
@@ -89,7 +89,7 @@ def test_forces_are_minus_the_energy_gradient(atoms):
         assert np.all(forces[:, 2] == 0.0)
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 @BUDGET
 @given(scenes(fixed=True), st.sampled_from(['tensor', 'scalar']))
 def test_maud_converges_or_says_why(atoms, method):

@@ -1,5 +1,5 @@
 """A relaxation killed with SIGKILL at random moments and resumed from its
-files ends where the uninterrupted run ends (issue 12, "kill -9 loses data").
+files ends where the uninterrupted run ends ("kill -9 loses no data").
 
 The run (``hanging_net(8)``, 42 steps, about 1 s) goes in a subprocess with
 a restart file and a trajectory; the parent kills it at seeded random moments,

@@ -1,4 +1,4 @@
-"""Nothing silently wrong (issue 12): checked arguments, no non-finite value
+"""Nothing silently wrong: checked arguments, no non-finite value
 reaching the user, the atomic restart file, planar scenes under ASE drivers.
 
 The property test draws hostile run arguments, keyword values and scales
@@ -10,6 +10,7 @@ docs/hard_cases.md); the assertions do not depend on rounding.
 """
 
 import functools
+import inspect
 import json
 import os
 import re
@@ -22,12 +23,13 @@ from ase.cluster import Icosahedron
 from ase.io import read
 from ase.optimize import BFGS
 from ase.optimize.basin import BasinHopping
+from doubles import PoisonedCalculator
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from ase_maud import Maud, MaudCalculator, MaudError
-from ase_maud.hardcases import PoisonedCalculator
-from ase_maud.optimizer import KEYWORDS, last_frame
+from ase_maud.checks import RULES
+from ase_maud.optimizer import last_frame
 from ase_maud.scenes import SCENES, build, keep_on_plane
 
 EXAMPLES = int(os.environ.get('ASE_MAUD_EXAMPLES', 200))
@@ -40,8 +42,12 @@ HOSTILE = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True),
     st.integers(-10, 10**6))
 
-#: Maud's keywords beyond the numeric ones of KEYWORDS (the last value of
-#: each is refused).
+#: Maud's numeric keywords (and those of run), with their rules in RULES.
+NUMERIC = [name for name in [*inspect.signature(Maud).parameters, 'fmax', 'steps']
+           if name in RULES and not RULES[name].choices]
+
+#: Maud's keywords beyond the numeric ones (the last value of each is
+#: refused).
 NAMED = {'model': ['auto', 'exact', 'global', 'nodal', 'secant', 'fast'],
          'method': ['tensor', 'scalar', 'vector'],
          'target': ['minimum', 'stationary', 'max']}
@@ -92,11 +98,10 @@ def test_whole_steps_are_accepted(steps):
     assert opt.nsteps == int(steps)
 
 
-BAD_KEYWORDS = [(name, value) for name in sorted(KEYWORDS) if name not in ('fmax', 'steps')
+BAD_KEYWORDS = [(name, value) for name in sorted(NUMERIC) if name not in ('fmax', 'steps')
                 for value in (np.nan, np.inf, -np.inf, '1', True, [1], -1.0)
-                ] + [(name, None) for name in ('gamma', 'gamma_growth', 'overshoot_shrink',
-                                               'maxstep_nn', 'kappa0', 'divergence_factor',
-                                               'patience')
+                ] + [(name, None) for name in ('gamma', 'overshoot_shrink', 'kappa0',
+                                               'divergence_factor', 'patience')
                      ] + [('memory', 1.5), ('patience', 2.5), ('maxstep_nn', 0.5),
                           ('beta_max', 1.0), ('gamma_growth', 0.9),
                           ('divergence_factor', 1.0), ('floor', 1.0)
@@ -181,7 +186,7 @@ def test_hostile_inputs_get_an_answer_or_a_clear_error(seed, scale, fmax, steps,
         fresh.get_potential_energy(atoms.copy()), rel=1e-12, abs=0)
 
 
-# -- 2. non-finite results of any calculator (hardcases.PoisonedCalculator) ---------
+# -- 2. non-finite results of any calculator (doubles.PoisonedCalculator) ---------
 
 
 def emt_cluster():

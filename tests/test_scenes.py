@@ -108,7 +108,7 @@ def test_build_names_sizes_and_errors():
 
 # The chain takes FIRE longest by far: in the full run only.
 @pytest.mark.parametrize('name, size', [
-    pytest.param(name, size, marks=pytest.mark.slow) if name == 'chain' else (name, size)
+    pytest.param(name, size, marks=pytest.mark.integration) if name == 'chain' else (name, size)
     for name, size in SUITE])
 def test_fire_reaches_a_minimum(name, size):
     atoms = build(name, size)
@@ -118,7 +118,7 @@ def test_fire_reaches_a_minimum(name, size):
     print(f'FIRE {name} {size}: {opt.nsteps} steps')
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.parametrize('name, size', LARGE)
 def test_large_suite_scenes_are_large_and_valid(name, size):
     atoms = build(name, size)

@@ -133,20 +133,27 @@ def test_dense_spring_graph_is_solved_matrix_free():
                        atol=1e-8 * np.abs(forces).max())
 
 
-def test_nodal_and_secant_models():
-    atoms = random_scene(3)
-    forces = atoms.get_forces()
+@pytest.mark.parametrize('seed', [3, 4])
+def test_nodal_and_secant_models(seed):
+    atoms = random_scene(seed)
+    forces = atoms.get_forces(apply_constraint=False)
+    free = free_dofs(atoms, 3)
     blocks = atoms.calc.get_stiffness(atoms)
+    for method in ('tensor', 'scalar'):
+        move = NodalModel(method=method).at(atoms).solve(forces)
+        assert not move[~free].any()   # zero where FixAtoms, FixCartesian hold
     move = NodalModel().at(atoms).solve(forces)
     # Where a block is positive definite, the tensor step is its inverse.
-    positive = np.linalg.eigvalsh(blocks).min(axis=1) > 1e-2 * np.abs(
-        np.linalg.eigvalsh(blocks)).max(axis=1)
+    positive = (np.linalg.eigvalsh(blocks).min(axis=1) > 1e-2 * np.abs(
+        np.linalg.eigvalsh(blocks)).max(axis=1)) & free.all(axis=1)
     expected = np.linalg.solve(blocks[positive], forces[positive][..., None])[..., 0]
     assert np.allclose(move[positive], expected)
     secant = SecantModel(kappa0=4.0)
-    assert np.allclose(secant.at(atoms).solve(forces), forces / 4.0)
-    secant.observe(np.ones((2, 3)), 3 * np.ones((2, 3)))
-    assert secant.kappa == 3.0
+    assert np.allclose(secant.at(atoms).solve(forces), np.where(free, forces / 4.0, 0))
+    learnt = secant.observe(np.ones((2, 3)), 3 * np.ones((2, 3)), {})
+    assert learnt == {'kappa': 3.0}
+    assert np.allclose(secant.at(atoms, learnt).solve(forces), np.where(free, forces / 3, 0))
+    assert secant.observe(np.ones((2, 3)), -np.ones((2, 3)), learnt) is learnt
 
 
 def test_auto_picks_by_size_and_calculator():
@@ -177,7 +184,7 @@ def test_default_maud_reaches_bfgs_minimum(name):
     assert energy <= ref * (1 + 1e-9), name
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.parametrize('name', MULTI_BASIN)
 def test_default_maud_in_multi_basin_clusters(name):
     # From a random start these clusters fall into one of a few minima, and

@@ -17,7 +17,7 @@ energy, within ``--energy-rtol``), the lowest energy found (``Q a^2``), the call
 the calls until the run first found its own lowest energy, and until it first found
 the lowest energy of all the runs from that start (``best``, within ``--energy-rtol``;
 ``inf`` if never); local relaxations that hit the ``--relax-steps`` cap (BasinHopping then
-takes the energy where they stopped), and any error. The goal (issue 14): Maud reaches
+takes the energy where they stopped), and any error. The goal: Maud reaches
 ``best`` in at most half of BFGS's calls. Run with one thread::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\

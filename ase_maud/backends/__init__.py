@@ -14,8 +14,9 @@ choices and runs the first that can meet its tolerance. Adding one (a Barnes-Hut
 a GPU kernel) is one new file here that defines ``BACKEND =
 Backend(name=..., evaluate=..., ...)``, plus one registration line at the end
 of this file, ``register(newmodule.BACKEND)`` (and its module in the import
-line). A parameter it takes that the calculator does not have yet goes into
-``MaudCalculator.default_parameters`` too.
+line). The parameters it takes, with their defaults, become the calculator's
+(:func:`parameter_defaults`); a new parameter's rule goes into
+:data:`ase_maud.checks.RULES`.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from ..checks import check
 from . import auto, direct, fmm, reference
 from .base import (
     VOIGT_PAIRS,
@@ -39,7 +41,8 @@ from .base import (
 
 __all__ = ['Backend', 'BeyondTolerance', 'Choice', 'Result', 'VOIGT_PAIRS',
            'blocks_to_voigt', 'check_parameters', 'evaluate', 'get',
-           'installed', 'names', 'register', 'voigt_to_blocks']
+           'installed', 'names', 'parameter_defaults', 'register',
+           'repulsion_hvp', 'voigt_to_blocks']
 
 _REGISTRY: dict[str, Backend] = {}
 
@@ -71,15 +74,31 @@ def installed() -> list[str]:
     return [name for name, backend in _REGISTRY.items() if backend.installed]
 
 
+def parameter_defaults() -> dict[str, Any]:
+    """Every registered backend's parameters with their defaults (the
+    calculator's ``default_parameters`` beside the potential's)."""
+    return {name: default for backend in _REGISTRY.values()
+            for name, default in backend.parameters.items()}
+
+
 def check_parameters(parameters: Mapping[str, Any]) -> None:
     """Raise ValueError unless ``parameters['backend']`` is registered and
     every backend parameter in ``parameters`` is valid (checked whichever
     backend is chosen, so a later switch of backend cannot fail)."""
     get(parameters['backend'])
+    for name in parameter_defaults():
+        if name in parameters:
+            check(name, parameters[name])
+
+
+def repulsion_hvp(positions: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The unit repulsion's Hessian-vector products ``sum_j B_ij (v_i -
+    v_j)`` at ``positions`` (N, 3) for ``v`` (m, N, 3), by the first
+    installed backend that has them (``hvp``)."""
     for backend in _REGISTRY.values():
-        for name, check in backend.parameters.items():
-            if name in parameters:
-                check(parameters[name])
+        if backend.hvp is not None and backend.installed:
+            return backend.hvp(positions, v)
+    raise ValueError('no registered backend computes Hessian-vector products')
 
 
 def evaluate(parameters: Mapping[str, Any], positions: np.ndarray, dim: int,

@@ -22,29 +22,23 @@ whatever the thread count (``None``, the default: the table).
 
 from __future__ import annotations
 
-from numbers import Real
-
 import numba
 import numpy as np
 
-from ..checks import as_whole
 from . import direct, fmm
 from .base import Backend, Choice, Result, evaluate_first
 
 #: Default ``tol``: forces to 1e-8 of the largest repulsive force, a hundred
 #: times below an ``fmax`` of 1e-6 of it, and still coarse enough for the FMM
-#: (at ``fmm_eps = 1e-7``) from about 33000-45000 points on one thread
-#: (docs/calculator.md).
+#: on large scenes (docs/calculator.md gives the crossovers).
 DEFAULT_TOL = 1e-8
 
 #: Points from which the FMM (rows: its ``fmm_eps``) is faster than the numba
-#: direct sum on one thread, by (dim, with blocks), in CPU seconds. Measured
-#: 2026-12-01 by ``python tools/backend_crossover.py --dims 3`` and ``--dims
-#: 2`` (docs/bench/crossover_backends.md), with the blocked direct kernel of
-#: that day (a faster one moves them up). Between two rows the crossover is
-#: interpolated in log-log; below the last row the FMM is never used (in 2D
-#: at 1e-12 the FMM refuses random scenes of 64000 points: too many near
-#: pairs for that precision).
+#: direct sum on one thread, by (dim, with blocks), in CPU seconds, as
+#: ``python tools/backend_crossover.py`` measures them (docs/calculator.md
+#: gives the table, its date and the command; a faster kernel moves them).
+#: Between two rows the crossover is interpolated in log-log; below the last
+#: row the FMM is never used.
 CROSSOVER: dict[tuple[int, bool], dict[float, int]] = {
     (3, False): {0.001: 12000, 1e-06: 29000, 1e-09: 53000, 1e-12: 190000},
     (3, True): {0.001: 14000, 1e-06: 38000, 1e-09: 65000, 1e-12: 272000},
@@ -56,23 +50,6 @@ CROSSOVER: dict[tuple[int, bool], dict[float, int]] = {
 MIN_EPS = 1e-13
 #: The coarsest ``fmm_eps`` used: a larger ``tol`` gains little more speed.
 MAX_EPS = 1e-3
-
-
-def check_tol(tol: object) -> None:
-    """Raise ValueError unless ``tol`` is a real number in [0, 1)."""
-    if not (isinstance(tol, Real) and 0.0 <= tol < 1.0):
-        raise ValueError(f'tol must be a number in [0, 1), the force error '
-                         'allowed relative to the largest repulsive force (0: '
-                         f'exact), got {tol!r}')
-
-
-def check_crossover(crossover: object) -> None:
-    """Raise ValueError unless ``crossover`` is None or a number of points
-    (an integer >= 0)."""
-    if crossover is not None and (as_whole(crossover) is None or crossover < 0):
-        raise ValueError('crossover must be None (the measured table) or '
-                         'the number of points from which the FMM is used, '
-                         f'an integer >= 0, got {crossover!r}')
 
 
 def crossover_points(eps: float, dim: int, want_blocks: bool) -> float:
@@ -118,7 +95,7 @@ def evaluate(positions: np.ndarray, want_blocks: bool = False,
 #: Per call, the cheapest backend that meets ``tol``.
 BACKEND = Backend(
     name='auto', evaluate=evaluate, cost='N', tolerance='tol',
-    parameters={'tol': check_tol, 'crossover': check_crossover},
+    parameters={'tol': DEFAULT_TOL, 'crossover': None},
     choose=choose, summary='per call, the cheapest backend that meets tol: '
     'the numba direct sum below a measured crossover, the FMM above it '
     '(the default)')

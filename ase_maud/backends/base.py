@@ -50,10 +50,14 @@ class Backend:
     (``'N^2'`` or ``'N'``). ``computes``: of ``'energy'``, ``'forces'``,
     ``'blocks'``. ``tolerance``: ``None`` if the result is exact to rounding,
     else the name of the calculator parameter that sets its relative
-    tolerance. ``parameters``: the calculator parameters it takes, each with
-    a function that raises ValueError on a bad value; ``evaluate`` receives
-    them as keywords of the same names. ``requires``: modules it imports
-    that may be missing (it is :attr:`installed` when all are importable).
+    tolerance. ``parameters``: the calculator parameters it takes, with
+    their defaults (the calculator's ``default_parameters`` are made of
+    them; each is checked by its rule in :data:`ase_maud.checks.RULES`);
+    ``evaluate`` receives them as keywords of the same names. ``requires``:
+    modules it imports that may be missing (it is :attr:`installed` when all
+    are importable). ``hvp``: if the backend has one, the unit repulsion's
+    Hessian-vector product ``hvp(positions (N, 3), v (m, N, 3)) -> (m, N, 3)``,
+    ``sum_j B_ij (v_i - v_j)``.
     """
 
     name: str
@@ -62,11 +66,11 @@ class Backend:
     cost: str
     computes: frozenset[str] = frozenset({'energy', 'forces', 'blocks'})
     tolerance: str | None = None
-    parameters: Mapping[str, Callable[[Any], None]] = field(
-        default_factory=dict)
+    parameters: Mapping[str, Any] = field(default_factory=dict)
     requires: tuple[str, ...] = ()
     force_tolerance: Callable[..., float] | None = None
     choose: Callable[..., list[Choice]] | None = None
+    hvp: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
 
     @property
     def exact(self) -> bool:

@@ -9,9 +9,10 @@ pair is visited once and both points get their share, in a blocked loop that
 the compiler vectorises (:func:`_make_numba_kernel`; ``tools/kernel_throughput.py``
 measures it against a plain loop over every ordered pair).
 
-The same file holds the Hessian-vector product kernel of
-:mod:`ase_maud.hessian`, so that numba's cache, which checks only the file of
-the function it compiled, sees every change to :func:`share`.
+Both kernels here, the sums and the Hessian-vector product
+(:func:`repulsion_hvp`), take the pair law from one inlined function,
+:func:`pair_law`; they live in one file so that numba's cache, which checks
+only the file of the function it compiled, sees every change to it.
 """
 
 from __future__ import annotations
@@ -20,6 +21,15 @@ import numba
 import numpy as np
 
 from .base import Backend, Result
+
+
+@numba.njit(inline='always')
+def pair_law(inv: float) -> tuple[float, float]:
+    """The unit pair law's radial factors at ``inv = 1 / L``:
+    ``(1 / L**3, 3 / L**2)``. The force on ``i`` is ``d / L**3`` and the pair
+    block ``(3 d d^T / L**2 - I) / L**3`` (:mod:`ase_maud.physics`)."""
+    inv2 = inv * inv
+    return inv2 * inv, 3.0 * inv2
 
 
 @numba.njit(inline='always')
@@ -112,8 +122,7 @@ def _make_numba_kernel(with_blocks):
                                 dy = yi - buf[1, jj]
                                 dz = zi - buf[2, jj]
                                 inv = buf[inv_row, jj]
-                                inv2 = inv * inv
-                                inv3 = inv2 * inv
+                                inv3, three_inv2 = pair_law(inv)
                                 e += inv
                                 px, py, pz = dx * inv3, dy * inv3, dz * inv3
                                 gx += px
@@ -123,7 +132,7 @@ def _make_numba_kernel(with_blocks):
                                 buf[4, jj] -= py
                                 buf[5, jj] -= pz
                                 if with_blocks:
-                                    sx, sy = 3.0 * inv2 * dx, 3.0 * inv2 * dy
+                                    sx, sy = three_inv2 * dx, three_inv2 * dy
                                     qxx = sx * px - inv3
                                     qyy = sy * py - inv3
                                     qxy, qxz, qyz = sx * py, sx * pz, sy * pz
@@ -186,6 +195,14 @@ def evaluate(positions: np.ndarray, want_blocks: bool = False) -> Result:
                       numba.get_num_threads(), want_blocks)
 
 
+def hvp(positions: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Unit repulsion part of ``H v`` at ``positions`` (N, 3) for ``v``
+    (m, N, 3), by :func:`repulsion_hvp` on numba's threads."""
+    x = np.ascontiguousarray(np.asarray(positions, dtype=float).T)
+    u = np.ascontiguousarray(np.asarray(v, dtype=float).transpose(0, 2, 1))
+    return repulsion_hvp(x, u, numba.get_num_threads()).transpose(0, 2, 1)
+
+
 @numba.njit(parallel=True, fastmath=True, cache=True)
 def repulsion_hvp(x: np.ndarray, v: np.ndarray, nchunks: int) -> np.ndarray:
     """Unit repulsion part of ``H v``: ``sum_j B_ij (v_i - v_j)`` with c = 1.
@@ -206,12 +223,12 @@ def repulsion_hvp(x: np.ndarray, v: np.ndarray, nchunks: int) -> np.ndarray:
                 dx = x[0, i] - x[0, j]
                 dy = x[1, i] - x[1, j]
                 dz = x[2, i] - x[2, j]
-                inv2 = 1.0 / (dx * dx + dy * dy + dz * dz)
+                inv3, three_inv2 = pair_law(1.0 / np.sqrt(dx * dx + dy * dy + dz * dz))
                 geo[0, j] = dx
                 geo[1, j] = dy
                 geo[2, j] = dz
-                geo[3, j] = 3.0 * inv2
-                geo[4, j] = inv2 * np.sqrt(inv2)
+                geo[3, j] = three_inv2
+                geo[4, j] = inv3
             for k in range(m):
                 ox, oy, oz = out[t, k, 0], out[t, k, 1], out[t, k, 2]
                 vx, vy, vz = v[k, 0], v[k, 1], v[k, 2]
@@ -234,6 +251,6 @@ def repulsion_hvp(x: np.ndarray, v: np.ndarray, nchunks: int) -> np.ndarray:
 
 #: The compiled direct sum (what ``auto`` runs below its crossover).
 BACKEND = Backend(
-    name='numba', evaluate=evaluate, cost='N^2',
+    name='numba', evaluate=evaluate, cost='N^2', hvp=hvp,
     summary='compiled direct sum over every pair, parallel over '
     'NUMBA_NUM_THREADS')

@@ -12,12 +12,12 @@ kernel is ``1/(4 pi r)`` and it drops each point's own term; with unit charges
   ``x_i``, ``sum_j (3 d d^T / L**5 - I / L**3)``, in the same xx, yy, zz, xy,
   xz, yz order as :mod:`.base`.
 
-Accuracy. ``fmm_eps`` is FMM3D's requested relative precision. Measured
-(``python tools/backend_crossover.py --errors``, docs/calculator.md) on random
-scenes in 3D and on a plane, with near pairs and far clusters, the largest
-force error relative to the largest force stays below
-:data:`FORCE_ERROR_PER_EPS` ``* fmm_eps``; that product is the backend's
-promised force tolerance (:func:`force_tolerance`).
+Accuracy. ``fmm_eps`` is FMM3D's requested relative precision. The backend
+promises a force error, relative to the largest force, of
+:data:`FORCE_ERROR_PER_EPS` ``* fmm_eps`` (:func:`force_tolerance`), the
+bound that ``python tools/backend_crossover.py --errors`` checks on random
+scenes in 3D and on a plane, with near pairs and far clusters
+(docs/calculator.md gives the figures).
 
 Near pairs. FMM3D maps the scene into its unit box, which rounds every
 coordinate to about ``1e-16`` of the scene's size ``D`` (the largest extent):
@@ -30,19 +30,16 @@ summed exactly by the direct kernel, the pairs between them and the rest by
 two FMM calls with separate sources and targets (every such pair is farther
 apart than the radius). More than :data:`MAX_NEAR_POINTS` such points is a
 :class:`~.base.BeyondTolerance` error (a ValueError) naming the closest pair
-and the exact backend. Finding them costs a k-d tree per call (0.1 to 0.3 CPU
-s at 10**5 points, under 10 % of an E+F call at ``fmm_eps = 1e-3``).
+and the exact backend. Finding them costs a k-d tree per call.
 
-Cost is O(N), with about 10 ms of fixed cost per call; the fmm3dpy wheel from
-PyPI is built without OpenMP and runs on one thread (a source build with
-OpenMP follows ``OMP_NUM_THREADS``). Measured crossovers against the numba
-direct sum: docs/calculator.md. Below a few hundred points FMM3D sums
-directly and the result is exact to rounding.
+Cost is O(N), with a fixed cost per call; the fmm3dpy wheel from PyPI is
+built without OpenMP and runs on one thread (a source build with OpenMP
+follows ``OMP_NUM_THREADS``). The crossovers against the numba direct sum
+are in docs/calculator.md. Below a few hundred points FMM3D sums directly
+and the result is exact to rounding.
 """
 
 from __future__ import annotations
-
-from numbers import Real
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -53,25 +50,17 @@ from .base import Backend, BeyondTolerance, Result
 
 #: FMM3D's Laplace kernel is ``1 / (4 pi r)``; the repulsion's is ``1 / r``.
 FMM3D_SCALE = 4.0 * np.pi
-#: Largest measured force error over ``fmm_eps`` (max over points of the
-#: error's norm, relative to the largest force), rounded up: see the module
-#: docstring and docs/calculator.md.
+#: Promised force error over ``fmm_eps`` (max over points of the error's
+#: norm, relative to the largest force): see the module docstring.
 FORCE_ERROR_PER_EPS = 0.1
 #: A point whose nearest neighbour is closer than ``NEAR_ROUNDING * D /
 #: fmm_eps`` (``D`` the scene's largest extent) is summed exactly: FMM3D's
 #: own rounding of that pair, about ``1e-16 D / L``, would exceed a tenth of
 #: ``fmm_eps``.
 NEAR_ROUNDING = 1e-15
-#: Most points summed exactly with one another (:data:`NEAR_ROUNDING`): the
-#: direct sum over them costs up to about 50 ms.
+#: Most points summed exactly with one another (:data:`NEAR_ROUNDING`), a
+#: direct sum over them at every call.
 MAX_NEAR_POINTS = 4096
-
-
-def check_eps(eps: object) -> None:
-    """Raise ValueError unless ``eps`` is a real number in (0, 1)."""
-    if not (isinstance(eps, Real) and 0.0 < eps < 1.0):
-        raise ValueError(f'fmm_eps must be a number in (0, 1), the requested '
-                         f'relative precision, got {eps!r}')
 
 
 def force_tolerance(fmm_eps: float) -> float:
@@ -110,7 +99,6 @@ def evaluate(positions: np.ndarray, want_blocks: bool = False,
     would drop that pair). Too many near points (module docstring) raise
     :class:`~.base.BeyondTolerance`.
     """
-    check_eps(fmm_eps)
     lfmm3d = _lfmm3d()
     p = np.asarray(positions, dtype=float)
     n = len(p)
@@ -193,7 +181,7 @@ def _near_points(p, eps):
 #: FMM3D's fast multipole method, approximate to ``fmm_eps``.
 BACKEND = Backend(
     name='fmm', evaluate=evaluate, cost='N', tolerance='fmm_eps',
-    parameters={'fmm_eps': check_eps}, requires=('fmm3dpy',),
+    parameters={'fmm_eps': 1e-6}, requires=('fmm3dpy',),
     force_tolerance=force_tolerance,
     summary="FMM3D's fast multipole method, O(N), forces to 0.1 fmm_eps; "
     'one thread with the PyPI wheel (OMP_NUM_THREADS if built with '

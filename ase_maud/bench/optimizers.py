@@ -102,9 +102,8 @@ ASE_BASELINES = ('FIRE', 'FIRE2', 'BFGS', 'LBFGS', 'PreconLBFGS')
 SCIPY_BASELINE = 'L-BFGS-B'
 
 #: Largest scene (points) each optimiser is run on. ASE's BFGS keeps a dense
-#: (3N)^2 Hessian and eigen-decomposes it at every step, O(N^3): 126 s for
-#: 673 steps on hanging_net 20 (400 points, docs/benchmarks.md); one
-#: eigen-decomposition at 2500 points (7500^2) takes minutes on one core.
+#: (3N)^2 Hessian and eigen-decomposes it at every step, O(N^3) per step
+#: (docs/benchmarks.md has its seconds on a net of 400 points).
 MAX_ATOMS = {'BFGS': 500, 'Maud-exact': 200}
 
 

@@ -1,0 +1,55 @@
+"""The accuracy a run asks of its calculator, and the protocol to ask it by.
+
+A calculator whose forces can be computed to a chosen relative error (a
+MaudCalculator: its ``auto`` backend takes the FMM for a coarse ``tol``, the
+exact direct sum for a fine one) is :class:`ToleranceAware`. An optimiser
+asks it, before each evaluation, for the force error it needs then
+(:func:`ask`): :data:`ACCURACY_FRACTION` of the larger of the requested
+``fmax`` and the current one, at most :data:`MAX_RUN_TOL` of the largest
+repulsive force: coarse, cheap sums far from the answer, fine ones near it,
+and never a stall on evaluation noise. The energies it then compares carry
+the relative error :func:`noise`. Other calculators are left alone.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol, runtime_checkable
+
+#: The force error a run asks for, as a fraction of the larger of the
+#: requested ``fmax`` and the current one.
+ACCURACY_FRACTION = 0.1
+#: The coarsest ``tol`` a run asks for (relative to the largest force).
+MAX_RUN_TOL = 1e-3
+
+
+@runtime_checkable
+class ToleranceAware(Protocol):
+    """A calculator with a settable force tolerance.
+
+    ``last_force_scale``: the largest repulsive force of the last call (force
+    units; None before a call); ``last_tolerance``: the force error the
+    results held promise, relative to it (0.0 exact); ``set_tolerance(tol)``
+    sets the relative force error of the next calls.
+    """
+
+    last_force_scale: float | None
+    last_tolerance: float | None
+
+    def set_tolerance(self, tol: float) -> None: ...
+
+
+def ask(calc: Any, fmax: float, fmax_now: float) -> None:
+    """Set a :class:`ToleranceAware` calculator's tolerance for the next
+    evaluation (module docstring); leave any other alone."""
+    if not isinstance(calc, ToleranceAware) or not calc.last_force_scale:
+        return
+    wanted = ACCURACY_FRACTION * max(fmax, fmax_now) / calc.last_force_scale
+    calc.set_tolerance(min(wanted, MAX_RUN_TOL))
+
+
+def noise(calc: Any) -> float:
+    """The relative error of the energy and forces ``calc`` holds: its
+    ``last_tolerance`` if it is :class:`ToleranceAware`, else 0."""
+    if isinstance(calc, ToleranceAware):
+        return calc.last_tolerance or 0.0
+    return 0.0

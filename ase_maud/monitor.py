@@ -1,0 +1,132 @@
+"""A run that cannot go on: divergence and stagnation, watched step by step.
+
+:class:`RunMonitor` knows nothing of Maud's step: any optimiser can call
+:meth:`RunMonitor.check` once per step with the positions, the merit, the
+forces and its step factor, and gets a :class:`DivergenceError` or a
+:class:`StagnationError` (both :class:`MaudError`) whose message says what was
+observed. Its state goes into a restart file (:meth:`RunMonitor.todict`).
+
+- Divergence: the points spread beyond ``divergence_factor`` times their
+  reference size, ``max(start size, a N)`` (the size is the largest distance
+  from the centroid), or, on a scene known to have no finite minimum
+  (``unbounded``), beyond twice their start size; or the centroid of the
+  scene moves by more than ``divergence_factor`` times that reference (a
+  scene that drifts as a whole).
+- Stagnation: ``gamma`` (the optimiser's step factor) underflowed, every
+  step having been taken back; or no progress for ``patience`` steps,
+  progress being fmax falling by 0.1 % below its best and, for
+  ``target='minimum'``, the merit (the energy) falling below its lowest by
+  more than its error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .topology import describe_unbounded
+
+
+class MaudError(RuntimeError):
+    """A run that cannot go on; the message (also in the log) says why."""
+
+
+class DivergenceError(MaudError):
+    """The points flew apart: the scene has no finite stationary point."""
+
+
+class StagnationError(MaudError):
+    """No progress: gamma underflowed or fmax stopped improving."""
+
+
+#: fmax counts as progress when it falls below ``(1 - FMAX_PROGRESS)`` of its
+#: best so far.
+FMAX_PROGRESS = 1e-3
+#: ``gamma`` has underflowed below this fraction of its start.
+GAMMA_UNDERFLOW = 1e-12
+
+
+@dataclass
+class RunMonitor:
+    """Divergence and stagnation of one run; see the module docstring.
+
+    ``merit_name``: what the merit is in messages (``'energy'`` for
+    ``target='minimum'``, else ``'|f|^2'``, which is not watched for
+    progress); ``length_scale``: the scene's ``a`` (0 if unknown);
+    ``unbounded``: spring components proved to have no finite minimum.
+    """
+
+    divergence_factor: float
+    patience: int
+    merit_name: str = 'energy'
+    length_scale: float = 0.0
+    unbounded: list[list[int]] = field(default_factory=list)
+    size0: float | None = None
+    centre0: np.ndarray | None = None
+    best: tuple[float, int] = (np.inf, 0)
+    lowest: tuple[float, int] = (np.inf, 0)
+
+    def check(self, step: int, x: np.ndarray, merit: float, forces: np.ndarray,
+              gamma: float, gamma0: float, tolerance: float) -> None:
+        """Raise DivergenceError or StagnationError (module docstring) at
+        ``step``; ``gamma0`` is the step factor's start, ``tolerance`` the
+        slack of a merit comparison."""
+        centre = x.mean(axis=0)
+        size = np.linalg.norm(x - centre, axis=1).max()
+        if self.size0 is None:
+            reference = size if self.unbounded else max(size, self.length_scale * len(x))
+            self.size0 = max(reference, np.finfo(float).tiny)
+            self.centre0 = centre
+        factor = 2.0 if self.unbounded else self.divergence_factor
+        why = (describe_unbounded(self.unbounded) if self.unbounded
+               else 'no stationary point in reach')
+        if size > factor * self.size0:
+            raise DivergenceError(
+                f'diverged at step {step}: the points spread to {size:.3g}, '
+                f'{size / self.size0:.3g} times their reference size '
+                f'{self.size0:.3g}; {why}')
+        drift = np.linalg.norm(centre - self.centre0)
+        if drift > factor * self.size0:
+            raise DivergenceError(
+                f'diverged at step {step}: the scene as a whole drifted by '
+                f'{drift:.3g}, {drift / self.size0:.3g} times its reference size '
+                f'{self.size0:.3g}; {why} (a constant force on a free scene?)')
+        fmax = float(np.linalg.norm(forces, axis=1).max(initial=0.0))
+        if fmax < (1 - FMAX_PROGRESS) * self.best[0]:
+            self.best = (fmax, step)
+        if self.merit_name == 'energy' and merit < self.lowest[0] - tolerance:
+            self.lowest = (merit, step)
+        if step - max(self.best[1], self.lowest[1]) > self.patience:
+            raise StagnationError(
+                f'stagnant at step {step}: no progress for {self.patience} steps '
+                f'(fmax {fmax:.3g}, best {self.best[0]:.3g} at step {self.best[1]}'
+                f'{self._lowest_text()}; a requested fmax below the rounding '
+                'noise of the forces, or an oscillation)')
+        if gamma < GAMMA_UNDERFLOW * gamma0:
+            raise StagnationError(
+                f'stagnant at step {step}: the step factor gamma fell to '
+                f'{gamma:.3g} ({gamma / gamma0:.3g} of its start): every step '
+                f'since step {max(self.best[1], self.lowest[1])} raised the '
+                f'{self.merit_name}, even the shortest along the model\'s direction '
+                f'(fmax {fmax:.3g})')
+
+    def _lowest_text(self) -> str:
+        if self.merit_name != 'energy':
+            return ''
+        return f', energy {self.lowest[0]:.12g} lowest since step {self.lowest[1]}'
+
+    def todict(self, step: int) -> dict[str, Any]:
+        """The state to resume from at ``step`` (steps counted from it)."""
+        return {'size0': self.size0, 'centre0': self.centre0,
+                'best': [self.best[0], self.best[1] - step],
+                'lowest': [self.lowest[0], self.lowest[1] - step]}
+
+    def load(self, d: dict[str, Any]) -> None:
+        """Take the state :meth:`todict` gave (its steps are relative to the
+        step it was written at, which the resumed run counts as 0)."""
+        self.size0 = None if d['size0'] is None else float(d['size0'])
+        self.centre0 = None if d['centre0'] is None else np.asarray(d['centre0'], float)
+        self.best = (float(d['best'][0]), int(d['best'][1]))
+        self.lowest = (float(d['lowest'][0]), int(d['lowest'][1]))

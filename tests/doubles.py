@@ -1,0 +1,31 @@
+"""Test doubles shared by the tests and tools/hostile_sweep.py."""
+
+import numpy as np
+from ase.calculators.calculator import Calculator, all_changes
+
+
+class PoisonedCalculator(Calculator):
+    """Any ASE calculator ``inner``, except that its call number ``call``
+    returns ``value`` (NaN or inf, say) as the energy (``what='energy'``) or
+    as the x force on atom ``atom`` (``what='forces'``): the hard input of a
+    calculator that fails mid-run."""
+
+    def __init__(self, inner: Calculator, call: int, what: str, value: float,
+                 atom: int = 6) -> None:
+        super().__init__()
+        self.implemented_properties = inner.implemented_properties
+        self.inner, self.call, self.what, self.value = inner, call, what, value
+        self.atom, self.calls = atom, 0
+
+    def calculate(self, atoms=None, properties=('energy',),
+                  system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        self.calls += 1
+        copy = self.atoms.copy()
+        self.results = {name: np.copy(self.inner.get_property(name, copy))
+                        for name in {'energy', 'free_energy', 'forces', *properties}}
+        if self.calls == self.call:
+            if self.what == 'energy':
+                self.results['energy'] = self.results['free_energy'] = self.value
+            else:
+                self.results['forces'][self.atom] = [self.value, 0.0, 0.0]

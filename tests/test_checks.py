@@ -1,0 +1,49 @@
+"""The one rules table: each keyword accepted and refused by its rule."""
+
+import re
+
+import numpy as np
+import pytest
+
+from ase_maud import Maud, MaudCalculator
+from ase_maud.checks import RULES, check
+from ase_maud.scenes import build
+
+
+@pytest.mark.parametrize('name, good, bad', [
+    ('gamma', [0.5, 2, np.float32(1.0)], [0, -1, np.nan, None, True, '1']),
+    ('memory', [0, 7, 7.0, np.int64(3), None], [1.5, -1, True, 'x']),
+    ('maxstep_nn', [0.1, 0.49, None], [0.5, 0, 1]),
+    ('target', ['minimum', 'stationary', None], ['max', 3, b'minimum']),
+    ('method', ['tensor', 'scalar'], ['vector', None]),
+    ('dim', [2, 3, np.int64(3)], [2.0, 4, True, None]),
+    ('tol', [0, 0.0, 1e-3], [1.0, -1e-9, np.inf]),
+    ('crossover', [None, 0, 5000], [-1, 2.5, 'x']),
+    ('fmm_eps', [1e-6, 0.5], [0, 1.0]),
+])
+def test_rules_accept_and_refuse(name, good, bad):
+    for value in good:
+        checked = check(name, value)
+        assert checked == value or (value is None and checked is None)
+    for value in bad:
+        with pytest.raises(ValueError, match=re.escape(
+                f'{name} must be {RULES[name].accepted}, got {value!r}')):
+            check(name, value)
+
+
+def test_whole_numbers_come_back_as_int():
+    assert type(check('memory', 7.0)) is int
+    assert type(check('gamma', 2)) is float
+    assert type(check('dim', np.int64(2))) is int
+
+
+def test_the_calculator_and_the_optimizer_use_the_same_rule():
+    with pytest.raises(ValueError, match=re.escape('tol must be ' + RULES['tol'].accepted)):
+        MaudCalculator(tol=2.0)
+    with pytest.raises(ValueError, match='^floor must be'):
+        Maud(build('ring', 8), floor=2.0, logfile=None)
+
+
+def test_an_unknown_calculator_parameter_is_named():
+    with pytest.raises(ValueError, match="no parameter 'tole'"):
+        MaudCalculator(tole=1e-3)

@@ -1,0 +1,264 @@
+"""The step rule alone (MaudMethod, StepRule, MaudState) on quadratics with
+a fake solver, and the run monitor: no calculator, no ASE optimizer."""
+
+import io
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from ase.io.jsonio import read_json, write_json
+
+from ase_maud.method import (
+    MIN_PAIR_COSINE,
+    STEP_DEFAULTS,
+    MaudMethod,
+    MaudState,
+    Point,
+    step_rule,
+)
+from ase_maud.monitor import DivergenceError, RunMonitor, StagnationError
+from ase_maud.neighbours import NearestDistances
+from ase_maud.stiffness import Solver, StiffnessModel
+
+
+class Quadratic:
+    """``E(x) = x.A x / 2 - b.x`` over (n, 3) positions, A random SPD."""
+
+    def __init__(self, seed, n=6, spread=100.0):
+        rng = np.random.default_rng(seed)
+        q, _ = np.linalg.qr(rng.standard_normal((3 * n, 3 * n)))
+        self.A = q @ np.diag(np.geomspace(1.0, spread, 3 * n)) @ q.T
+        self.b = rng.standard_normal(3 * n)
+        self.n = n
+        self.minimum = np.linalg.solve(self.A, self.b).reshape(n, 3)
+
+    def energy(self, x):
+        x = x.ravel()
+        return 0.5 * x @ self.A @ x - self.b @ x
+
+    def forces(self, x):
+        return (self.b - self.A @ x.ravel()).reshape(-1, 3)
+
+
+class MatrixSolver(Solver):
+    """``K^-1 f`` for a dense K over all 3n coordinates."""
+
+    def __init__(self, K):
+        self.K = K
+
+    def solve(self, forces):
+        return np.linalg.solve(self.K, np.ravel(forces)).reshape(-1, 3)
+
+
+class FakeModel(StiffnessModel):
+    name = 'fake'
+
+    def at(self, atoms, learnt=None):
+        raise AssertionError('the step rule never calls the model itself')
+
+
+def method(target='minimum', model='exact', maxstep_nn=None, **keywords):
+    """The step rule of ``model`` on a fake model; no nearest-distance bound
+    unless ``maxstep_nn`` is given."""
+    fake = FakeModel(target)
+    rule = replace(step_rule(model, fake.target, **keywords), maxstep_nn=maxstep_nn)
+    return MaudMethod(fake, rule, NearestDistances())
+
+
+def start(seed, quadratic):
+    return np.random.default_rng(seed + 100).standard_normal((quadratic.n, 3)) * 10
+
+
+def relax(rule, quadratic, x, K, steps=500, fmax=1e-9):
+    """Drive ``rule`` with exact energies and forces; return the positions,
+    the number of evaluations and the energies of the accepted points."""
+    state = rule.start()
+    accepted = []
+    for evaluation in range(1, steps + 1):
+        forces = quadratic.forces(x)
+        if np.linalg.norm(forces, axis=1).max() < fmax:
+            return x, evaluation, accepted
+        move = rule.step(state, x, quadratic.energy(x), forces, 0.0,
+                         lambda at: MatrixSolver(K))
+        accepted.append(state.last.merit)
+        x = state.last.x + move
+        rule.moved(state, x)
+    raise AssertionError(f'not converged in {steps} evaluations')
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_exact_model_is_one_newton_step(seed):
+    quadratic = Quadratic(seed)
+    x, evaluations, _ = relax(method(), quadratic, start(seed, quadratic), quadratic.A)
+    assert evaluations == 2   # the start, then the minimum
+    np.testing.assert_allclose(x, quadratic.minimum, atol=1e-9)
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_lbfgs_memory_over_a_poor_model_converges_downhill(seed):
+    quadratic = Quadratic(seed, spread=30.0)
+    K = np.eye(3 * quadratic.n) * 30.0   # the stiffest curvature: no overshoot
+    memoryless, plain, _ = relax(method(model='global', memory=0), quadratic,
+                                 start(seed, quadratic), K, steps=5000)
+    x, with_memory, energies = relax(method(model='global', memory=30), quadratic,
+                                     start(seed, quadratic), K)
+    np.testing.assert_allclose(x, quadratic.minimum, atol=1e-8)
+    assert with_memory < plain / 3
+    assert np.all(np.diff(energies) <= 1e-12 * np.abs(energies[1:]))
+
+
+def test_an_uphill_step_is_taken_back_with_half_the_gamma():
+    quadratic = Quadratic(3)
+    rule = method()
+    state = rule.start()
+    x0 = start(3, quadratic)
+    too_soft = MatrixSolver(quadratic.A / 3)   # overshoots by 3
+    move = rule.step(state, x0, quadratic.energy(x0), quadratic.forces(x0), 0.0,
+                     lambda at: too_soft)
+    x1 = x0 + move
+    rule.moved(state, x1)
+    assert rule.uphill(state, x1, quadratic.energy(x1), quadratic.forces(x1), 0.0)
+    again = rule.step(state, x1, quadratic.energy(x1), quadratic.forces(x1), 0.0,
+                      lambda at: pytest.fail('the solver of the start is kept'))
+    assert state.last.x is not x1 and np.array_equal(state.last.x, x0)
+    assert state.gamma == 0.5
+    np.testing.assert_allclose(again, 0.5 * move)
+
+
+def test_energies_within_their_noise_are_decided_by_the_forces():
+    quadratic = Quadratic(4)
+    rule = method()
+    x0 = quadratic.minimum + 1e-4
+    x1 = quadratic.minimum + 0.5e-4
+    state = rule.start()
+    state.last = Point(x0, quadratic.energy(x0), quadratic.forces(x0), 0.0)
+    # a merit that looks higher, within a noise of 1e-3, but downhill by the
+    # trapezoid rule of the forces: accepted
+    looks_higher = quadratic.energy(x1) + 1e-6 * abs(quadratic.energy(x1))
+    assert not rule.uphill(state, x1, looks_higher, quadratic.forces(x1), 1e-3)
+    assert rule.uphill(state, x1, looks_higher, quadratic.forces(x1), 1e-9)
+
+
+def test_nearly_degenerate_secant_pairs_are_not_kept():
+    rule = method(model='global', memory=10)
+    state = rule.start()
+    x0 = np.zeros((2, 3))
+    state.last = Point(x0, 0.0, np.ones((2, 3)), 0.0)
+    s = np.ones((2, 3))
+    y = np.zeros((2, 3))
+    y[0, 0], y[0, 1] = 1.0, -1.0
+    y[0, 1] += 1e-3 * MIN_PAIR_COSINE * np.sqrt(12)  # s.y / (|s| |y|) below the bound
+    rule._accept(state, x0 + s, state.last.forces - y)
+    assert state.pairs == []
+    y[0, 1] = 1.0
+    rule._accept(state, x0 + s, state.last.forces - y)
+    assert len(state.pairs) == 1
+
+
+def test_a_direction_that_is_not_downhill_clears_the_memory():
+    rule = method(model='global', memory=10)
+    forces = np.array([[1.0, 0, 0], [0, 1.0, 0]])
+    state = rule.start()
+    state.last = Point(np.zeros((2, 3)), 0.0, forces, 0.0)
+    state.solver = MatrixSolver(np.eye(6))
+    # a pair of negative curvature, as rounding could leave: the two-loop
+    # recursion then points uphill
+    state.pairs = [(forces.copy(), -4.0 * forces)]
+    direction = rule._direction(state)
+    assert state.pairs == []
+    np.testing.assert_array_equal(direction, forces)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_each_point_moves_at_most_maxstep_nn_of_its_nearest_distance(seed):
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(0, 5, (12, 3))
+    rule = method(maxstep_nn=0.3)
+    state = rule.start()
+    big = rng.standard_normal((12, 3)) * 100
+    move = rule.step(state, x, 0.0, big, 0.0, lambda at: MatrixSolver(np.eye(36)))
+    limit = 0.3 * NearestDistances()(x)
+    assert np.all(np.linalg.norm(move, axis=1) <= limit * (1 + 1e-12))
+    unit = big / np.linalg.norm(big, axis=1)[:, None]
+    np.testing.assert_allclose(move / np.linalg.norm(move, axis=1)[:, None], unit)
+
+
+def test_momentum_restarts_on_an_overshoot():
+    rule = method(model='nodal')
+    state = rule.start()
+    x = np.zeros((1, 3))
+    solver = MatrixSolver(np.eye(3))
+    rule.step(state, x, 0.0, np.array([[1.0, 0, 0]]), 0.0, lambda at: solver)
+    rule.moved(state, x + [[1.0, 0, 0]])
+    gamma = state.gamma * rule.rule.gamma_growth
+    # the next force points back: the move is dropped, gamma shrinks
+    move = rule.step(state, x + [[1.0, 0, 0]], -1.0, np.array([[-1.0, 0, 0]]), 0.0,
+                     lambda at: solver)
+    assert state.gamma == pytest.approx(gamma * rule.rule.overshoot_shrink)
+    np.testing.assert_allclose(move, [[-state.gamma, 0, 0]])
+
+
+def test_step_rule_merges_defaults_model_and_keywords():
+    rule = step_rule('global', gamma_max=0.8, memory=None)
+    assert rule.gamma_max == 0.8
+    assert rule.memory == STEP_DEFAULTS['global']['memory']
+    assert rule.gamma_growth == STEP_DEFAULTS['common']['gamma_growth']
+    assert step_rule('global', target='stationary').memory == 0
+    assert step_rule('no such model').beta_max == STEP_DEFAULTS['nodal']['beta_max']
+
+
+def test_state_survives_json():
+    rng = np.random.default_rng(5)
+    state = MaudState(gamma=0.3, k=4, v=rng.standard_normal((3, 3)),
+                      last=Point(rng.standard_normal((3, 3)), 1.5,
+                                 rng.standard_normal((3, 3)), 1e-7),
+                      pairs=[(rng.standard_normal((3, 3)), rng.standard_normal((3, 3)))],
+                      model={'kappa': 2.5})
+    buffer = io.StringIO()
+    write_json(buffer, state.todict())
+    buffer.seek(0)
+    again = MaudState.fromdict(read_json(buffer))
+    assert again.todict().keys() == state.todict().keys()
+    for name in ('gamma', 'k', 'model'):
+        assert getattr(again, name) == getattr(state, name)
+    np.testing.assert_array_equal(again.v, state.v)
+    np.testing.assert_array_equal(again.last.x, state.last.x)
+    np.testing.assert_array_equal(again.pairs[0][1], state.pairs[0][1])
+
+
+# -- the run monitor ------------------------------------------------------------
+
+def test_monitor_names_a_spread_and_a_drift():
+    monitor = RunMonitor(divergence_factor=3.0, patience=100)
+    x = np.random.default_rng(0).uniform(-1, 1, (10, 3))
+    forces = np.ones((10, 3))
+    monitor.check(0, x, 1.0, forces, 1.0, 1.0, 1e-12)
+    with pytest.raises(DivergenceError, match='spread to'):
+        monitor.check(1, 5 * x, 1.0, forces, 1.0, 1.0, 1e-12)
+    with pytest.raises(DivergenceError, match='drifted by'):
+        monitor.check(1, x + 20.0, 1.0, forces, 1.0, 1.0, 1e-12)
+
+
+def test_monitor_names_stagnation_and_an_underflowed_gamma():
+    monitor = RunMonitor(divergence_factor=3.0, patience=5)
+    x = np.zeros((2, 3))
+    x[1, 0] = 1.0
+    forces = np.ones((2, 3))
+    for step in range(6):
+        monitor.check(step, x, 1.0, forces, 1.0, 1.0, 1e-12)
+    with pytest.raises(StagnationError, match='no progress for 5 steps'):
+        monitor.check(6, x, 1.0, forces, 1.0, 1.0, 1e-12)
+    fresh = RunMonitor(divergence_factor=3.0, patience=5)
+    with pytest.raises(StagnationError, match='gamma fell to 1e-13'):
+        fresh.check(0, x, 1.0, forces, 1e-13, 1.0, 1e-12)
+
+
+def test_monitor_state_counts_steps_from_the_restart():
+    monitor = RunMonitor(divergence_factor=3.0, patience=5)
+    x = np.zeros((2, 3))
+    x[1, 0] = 1.0
+    monitor.check(7, x, 2.0, np.ones((2, 3)), 1.0, 1.0, 1e-12)
+    resumed = RunMonitor(divergence_factor=3.0, patience=5)
+    resumed.load(monitor.todict(step=7))
+    assert resumed.best == (monitor.best[0], 0) and resumed.lowest == (2.0, 0)
+    assert resumed.size0 == monitor.size0

@@ -38,10 +38,22 @@ class ToleranceAware(Protocol):
     def set_tolerance(self, tol: float) -> None: ...
 
 
+_AWARE: dict[type, bool] = {}
+
+
+def is_aware(calc: Any) -> bool:
+    """Whether ``calc`` is :class:`ToleranceAware` (decided once per class:
+    a protocol check looks at every attribute)."""
+    kind = type(calc)
+    if kind not in _AWARE:
+        _AWARE[kind] = isinstance(calc, ToleranceAware)
+    return _AWARE[kind]
+
+
 def ask(calc: Any, fmax: float, fmax_now: float) -> None:
     """Set a :class:`ToleranceAware` calculator's tolerance for the next
     evaluation (module docstring); leave any other alone."""
-    if not isinstance(calc, ToleranceAware) or not calc.last_force_scale:
+    if not is_aware(calc) or not calc.last_force_scale:
         return
     wanted = ACCURACY_FRACTION * max(fmax, fmax_now) / calc.last_force_scale
     calc.set_tolerance(min(wanted, MAX_RUN_TOL))
@@ -50,6 +62,6 @@ def ask(calc: Any, fmax: float, fmax_now: float) -> None:
 def noise(calc: Any) -> float:
     """The relative error of the energy and forces ``calc`` holds: its
     ``last_tolerance`` if it is :class:`ToleranceAware`, else 0."""
-    if isinstance(calc, ToleranceAware):
+    if is_aware(calc):
         return calc.last_tolerance or 0.0
     return 0.0

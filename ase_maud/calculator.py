@@ -30,6 +30,7 @@ from ase.calculators.calculator import Calculator, all_changes
 from numpy.typing import ArrayLike
 
 from . import backends, physics, topology
+from .checks import check
 from .potential import MaudPotential
 from .springs import check_range
 
@@ -173,8 +174,13 @@ class MaudCalculator(Calculator):
         return super().set(**kwargs)
 
     def set_tolerance(self, tol: float) -> None:
-        """Set ``tol`` for the next calls (:class:`ase_maud.accuracy.ToleranceAware`)."""
-        self.set(tol=tol)
+        """Set ``tol`` for the next calls (:class:`ase_maud.accuracy.ToleranceAware`):
+        :meth:`set` with ``tol`` alone, without its checks of the other
+        parameters when the results held already meet it."""
+        if self.last_tolerance is not None and self.last_tolerance <= tol:
+            self.parameters['tol'] = check('tol', tol)
+        else:
+            self.set(tol=tol)
 
     def reset(self) -> None:
         """Clear the results and what is known of their accuracy."""

@@ -40,7 +40,11 @@ stiffness solver ``K^-1`` (:mod:`ase_maud.stiffness`)::
   move becomes ``gamma (K + mu I)^-1 f`` with the smallest ``mu >= 0`` that
   keeps every point within its bound (Levenberg-Marquardt): far from a
   minimum this turns the step towards the forces instead of shortening the
-  Newton step as a whole.
+  Newton step as a whole. With ``bound='whole'`` the whole move is scaled
+  by one factor instead, so that a descent direction stays one; and
+  ``maxstep_size`` bounds every point's move by that fraction of the scene's
+  size (the largest distance from the centroid), a bound that needs no
+  neighbour search.
 
 The state of a run is a :class:`MaudState` (what a restart file holds); the
 settings are a frozen :class:`StepRule`, made by :func:`step_rule` from the
@@ -67,13 +71,19 @@ from .stiffness import Solver, StiffnessModel
 #: the specification has it.
 STEP_DEFAULTS: dict[str, dict[str, Any]] = {
     'common': {'gamma': 1.0, 'gamma_growth': 1.1, 'overshoot_shrink': 0.6,
-               'maxstep_nn': 0.45, 'maxstep': None, 'trust_region': False,
-               'interpolate': False},
+               'maxstep_nn': 0.45, 'maxstep': None, 'maxstep_size': None,
+               'trust_region': False, 'interpolate': False, 'bound': 'each'},
     'exact': {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 0, 'trust_region': True},
     'global': {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 30},
     'nodal': {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0},
     'secant': {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0},
+    'springs': {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 20, 'maxstep_nn': None,
+                'maxstep_size': 1.0, 'bound': 'whole', 'gamma_growth': 1e3,
+                'interpolate': True},
 }
+
+#: Shifts per grid of the trust-region search (:meth:`MaudMethod._trust_region`).
+TRUST_GRID = 24
 
 #: Smallest ``s.y / (|s| |y|)`` of a secant pair the L-BFGS memory keeps.
 MIN_PAIR_COSINE = 1e-12
@@ -92,8 +102,10 @@ class StepRule:
     memory: int
     maxstep_nn: float | None
     maxstep: float | None
+    maxstep_size: float | None
     trust_region: bool
     interpolate: bool
+    bound: str
     #: Points per image when the positions are a chain of images (ASE's NEB):
     #: the nearest other point is sought within the same image only (the same
     #: atom in the next image is not a neighbour). None: one scene.
@@ -252,7 +264,9 @@ class MaudMethod:
         here, rule = state.last, self.rule
         direction = self._direction(state)
         limit = self._limits(here.x)
-        if rule.trust_region and hasattr(state.solver, 'shifted_solve'):
+        if rule.trust_region and hasattr(state.solver, 'dot'):
+            direction = self._dogleg(state, direction, limit)
+        elif rule.trust_region and hasattr(state.solver, 'shifted_solve'):
             direction = self._trust_region(state, direction, limit)
         if (rule.beta_max > 0 and state.v is not None
                 and np.vdot(state.v, direction) < 0):
@@ -263,7 +277,7 @@ class MaudMethod:
         if state.v is not None and rule.beta_max > 0:
             direction += min(state.k / (state.k + 3.0), rule.beta_max) * state.v
         state.k += 1
-        return _bound(direction, limit)
+        return _bound(direction, limit, whole=rule.bound == 'whole')
 
     def _direction(self, state: MaudState) -> np.ndarray:
         """``K^-1 f``, or its L-BFGS correction over the stored pairs; if that
@@ -287,43 +301,85 @@ class MaudMethod:
 
     def _limits(self, x: np.ndarray) -> np.ndarray:
         """The longest move allowed to each point (length units)."""
+        rule = self.rule
         limit = np.full(len(x), np.inf)
-        if self.rule.maxstep_nn is not None:
-            limit = self.rule.maxstep_nn * self.nearest(x)
-        if self.rule.maxstep is not None:
-            limit = np.minimum(limit, self.rule.maxstep)
+        if rule.maxstep_nn is not None:
+            limit = rule.maxstep_nn * self.nearest(x)
+        if rule.maxstep is not None:
+            limit = np.minimum(limit, rule.maxstep)
+        if rule.maxstep_size is not None and len(x) > 1:
+            size = np.linalg.norm(x - x.mean(axis=0), axis=1).max()
+            limit = np.minimum(limit, rule.maxstep_size * size)
         return limit
+
+    def _dogleg(self, state: MaudState, newton: np.ndarray,
+                limit: np.ndarray) -> np.ndarray:
+        """The longest move along the dogleg path (from 0 to the Cauchy point
+        ``(f.f / f.K f) f``, then to the Newton move ``K^-1 f``) whose
+        ``gamma`` times keeps every point within ``limit``."""
+        gamma, forces = state.gamma, state.last.forces
+        if (gamma * np.linalg.norm(newton, axis=1) / limit).max() <= 1:
+            return newton
+        curvature = np.vdot(forces, state.solver.dot(forces))
+        cauchy = forces * (np.vdot(forces, forces) / curvature) if curvature > 0 else None
+        for start, end in ((np.zeros_like(forces), cauchy), (cauchy, newton)):
+            if end is None:
+                return forces * _reach(gamma * np.zeros_like(forces), gamma * forces, limit)
+            t = _reach(gamma * start, gamma * (end - start), limit)
+            if t < 1:
+                return start + t * (end - start)
+        return newton
 
     def _trust_region(self, state: MaudState, direction: np.ndarray,
                       limit: np.ndarray) -> np.ndarray:
         """``K^-1 f`` damped to ``(K + mu I)^-1 f`` with the smallest ``mu``
-        (to 1 %, by bisection in log mu) at which ``gamma`` times it keeps
-        every point within ``limit``."""
+        (to about 0.2 %) at which ``gamma`` times it keeps every point within
+        ``limit``: the longest move, relative to its limit, falls as ``mu``
+        grows, so three log-spaced grids of :data:`TRUST_GRID` values, each
+        within the bracket the last one found, pin it down (each grid is one
+        batch of shifted solves)."""
         solver, forces, gamma = state.solver, state.last.forces, state.gamma
 
-        def outside(mu):
-            move = solver.shifted_solve(forces, [mu])[0]
-            return (gamma * np.linalg.norm(move, axis=1) / limit).max() > 1
+        def longest(mus):
+            moves = solver.shifted_solve(forces, mus)
+            return (gamma * np.linalg.norm(moves, axis=2) / limit).max(axis=1), moves
 
         if (gamma * np.linalg.norm(direction, axis=1) / limit).max() <= 1:
             return direction
-        low, high = 0.0, np.abs(solver.values).max()
-        while outside(high):
-            low, high = high, 10.0 * high
-        while high > 1.01 * max(low, high / 1e12):
-            middle = np.sqrt(max(low, high / 1e12) * high)
-            if outside(middle):
-                low = middle
-            else:
-                high = middle
-        return solver.shifted_solve(forces, [high])[0]
+        high = np.abs(solver.values).max()
+        while longest([high])[0][0] > 1:
+            high *= 10.0
+        low = high * 1e-12
+        for _ in range(3):
+            mus = np.geomspace(low, high, TRUST_GRID)
+            ratio, moves = longest(mus)
+            first = int(np.argmax(ratio <= 1)) if (ratio <= 1).any() else len(mus) - 1
+            low, high, best = mus[max(first - 1, 0)], mus[first], moves[first]
+        return best
 
 
-def _bound(step: np.ndarray, limit: np.ndarray) -> np.ndarray:
-    """Scale each point's move down to its allowed length."""
+def _reach(start: np.ndarray, step: np.ndarray, limit: np.ndarray) -> float:
+    """The largest ``t`` in [0, inf] with every point's ``|start_i + t
+    step_i| <= limit_i`` (``start`` within its limits): the smallest positive
+    root over points of ``|start_i + t step_i|**2 = limit_i**2``."""
+    a = np.einsum('ij,ij->i', step, step)
+    b = np.einsum('ij,ij->i', start, step)
+    c = np.einsum('ij,ij->i', start, start) - limit**2
+    moving = a > 0
+    roots = (-b[moving] + np.sqrt(np.maximum(b[moving]**2 - a[moving] * c[moving], 0.0))
+             ) / a[moving]
+    return float(roots.min(initial=np.inf))
+
+
+def _bound(step: np.ndarray, limit: np.ndarray, whole: bool = False) -> np.ndarray:
+    """Scale each point's move down to its allowed length, or (``whole``)
+    the whole move by the one factor that brings every point within its
+    length (a descent direction stays one)."""
     length = np.linalg.norm(step, axis=1)
     scale = np.divide(limit, length, out=np.ones_like(length),
                       where=length > limit)
+    if whole:
+        return step * scale.min(initial=1.0)
     return step * scale[:, None]
 
 

@@ -4,6 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.spatial import cKDTree
+from scipy.spatial.distance import cdist
+
+#: Images of at most this many points get their distances from a full
+#: distance matrix, larger ones from a k-d tree.
+DENSE_MAX_POINTS = 64
 
 
 class NearestDistances:
@@ -24,8 +29,16 @@ class NearestDistances:
         if size < 2:
             distances = np.full(len(x), np.inf)
         else:
-            distances = np.concatenate(
-                [cKDTree(image).query(image, k=2)[0][:, 1]
-                 for image in x.reshape(-1, size, x.shape[1])])
+            distances = np.concatenate([_nearest(image)
+                                        for image in x.reshape(-1, size, x.shape[1])])
         self._kept = x.copy(), distances
         return distances
+
+
+def _nearest(points: np.ndarray) -> np.ndarray:
+    """Each point's distance to its nearest other point (N >= 2)."""
+    if len(points) > DENSE_MAX_POINTS:
+        return cKDTree(points).query(points, k=2)[0][:, 1]
+    distances = cdist(points, points)
+    np.fill_diagonal(distances, np.inf)
+    return distances.min(axis=1)

@@ -114,13 +114,28 @@ def spring_laplacian(springs: np.ndarray, natoms: int) -> sp.csr_matrix:
     return sp.csr_matrix(degrees - adjacency)
 
 
+def spring_hessian_entries(springs: np.ndarray, natoms: int, Q: float,
+                           dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The springs' exact, constant Hessian ``Q (L (x) I_dim)`` as entries
+    ``(rows, columns, values)`` (repeated indices add up), coordinates
+    ordered point by point (x0, y0, z0, x1, ...): each spring's pair block
+    ``Q I`` (:func:`spring_block`) at ``(i, i)`` and ``(j, j)``, its negative
+    at ``(i, j)`` and ``(j, i)``."""
+    i, j = np.asarray(springs, dtype=int).reshape(-1, 2).T
+    axis = np.arange(dim)
+    rows = (dim * np.stack([i, j, i, j])[:, :, None] + axis).ravel()
+    cols = (dim * np.stack([i, j, j, i])[:, :, None] + axis).ravel()
+    block = spring_block(np.zeros(dim), Q)[0, 0]
+    values = np.repeat(np.array([block, block, -block, -block]), len(i) * dim)
+    return rows, cols, values
+
+
 def spring_hessian(springs: np.ndarray, natoms: int, Q: float,
                    dim: int) -> sp.csr_matrix:
     """The springs' exact, constant Hessian ``Q (L (x) I_dim)``, shape
-    (dim N, dim N), coordinates ordered point by point (x0, y0, z0, x1, ...)."""
-    block = spring_block(np.zeros(dim), Q)
-    return sp.csr_matrix(sp.kron(spring_laplacian(springs, natoms), block,
-                                 format='csr'))   # no stored zeros
+    (dim N, dim N) (csr), from :func:`spring_hessian_entries`."""
+    rows, cols, values = spring_hessian_entries(springs, natoms, Q, dim)
+    return sp.csr_matrix((values, (rows, cols)), shape=(dim * natoms,) * 2)
 
 
 def pair_chunks(natoms: int,

@@ -110,22 +110,16 @@ class MaudPotential:
 
     # -- the whole Hessian --------------------------------------------------
 
-    def hessian(self, positions: np.ndarray, chunk_pairs: int = 1_000_000) -> np.ndarray:
+    def hessian(self, positions: np.ndarray) -> np.ndarray:
         """The dense Hessian ``d2E/dr dr``, shape (dim N, dim N), units of
-        ``Q``; ``-B_ij`` off the diagonal, the nodal block ``K_ii = sum_j
-        B_ij`` on it (:mod:`.physics`). Built ``chunk_pairs`` pairs at a time;
-        memory is the output plus O(chunk_pairs)."""
-        x = self.reduced(positions)[:, :self.dim]
-        n = len(x)
-        hess = np.zeros((n, self.dim, n, self.dim))
-        for i, j in physics.pair_chunks(n, chunk_pairs):
-            block = self.Q * physics.repulsion_block(x[i] - x[j])
-            hess[i, :, j, :] = hess[j, :, i, :] = -block
-        diagonal = np.arange(n)
-        hess[diagonal, :, diagonal, :] = -hess.sum(axis=2)   # K_ii = sum_j B_ij
-        hess = hess.reshape(n * self.dim, n * self.dim)
-        spring = self.spring_hessian(n).tocoo()
-        hess[spring.row, spring.col] += spring.data
+        ``Q``: ``-B_ij`` off the diagonal, the nodal block ``K_ii = sum_j
+        B_ij`` on it (:mod:`.physics`); the repulsion's part by the
+        registry's Hessian backend (:func:`.backends.repulsion_hessian`)."""
+        n = len(positions)
+        hess = self.Q * backends.repulsion_hessian(self.reduced(positions), self.dim)
+        rows, cols, values = self._kept(('entries', n), lambda: physics.spring_hessian_entries(
+            self._springs_within(n), n, self.Q, self.dim))
+        np.add.at(hess, (rows, cols), values)
         return hess
 
     def hvp(self, positions: np.ndarray, v: ArrayLike) -> np.ndarray:

@@ -23,6 +23,10 @@ it for a step it may take back. Four models, from the cheapest:
 - :class:`ExactModel` (``'exact'``): the dense analytic Hessian (property
   ``hessian``), eigen-decomposed: the step is saddle-free Newton. O((dim N)^3)
   per step, for small scenes.
+- :class:`SpringsModel` (``'springs'``): the springs' exact, constant Hessian
+  ``Q L`` per coordinate (one N x N matrix for every coordinate), factorised
+  once per run; the repulsion is left to the L-BFGS memory of the step rule.
+  Energy and forces only, no stiffness property: for large scenes.
 
 ``target='minimum'`` makes every model positive definite: eigenvalues are
 replaced by their absolute values and floored at ``floor`` times the largest
@@ -46,6 +50,7 @@ from abc import ABC, abstractmethod
 from typing import Any
 
 import numpy as np
+import scipy.linalg
 import scipy.sparse as sp
 from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian, FixedLine, FixedPlane
@@ -53,12 +58,15 @@ from scipy.sparse.linalg import LinearOperator, cg, splu
 
 from .checks import check
 from .neighbours import NearestDistances
+from .topology import spring_components
 
 #: ``model='auto'`` takes the exact model up to this many free degrees of
 #: freedom (dense eigen-decomposition cost against a calculator call; see
 #: docs/optimizer.md for the measurement), the global model above.
 EXACT_MAX_DOFS = 300
-#: The global model uses algebraic multigrid above this many free DOFs.
+#: Sparse symmetric positive-definite matrices of this many rows or more are
+#: solved by algebraic multigrid, smaller ones are factorised
+#: (:func:`spd_inverse`; docs/benchmarks.md has the measurement).
 AMG_MIN_DOFS = 200_000
 #: The global model goes matrix-free when the spring graph holds more than
 #: this fraction of all pairs (a factorisation would be dense).
@@ -67,6 +75,9 @@ DENSE_GRAPH_FRACTION = 0.25
 DENSE_MIN_DOFS = 300
 #: Relative residual of the iterative solves (CG, multigrid).
 SOLVE_RTOL = 1e-10
+#: Relative residual of the multigrid solves of the springs model, whose
+#: solution only starts the L-BFGS recursion.
+SPRINGS_RTOL = 1e-6
 
 
 
@@ -306,50 +317,134 @@ class _BlockSolver(Solver):
 class ExactModel(StiffnessModel):
     """The dense analytic Hessian (calculator property ``hessian``,
     (dim N, dim N)) on the moves the constraints allow
-    (:func:`allowed_basis`), eigen-decomposed.
+    (:func:`allowed_basis`, kept while the constraints are the same).
 
-    ``floor`` is relative to the largest absolute eigenvalue of the whole
-    matrix (default 1e-8: soft collective modes must keep their own
-    curvature; rigid-body modes, where the forces have no component, are
-    floored).
+    For ``'minimum'`` it is factorised by Cholesky, shifted by ``floor``
+    times its largest absolute row sum (a bound on its largest eigenvalue),
+    when that succeeds: the Newton step costs no eigen-decomposition. Where
+    the shifted Hessian is indefinite, or for ``'stationary'``, or when a
+    trust-region step needs ``(K + mu I)^-1``, it is eigen-decomposed and its
+    eigenvalues made safe (:meth:`StiffnessModel._absolute`). ``floor`` is
+    relative to the largest absolute eigenvalue of the whole matrix (default
+    1e-8: soft collective modes must keep their own curvature; rigid-body
+    modes, where the forces have no component, are floored).
     """
 
     name = 'exact'
     prop = 'hessian'
     default_floor = 1e-8
 
+    def __init__(self, target: str = 'minimum', floor: float | None = None):
+        super().__init__(target, floor)
+        self._basis: tuple[Any, np.ndarray | None] | None = None
+
     def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
         hessian = atoms.calc.get_property('hessian', atoms)
+        if not np.isfinite(hessian).all():
+            raise np.linalg.LinAlgError('the Hessian is not finite')
         dim = hessian.shape[0] // len(atoms)
-        basis = allowed_basis(atoms, dim)
-        values, vectors = np.linalg.eigh(basis.T @ hessian @ basis)
-        return _EigenSolver(basis @ vectors, self._absolute(values),
-                            np.ones((len(atoms), dim), dtype=bool))
+        basis = self.basis(atoms, dim)
+        matrix = hessian if basis is None else basis.T @ hessian @ basis
+        free = np.ones((len(atoms), dim), dtype=bool)
+        eigen = _EigenSolver(matrix, basis, free, self._absolute)
+        if self.target == 'minimum':
+            shift = self.floor * np.abs(matrix).sum(axis=1).max(initial=0.0)
+            try:
+                factor = scipy.linalg.cho_factor(
+                    matrix + shift * np.eye(len(matrix)), check_finite=False)
+            except np.linalg.LinAlgError:
+                return eigen.decomposed()
+            return _CholeskySolver(factor, eigen)
+        return eigen.decomposed()
+
+    def basis(self, atoms: Atoms, dim: int) -> np.ndarray | None:
+        """:func:`allowed_basis`, kept while the constraints are the same;
+        None if every move is allowed."""
+        key = (len(atoms), dim, [(type(c).__name__, repr(c.todict()))
+                                 for c in atoms.constraints])
+        if self._basis is None or self._basis[0] != key:
+            basis = allowed_basis(atoms, dim) if atoms.constraints else None
+            self._basis = key, basis
+        return self._basis[1]
 
 
 class _EigenSolver(_DofSolver):
-    """``K^-1`` from its eigen-decomposition; also the damped
-    ``(K + mu I)^-1`` of trust-region steps, for many ``mu`` at once
-    (:meth:`shifted_solve`)."""
+    """``K^-1`` from its eigen-decomposition (``matrix`` on the columns of
+    ``basis``, or on every coordinate if it is None), its eigenvalues made
+    safe by ``absolute``; also the damped ``(K + mu I)^-1`` of trust-region
+    steps, for many ``mu`` at once (:meth:`shifted_solve`). The
+    decomposition is made when first needed."""
 
-    def __init__(self, vectors, values, free):
+    def __init__(self, matrix, basis, free, absolute):
         super().__init__(free)
-        self.vectors, self.values = vectors, values
+        self.matrix, self.basis, self.absolute = matrix, basis, absolute
+        self._pairs: tuple[np.ndarray, np.ndarray] | None = None
+
+    def decomposed(self) -> _EigenSolver:
+        """This solver, with its eigen-decomposition made."""
+        if self._pairs is None:
+            values, vectors = scipy.linalg.eigh(self.matrix, check_finite=False,
+                                                driver='evd')
+            if self.basis is not None:
+                vectors = self.basis @ vectors
+            self._pairs = self.absolute(values), vectors
+        return self
+
+    @property
+    def values(self) -> np.ndarray:
+        return self.decomposed()._pairs[0]
 
     def _solve(self, rhs):
-        return self.vectors @ ((self.vectors.T @ rhs) / self.values)
+        values, vectors = self.decomposed()._pairs
+        return vectors @ ((vectors.T @ rhs) / values)
 
     def shifted_solve(self, forces: np.ndarray, shifts: np.ndarray) -> np.ndarray:
         """The moves ``(K + mu I)^-1 f`` (each eigenvalue moved ``mu >= 0``
         away from zero: shorter moves, turned towards the forces), one per
         ``mu`` in ``shifts``: shape (len(shifts), N, 3)."""
+        values, vectors = self.decomposed()._pairs
         shifts = np.asarray(shifts, dtype=float)
         rhs = np.asarray(forces, dtype=float).reshape(-1, 3)[:, :self.dim][self.free]
-        damped = self.values + np.sign(self.values) * shifts[:, None]
+        damped = values + np.sign(values) * shifts[:, None]
         moves = np.zeros((len(shifts), len(self.free), 3))
-        moves[:, :, :self.dim][:, self.free] = (
-            (self.vectors.T @ rhs) / damped) @ self.vectors.T
+        moves[:, :, :self.dim][:, self.free] = ((vectors.T @ rhs) / damped) @ vectors.T
         return moves
+
+
+class _CholeskySolver(_DofSolver):
+    """``K^-1`` by a Cholesky factor of the (shifted) Hessian, and ``K v``
+    (:meth:`dot`, for a trust-region step along the dogleg path); damped
+    solves go to ``eigen``, decomposed then."""
+
+    def __init__(self, factor, eigen: _EigenSolver):
+        super().__init__(eigen.free)
+        self.factor, self.eigen = factor, eigen
+
+    def dot(self, move: np.ndarray) -> np.ndarray:
+        """``K v`` for a move (N, 3), shape (N, 3)."""
+        eigen = self.eigen
+        v = np.asarray(move, dtype=float).reshape(-1, 3)[:, :self.dim].ravel()
+        if eigen.basis is not None:
+            v = eigen.basis @ (eigen.matrix @ (eigen.basis.T @ v))
+        else:
+            v = eigen.matrix @ v
+        out = np.zeros((len(self.free), 3))
+        out[:, :self.dim] = v.reshape(-1, self.dim)
+        return out
+
+    def _solve(self, rhs):
+        if self.eigen.basis is None:
+            return scipy.linalg.cho_solve(self.factor, rhs, check_finite=False)
+        basis = self.eigen.basis
+        return basis @ scipy.linalg.cho_solve(self.factor, basis.T @ rhs,
+                                              check_finite=False)
+
+    @property
+    def values(self) -> np.ndarray:
+        return self.eigen.values
+
+    def shifted_solve(self, forces: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+        return self.eigen.shifted_solve(forces, shifts)
 
 
 # -- global sparse -------------------------------------------------------------
@@ -403,8 +498,6 @@ class GlobalModel(StiffnessModel):
         size = matrix.shape[0]
         if size > DENSE_MIN_DOFS and matrix.nnz > DENSE_GRAPH_FRACTION * size**2:
             solver = _MatrixFreeSolver(matrix, free, diagonal)
-        elif size >= AMG_MIN_DOFS:
-            solver = _MultigridSolver(matrix, free)
         else:
             solver = _FactorSolver(matrix, free)
         self._kept = atoms.positions.copy(), solver
@@ -438,28 +531,35 @@ class _SparseSolver(_DofSolver):
 
 
 class _FactorSolver(_SparseSolver):
-    """Sparse LU (SuperLU) of the free part of ``P``."""
+    """The free part of ``P`` inverted by :func:`spd_inverse`."""
 
     def __init__(self, matrix, free):
         super().__init__(matrix, free)
-        self.lu = splu(matrix.tocsc(), permc_spec='MMD_AT_PLUS_A')
+        self.inverse = spd_inverse(matrix, SOLVE_RTOL)
 
     def _solve(self, rhs):
-        return self.lu.solve(rhs)
+        return self.inverse(rhs)
 
 
-class _MultigridSolver(_SparseSolver):
-    """Smoothed-aggregation multigrid (pyamg) as a CG preconditioner, for
-    ``P`` too large to factorise."""
+def spd_inverse(matrix: sp.spmatrix, rtol: float) -> Any:
+    """``b -> matrix^-1 b`` for a sparse symmetric positive-definite matrix:
+    SuperLU in symmetric mode (minimum-degree ordering of ``A + A^T``, no
+    pivoting across the diagonal) below :data:`AMG_MIN_DOFS` rows, else
+    conjugate gradients preconditioned by smoothed-aggregation multigrid
+    (pyamg) to the relative residual ``rtol`` (a factorisation could fill in
+    beyond memory). ``b`` is a vector or a (rows, k) array."""
+    if matrix.shape[0] < AMG_MIN_DOFS:
+        lu = splu(sp.csc_matrix(matrix), permc_spec='MMD_AT_PLUS_A',
+                  diag_pivot_thresh=0.0, options={'SymmetricMode': True})
+        return lu.solve
+    import pyamg
+    hierarchy = pyamg.smoothed_aggregation_solver(sp.csr_matrix(matrix))
 
-    def __init__(self, matrix, free):
-        import pyamg
-        super().__init__(matrix, free)
-        self.hierarchy = pyamg.smoothed_aggregation_solver(matrix)
-
-    def _solve(self, rhs):
-        return self.hierarchy.solve(rhs, tol=SOLVE_RTOL, accel='cg',
-                                    maxiter=200)
+    def solve(rhs):
+        if rhs.ndim == 1:
+            return hierarchy.solve(rhs, tol=rtol, accel='cg', maxiter=200)
+        return np.column_stack([solve(column) for column in rhs.T])
+    return solve
 
 
 class _MatrixFreeSolver(_SparseSolver):
@@ -485,8 +585,98 @@ class _MatrixFreeSolver(_SparseSolver):
         return move
 
 
+# -- springs ------------------------------------------------------------------
+
+
+class SpringsModel(StiffnessModel):
+    """``P = Q L + diag(s)`` for each coordinate: the springs' exact, constant
+    Hessian ``Q (L (x) I_dim)`` is block diagonal by coordinate, so one N x N
+    matrix (``L`` the spring graph's Laplacian, from the calculator's
+    :class:`~ase_maud.potential.MaudPotential`) serves every coordinate,
+    restricted to the points free in it (FixAtoms, FixCartesian). It is
+    factorised once per run (:func:`spd_inverse`), and again only if the
+    potential or the constraints change; the calculator is asked for energy
+    and forces alone.
+
+    ``s`` makes ``P`` definite where the springs leave it singular: the
+    repulsion's stiffness along the line to the nearest neighbour,
+    ``2 a**3 Q / r**3`` (``r`` that distance at the start), at a point with no
+    spring, and ``floor`` times the largest diagonal entry on the points of a
+    spring component that holds no fixed point (it could translate as a
+    whole). The repulsion's
+    stiffness elsewhere, and its coupling, is left to the L-BFGS memory of
+    the step rule (:data:`ase_maud.method.STEP_DEFAULTS`).
+    """
+
+    name = 'springs'
+    default_floor = 1e-3
+
+    def __init__(self, target: str = 'minimum', floor: float | None = None,
+                 nearest: NearestDistances | None = None):
+        super().__init__(target, floor)
+        self.nearest = nearest or NearestDistances()
+        self._kept: tuple[Any, np.ndarray, Solver] | None = None
+
+    def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
+        potential = atoms.calc.potential
+        free = free_dofs(atoms, potential.dim)
+        kept = self._kept
+        if kept is None or kept[0] is not potential or not np.array_equal(kept[1], free):
+            self._kept = potential, free, self._solver(atoms, potential, free)
+        return self._kept[2]
+
+    def _solver(self, atoms: Atoms, potential: Any, free: np.ndarray) -> Solver:
+        n = len(atoms)
+        laplacian = potential.Q * potential.spring_laplacian(n)
+        diagonal = np.zeros(n)
+        alone = laplacian.diagonal() == 0
+        if alone.any() and n > 1:
+            distance = self.nearest(atoms.positions)[alone]
+            diagonal[alone] = 2 * potential.a**3 * potential.Q / distance**3
+        largest = max(laplacian.diagonal().max(initial=0.0), diagonal.max(initial=0.0))
+        matrix = sp.csr_matrix(laplacian + sp.diags(diagonal))
+        inverses = {}
+        for mask in {column.tobytes(): column for column in free.T}.values():
+            keep = np.flatnonzero(mask)
+            shift = self.floor * largest * _floating(potential.springs, ~mask)[keep]
+            inverses[mask.tobytes()] = keep, spd_inverse(
+                matrix[keep][:, keep] + sp.diags(shift), SPRINGS_RTOL)
+        return _CoordinateSolver([inverses[column.tobytes()] for column in free.T], free)
+
+
+def _floating(springs: np.ndarray, held: np.ndarray) -> np.ndarray:
+    """Boolean mask of the points whose spring component holds no point of
+    ``held`` (N,): the components free to translate."""
+    labels = spring_components(len(held), springs)
+    anchored = np.zeros(labels.max(initial=-1) + 1, dtype=bool)
+    anchored[labels[held]] = True
+    return ~anchored[labels]
+
+
+class _CoordinateSolver(Solver):
+    """``P^-1 f`` coordinate by coordinate: column ``c`` of the move is the
+    inverse (``keep``, ``inverse``) of coordinate ``c`` applied to its free
+    points; coordinates with the same free points share one inverse."""
+
+    def __init__(self, columns: list[tuple[np.ndarray, Any]], free: np.ndarray):
+        self.columns, self.free = columns, free
+
+    def solve(self, forces):
+        f = np.asarray(forces, dtype=float).reshape(-1, 3)
+        move = np.zeros_like(f)
+        groups: dict[int, list[int]] = {}
+        for c, (keep, _) in enumerate(self.columns):
+            groups.setdefault(id(keep), []).append(c)
+        for coordinates in groups.values():
+            keep, inverse = self.columns[coordinates[0]]
+            if keep.size:
+                move[np.ix_(keep, coordinates)] = inverse(f[np.ix_(keep, coordinates)])
+        return move
+
+
 MODELS: dict[str, type[StiffnessModel]] = {
-    cls.name: cls for cls in (SecantModel, NodalModel, GlobalModel, ExactModel)}
+    cls.name: cls for cls in (SecantModel, NodalModel, GlobalModel, ExactModel,
+                              SpringsModel)}
 
 
 def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
@@ -497,9 +687,9 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
     ``'auto'``: ``exact`` while the free degrees of freedom are at most
     :data:`EXACT_MAX_DOFS`, the calculator has a ``hessian`` and every
     constraint is one of :data:`PROJECTIONS` (a Hookean tether, say, adds
-    stiffness the Hessian does not hold); else ``global`` if it has the nodal
-    blocks and a ``potential`` (a :class:`~ase_maud.potential.MaudPotential`);
-    else ``nodal`` if it has the blocks; else ``secant``. ``options`` go to
+    stiffness the Hessian does not hold); else ``springs`` if it has a
+    ``potential`` (a :class:`~ase_maud.potential.MaudPotential`); else
+    ``nodal`` if it has the nodal blocks; else ``secant``. ``options`` go to
     the model (``floor``; ``method`` for nodal; ``kappa0`` for secant), and
     each is checked there; an option the chosen model does not take is
     checked here and dropped. ``nearest`` is shared with a model that ages
@@ -512,8 +702,8 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
         if ('hessian' in offers and free_dofs(atoms, dim).sum() <= EXACT_MAX_DOFS
                 and all(isinstance(c, PROJECTIONS) for c in atoms.constraints)):
             name = 'exact'
-        elif 'stiffness' in offers and hasattr(calc, 'potential'):
-            name = 'global'
+        elif hasattr(calc, 'potential'):
+            name = 'springs'
         elif 'stiffness' in offers:
             name = 'nodal'
         else:
@@ -529,7 +719,7 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
     taken = {'floor', *_EXTRA_OPTIONS.get(cls, ())}
     for option in set(options) - taken:
         check(option, options[option])
-    if cls is GlobalModel:
+    if cls in (GlobalModel, SpringsModel):
         options['nearest'] = nearest
         taken.add('nearest')
     return cls(target=target, **{k: v for k, v in options.items() if k in taken})

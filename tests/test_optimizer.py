@@ -65,8 +65,8 @@ def suite_start(request):
     return name, size, seed, found
 
 
-MODELS = [('exact', 'tensor'), ('global', 'tensor'), ('nodal', 'tensor'),
-          ('nodal', 'scalar'), ('auto', 'tensor')]
+MODELS = [('exact', 'tensor'), ('global', 'tensor'), ('springs', 'tensor'),
+          ('nodal', 'tensor'), ('nodal', 'scalar'), ('auto', 'tensor')]
 
 
 @pytest.mark.integration

@@ -48,7 +48,7 @@ NUMERIC = [name for name in [*inspect.signature(Maud).parameters, 'fmax', 'steps
 
 #: Maud's keywords beyond the numeric ones (the last value of each is
 #: refused).
-NAMED = {'model': ['auto', 'exact', 'global', 'nodal', 'secant', 'fast'],
+NAMED = {'model': ['auto', 'exact', 'global', 'springs', 'nodal', 'secant', 'fast'],
          'method': ['tensor', 'scalar', 'vector'],
          'target': ['minimum', 'stationary', 'max']}
 

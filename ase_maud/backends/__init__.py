@@ -42,7 +42,7 @@ from .base import (
 __all__ = ['Backend', 'BeyondTolerance', 'Choice', 'Result', 'VOIGT_PAIRS',
            'blocks_to_voigt', 'check_parameters', 'evaluate', 'get',
            'installed', 'names', 'parameter_defaults', 'register',
-           'repulsion_hvp', 'voigt_to_blocks']
+           'repulsion_hessian', 'repulsion_hvp', 'voigt_to_blocks']
 
 _REGISTRY: dict[str, Backend] = {}
 
@@ -95,10 +95,20 @@ def repulsion_hvp(positions: np.ndarray, v: np.ndarray) -> np.ndarray:
     """The unit repulsion's Hessian-vector products ``sum_j B_ij (v_i -
     v_j)`` at ``positions`` (N, 3) for ``v`` (m, N, 3), by the first
     installed backend that has them (``hvp``)."""
+    return _first_with('hvp')(positions, v)
+
+
+def repulsion_hessian(positions: np.ndarray, dim: int) -> np.ndarray:
+    """The unit repulsion's dense Hessian (dim N, dim N) at ``positions``
+    (N, 3), by the first installed backend that has one (``hessian``)."""
+    return _first_with('hessian')(positions, dim)
+
+
+def _first_with(capability: str):
     for backend in _REGISTRY.values():
-        if backend.hvp is not None and backend.installed:
-            return backend.hvp(positions, v)
-    raise ValueError('no registered backend computes Hessian-vector products')
+        if getattr(backend, capability) is not None and backend.installed:
+            return getattr(backend, capability)
+    raise ValueError(f'no registered backend computes {capability}')
 
 
 def evaluate(parameters: Mapping[str, Any], positions: np.ndarray, dim: int,

@@ -71,7 +71,9 @@ def choose(natoms: int, dim: int, want_blocks: bool,
            ) -> list[Choice]:
     """The backends to try, in order (module docstring)."""
     exact = Choice(direct.BACKEND, {}, 0.0)
-    if tol == 0 or not fmm.BACKEND.installed:
+    fewest = min(min(row.values()) for row in CROSSOVER.values())
+    if (tol == 0 or not fmm.BACKEND.installed
+            or (crossover is None and natoms < fewest)):
         return [exact]
     eps = min(fmm.eps_for(tol), MAX_EPS)
     start = (crossover_points(eps, dim, want_blocks) if crossover is None

@@ -84,6 +84,7 @@ OPTIMIZERS = {
     'Maud': lambda atoms: Maud(atoms, logfile=None),
     'Maud-exact': lambda atoms: Maud(atoms, model='exact', logfile=None),
     'Maud-global': lambda atoms: Maud(atoms, model='global', logfile=None),
+    'Maud-springs': lambda atoms: Maud(atoms, model='springs', logfile=None),
     'Maud-tensor': lambda atoms: Maud(atoms, model='nodal', method='tensor',
                                       logfile=None),
     'Maud-scalar': lambda atoms: Maud(atoms, model='nodal', method='scalar',

@@ -81,7 +81,7 @@ class MaudCalculator(Calculator):
         default, uses the measured table
         :data:`ase_maud.backends.auto.CROSSOVER`), ``fmm_eps`` (the explicit
         ``fmm`` backend's requested relative precision, default 1e-6; its
-        forces are good to ``0.1 fmm_eps`` of the largest repulsive force);
+        forces are good to ``fmm_eps`` of the largest repulsive force);
         and ASE's own calculator keywords.
 
     Notes

@@ -74,7 +74,7 @@ STEP_DEFAULTS: dict[str, dict[str, Any]] = {
                'maxstep_nn': 0.45, 'maxstep': None, 'maxstep_size': None,
                'trust_region': False, 'interpolate': False, 'bound': 'each'},
     'exact': {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 0, 'trust_region': True},
-    'global': {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 30},
+    'global': {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 30, 'bound': 'whole'},
     'nodal': {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0},
     'secant': {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0},
     'springs': {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 20, 'maxstep_nn': None,
@@ -85,8 +85,12 @@ STEP_DEFAULTS: dict[str, dict[str, Any]] = {
 #: Shifts per grid of the trust-region search (:meth:`MaudMethod._trust_region`).
 TRUST_GRID = 24
 
-#: Smallest ``s.y / (|s| |y|)`` of a secant pair the L-BFGS memory keeps.
-MIN_PAIR_COSINE = 1e-12
+#: Smallest ``s.y / (|s| |y|)`` of a secant pair the L-BFGS memory keeps: the
+#: cosine between ``s`` and ``H s`` for a positive-definite ``H`` is at least
+#: ``2 / sqrt(cond H)``, so this keeps every pair of a Hessian conditioned up
+#: to 4e10 and drops the nearly degenerate pairs of flat or non-convex
+#: regions, whose ``1 / s.y`` would blow the recursion up.
+MIN_PAIR_COSINE = 1e-5
 
 
 @dataclass(frozen=True)

@@ -22,36 +22,33 @@ every energy and force is finite. The step is
   is a ValueError naming it; every energy and force the calculator returns
   is checked finite before it is logged or written: a non-finite one puts
   the positions back to the last step whose results were finite and raises
-  :class:`MaudError` naming the step and the value; the restart file is
-  replaced atomically after each trajectory frame and holds the positions
-  its state belongs to, so a run killed at any moment carries on exactly
-  (:meth:`Maud.resume`).
+  :class:`MaudError` naming the step and the value; the restart file
+  (:mod:`ase_maud.restart`) is replaced atomically after each trajectory
+  frame and holds the positions its state belongs to, so a run killed at any
+  moment carries on exactly (:meth:`Maud.resume`).
 """
 
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
 from ase import Atoms
-from ase.io.jsonio import write_json
 from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 
 from . import accuracy
 from .checks import check, check_all
-from .method import MaudMethod, MaudState, StepRule, merit_tolerance, step_rule
+from .method import MaudMethod, StepRule, merit_tolerance, step_rule
 from .monitor import DivergenceError, MaudError, RunMonitor, StagnationError
 from .neighbours import NearestDistances
+from .restart import RestartFile
 from .stiffness import StiffnessModel, choose_model
 from .topology import describe_unbounded
 
 __all__ = ['DivergenceError', 'Maud', 'MaudError', 'StagnationError', 'last_frame']
 
-#: The keys a restart file holds.
-RESTART_KEYS = frozenset({'x', 'step', 'state', 'monitor', 'fmax_now'})
 
 
 class Maud(Optimizer):
@@ -180,13 +177,8 @@ class Maud(Optimizer):
     def read(self) -> None:
         """Take the restart file's state, and its positions (they win: the
         state belongs to them; a line in the log says if the atoms moved)."""
-        data = self.load()
-        missing = RESTART_KEYS - set(data)
-        if missing:
-            raise ValueError(f'restart file {str(self.restart)!r} was not written by '
-                             f'this version of Maud (no {", ".join(sorted(missing))}); '
-                             'delete it')
-        x, here = np.asarray(data['x'], float), self.optimizable.get_x()
+        data = self._restart_file().read()
+        x, here = data['x'].ravel(), self.optimizable.get_x()
         if x.shape != here.shape:
             raise ValueError(
                 f'restart file {str(self.restart)!r} holds {x.size // 3} points, '
@@ -199,38 +191,26 @@ class Maud(Optimizer):
                 f'Maud: the atoms moved to the positions of step {data["step"]} '
                 f'in {self.restart} (up to {gap:.3g} from the atoms given)\n')
         self.initialize()
-        self.state = MaudState.fromdict(data['state'])
+        self.state = data['state']
         self.monitor.load(data['monitor'])   # this run counts its steps from 0 again
         self.fmax_now = data['fmax_now']   # the accuracy of the next evaluation
 
     def call_observers(self) -> None:
         """ASE's observers (the trajectory first), then the restart file: it
-        is never ahead of the trajectory's last frame."""
+        is never ahead of the trajectory's last frame, and holds nothing
+        before the first step (there is no state to carry on yet)."""
         super().call_observers()
-        if self.restart is not None:
-            self.dump({'x': self.optimizable.get_x(), 'step': self.nsteps,
-                       'state': self.state.todict(),
-                       'monitor': self.monitor.todict(self.nsteps),
-                       'fmax_now': self.fmax_now})
+        if self.restart is not None and self.comm.rank == 0 and self.state.last is not None:
+            self._restart_file().write(self.nsteps, self.optimizable.get_x().reshape(-1, 3),
+                                       self.state, self.monitor.todict(self.nsteps),
+                                       self.fmax_now)
 
-    def dump(self, data: dict[str, Any]) -> None:
-        """Replace the restart file atomically (a temporary file in the same
-        directory, flushed and synced, then ``os.replace``): after a kill at
-        any moment it holds the old state or the new one, never a part."""
-        if self.comm.rank != 0 or self.restart is None:
-            return
-        path = Path(self.restart)
-        handle, temporary = tempfile.mkstemp(dir=path.parent,
-                                             prefix=f'.{path.name}.', suffix='.tmp')
-        try:
-            with os.fdopen(handle, 'w') as fd:
-                write_json(fd, data)
-                fd.flush()
-                os.fsync(fd.fileno())
-            os.replace(temporary, path)
-        except BaseException:
-            Path(temporary).unlink(missing_ok=True)
-            raise
+    def _restart_file(self) -> RestartFile:
+        """The run's :class:`~ase_maud.restart.RestartFile` (one per run, so
+        that each step writes only what is new)."""
+        if getattr(self, '_restart', None) is None:
+            self._restart = RestartFile(self.restart)
+        return self._restart
 
     @classmethod
     def resume(cls, atoms: Atoms, restart: str | Path = 'maud.json',

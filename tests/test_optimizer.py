@@ -156,18 +156,20 @@ def test_fixed_atoms_and_cartesian_components_stay(seed):
     assert np.abs(atoms.positions - start).max() > 0.1
 
 
-def test_restart_reproduces_uninterrupted_run(tmp_path):
-    straight = build('hanging_net', 6, seed=2)
-    with Maud(straight, logfile=None) as opt:
+@pytest.mark.parametrize('model', ['exact', 'springs', 'nodal', 'secant'])
+@pytest.mark.parametrize('seed', [2, 3])
+def test_restart_reproduces_uninterrupted_run(tmp_path, model, seed):
+    # the springs model's L-BFGS memory, the secant model's learnt kappa and
+    # the momentum of the nodal one all come back from the files
+    straight = build('hanging_net', 8, seed=seed)
+    with Maud(straight, logfile=None, model=model) as opt:
         opt.run(fmax=1e-300, steps=30)
-    interrupted = build('hanging_net', 6, seed=2)
+    interrupted = build('hanging_net', 8, seed=seed)
     restart = tmp_path / 'maud.json'
-    with Maud(interrupted, logfile=None, restart=restart) as opt:
-        opt.run(fmax=1e-300, steps=17)
-    with Maud(interrupted, logfile=None, restart=restart) as opt:
-        opt.run(fmax=1e-300, steps=13)
-    assert np.allclose(interrupted.positions, straight.positions,
-                       rtol=0, atol=1e-12)
+    for steps in (11, 6, 13):
+        with Maud(interrupted, logfile=None, restart=restart, model=model) as opt:
+            opt.run(fmax=1e-300, steps=steps)
+    np.testing.assert_array_equal(interrupted.positions, straight.positions)
 
 
 def test_trajectory_and_log_are_readable(tmp_path):

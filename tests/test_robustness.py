@@ -14,6 +14,7 @@ import inspect
 import json
 import os
 import re
+import shutil
 
 import numpy as np
 import pytest
@@ -30,6 +31,7 @@ from hypothesis import strategies as st
 from ase_maud import Maud, MaudCalculator, MaudError
 from ase_maud.checks import RULES
 from ase_maud.optimizer import last_frame
+from ase_maud.restart import RestartFile
 from ase_maud.scenes import SCENES, build, keep_on_plane
 
 EXAMPLES = int(os.environ.get('ASE_MAUD_EXAMPLES', 200))
@@ -263,24 +265,30 @@ def test_restart_file_is_replaced_whole(tmp_path, monkeypatch):
 
     def checked_replace(source, destination):
         """At the moment of the swap: the new state is whole, in the same
-        folder, and the old file (if any) is whole too."""
+        folder, and names rows of the arrays file that are written already;
+        the old file (if any) is whole too."""
         assert os.path.dirname(os.path.abspath(source)) == str(tmp_path)
-        json.loads(open(source).read())
+        new = json.loads(open(source).read())
+        shutil.copy(source, 'check.json')
+        shutil.copy('maud.json.arrays', 'check.json.arrays')
+        assert RestartFile('check.json').read()['step'] == new['step']
+        os.remove('check.json')
+        os.remove('check.json.arrays')
         if os.path.exists(destination):
             json.loads(open(destination).read())
         replaced.append(destination)
         real_replace(source, destination)
 
-    monkeypatch.setattr('ase_maud.optimizer.os.replace', checked_replace)
+    monkeypatch.setattr('ase_maud.restart.os.replace', checked_replace)
     with Maud(atoms, logfile=None, restart='maud.json') as opt:
         opt.attach(lambda: seen.append(sorted(os.listdir('.'))))
         opt.run(fmax=1e-6, steps=5)
-    assert len(replaced) == opt.nsteps + 1                     # one swap per frame
-    assert all(names == ['maud.json'] for names in seen[1:])   # no temporary left
-    state = json.loads((tmp_path / 'maud.json').read_text())
-    assert state['step'] == opt.nsteps
-    x = np.array(state['x']['__ndarray__'][2]).reshape(-1, 3)
-    assert np.array_equal(x, atoms.positions)
+    assert len(replaced) == opt.nsteps                     # one swap per step
+    # (the observers run before the file is written: from the second step on)
+    assert all(names == ['maud.json', 'maud.json.arrays'] for names in seen[2:])
+    saved = RestartFile(tmp_path / 'maud.json').read()
+    assert saved['step'] == opt.nsteps
+    assert np.array_equal(saved['x'], atoms.positions)
 
 
 def test_restart_positions_win_and_are_logged(tmp_path):

@@ -11,8 +11,10 @@ log-log, extrapolated linearly past the last N) meets it.
 
 Errors (``--errors``): the FMM's largest force error (norm over points),
 relative to the largest force, against the exact direct sum, over seeds, on
-a cube, a plane, a cube with one pair at 1e-13 of its size and two clusters
-far apart; the ratio to ``fmm_eps`` sets FORCE_ERROR_PER_EPS.
+a cube, a plane, the start of a hanging net (a flat sheet whose forces
+nearly cancel: the worst case seen), a cube with one pair at 1e-13 of its
+size and two clusters far apart; the largest ratio to ``fmm_eps`` sets
+FORCE_ERROR_PER_EPS.
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \
         python tools/backend_crossover.py --errors \
@@ -29,6 +31,7 @@ import numba
 import numpy as np
 
 from ase_maud.backends import direct, fmm
+from ase_maud.scenes import build
 
 EPS = (1e-3, 1e-6, 1e-9, 1e-12)
 SIZES = (2000, 4000, 8000, 16000, 32000, 64000)
@@ -110,11 +113,14 @@ def error_scenes(n, seed):
     plane[:, 2] = 0
     near = cube.copy()
     near[1] = near[0] + 1e-13 * rng.standard_normal(3)
+    side = max(int(round(np.sqrt(n))), 3)
+    net = build('hanging_net', side, seed=seed).positions
     far = cube.copy()
     far[n // 2:, 0] += 1e3
     farther = cube.copy()
     farther[n // 2:, 0] += 1e6
-    return {'cube': cube, 'plane': plane, 'pair at 1e-13': near,
+    return {'cube': cube, 'plane': plane, 'hanging net (its start)': net,
+            'pair at 1e-13': near,
             'clusters 1e3 apart': far, 'clusters 1e6 apart': farther}
 
 

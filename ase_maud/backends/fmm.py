@@ -52,7 +52,7 @@ from .base import Backend, BeyondTolerance, Result
 FMM3D_SCALE = 4.0 * np.pi
 #: Promised force error over ``fmm_eps`` (max over points of the error's
 #: norm, relative to the largest force): see the module docstring.
-FORCE_ERROR_PER_EPS = 0.1
+FORCE_ERROR_PER_EPS = 1.0
 #: A point whose nearest neighbour is closer than ``NEAR_ROUNDING * D /
 #: fmm_eps`` (``D`` the scene's largest extent) is summed exactly: FMM3D's
 #: own rounding of that pair, about ``1e-16 D / L``, would exceed a tenth of
@@ -183,6 +183,6 @@ BACKEND = Backend(
     name='fmm', evaluate=evaluate, cost='N', tolerance='fmm_eps',
     parameters={'fmm_eps': 1e-6}, requires=('fmm3dpy',),
     force_tolerance=force_tolerance,
-    summary="FMM3D's fast multipole method, O(N), forces to 0.1 fmm_eps; "
+    summary="FMM3D's fast multipole method, O(N), forces to fmm_eps; "
     'one thread with the PyPI wheel (OMP_NUM_THREADS if built with '
     "OpenMP); pip install 'ase-maud[fmm]'")

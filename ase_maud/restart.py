@@ -1,0 +1,151 @@
+"""The restart file of a Maud run: written after every step, cheap, crash-safe,
+and enough to carry on exactly.
+
+Two files. ``NAME`` is JSON: the step, the run monitor's state, the step
+rule's scalars (gamma, momentum count, the last point's merit and noise, the
+model's learnt state) and which rows of the arrays file hold what.
+``NAME.arrays`` holds the arrays as raw float64 rows of 3N numbers each:
+
+- two state slots of three rows (the positions, the last point and its
+  forces), used in turn;
+- pair slots of two rows (an L-BFGS pair ``s``, ``y``), each pair written
+  once, into a slot the committed JSON does not name (at most ``memory + 1``
+  slots are ever used).
+
+A step writes its rows (a few times 3N numbers, not the whole memory), syncs
+the arrays file, then replaces ``NAME`` atomically (a temporary file in the
+same folder, synced, then ``os.replace``): killed at any moment, ``NAME``
+names rows that were whole before it was replaced, so the files hold the old
+step or the new one, never a mixture. The momentum ``v`` is the positions
+minus the last point and is not stored.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .method import MaudState, Point
+
+#: The version of the layout; a file of another one is refused by name.
+FORMAT = 'maud-restart-2'
+#: Rows per state slot: positions, the last point, its forces.
+STATE_ROWS = 3
+
+
+class RestartFile:
+    """Reads and writes the restart files of one run (module docstring);
+    ``path`` is the JSON file, ``path + '.arrays'`` the rows."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self.arrays = self.path.with_name(self.path.name + '.arrays')
+        self._slot = 1   # the state slot written last
+        # id(s) of each pair the committed file names -> (s, its pair slot);
+        # s is kept so that its id cannot be reused by a new array
+        self._pairs: dict[int, tuple[np.ndarray, int]] = {}
+
+    def write(self, step: int, x: np.ndarray, state: MaudState,
+              monitor: dict[str, Any], fmax_now: float) -> None:
+        """Save the run at ``step``: positions ``x`` (N, 3), the step rule's
+        ``state`` (whose ``last`` is set), the monitor's state."""
+        rows = x.size
+        self._slot = 1 - self._slot
+        kept = {id(s): self._pairs[id(s)] for s, _ in state.pairs if id(s) in self._pairs}
+        taken = {slot for _, slot in self._pairs.values()}
+        free = (slot for slot in itertools.count() if slot not in taken)
+        with open(self.arrays, 'r+b' if self.arrays.exists() else 'w+b') as handle:
+            self._write_rows(handle, self._slot * STATE_ROWS, rows,
+                             [x, state.last.x, state.last.forces])
+            for s, y in state.pairs:
+                if id(s) not in kept:
+                    kept[id(s)] = s, next(free)
+                    self._write_rows(handle, 2 * STATE_ROWS + 2 * kept[id(s)][1], rows,
+                                     [s, y])
+            handle.flush()
+            os.fsync(handle.fileno())
+        self._pairs = kept
+        document = {
+            'format': FORMAT, 'rows': rows, 'step': step, 'slot': self._slot,
+            'pairs': [kept[id(s)][1] for s, _ in state.pairs],
+            'gamma': state.gamma, 'k': state.k, 'moving': state.v is not None,
+            'merit': state.last.merit, 'noise': state.last.noise,
+            'model': state.model, 'monitor': _plain(monitor), 'fmax_now': fmax_now}
+        _replace(self.path, json.dumps(document))
+
+    def read(self) -> dict[str, Any]:
+        """What :meth:`write` saved: ``step``, ``x`` (N, 3), ``state`` (a
+        :class:`MaudState`), ``monitor``, ``fmax_now``. A file of another
+        layout or one whose arrays file is missing or short is a ValueError
+        naming it."""
+        try:
+            document = json.loads(self.path.read_text())
+        except (OSError, ValueError) as error:
+            raise ValueError(f'restart file {str(self.path)!r} cannot be read: '
+                             f'{error}') from None
+        if not isinstance(document, dict) or document.get('format') != FORMAT:
+            raise ValueError(f'restart file {str(self.path)!r} was not written by this '
+                             'version of Maud; delete it')
+        rows, slot = int(document['rows']), int(document['slot'])
+        pairs = list(document['pairs'])
+        last_row = max((slot + 1) * STATE_ROWS,
+                       2 * STATE_ROWS + 2 * (max(pairs) + 1) if pairs else 0)
+        needed = last_row * rows * 8
+        if not self.arrays.is_file() or self.arrays.stat().st_size < needed:
+            raise ValueError(f'restart file {str(self.path)!r}: its arrays file '
+                             f'{str(self.arrays)!r} is missing or short; delete both')
+        table = np.fromfile(self.arrays, dtype=np.float64, count=last_row * rows
+                            ).reshape(-1, rows)
+        x, last_x, forces = (table[slot * STATE_ROWS + k].reshape(-1, 3).copy()
+                             for k in range(STATE_ROWS))
+        state = MaudState(
+            gamma=float(document['gamma']), k=int(document['k']),
+            v=x - last_x if document['moving'] else None,
+            last=Point(last_x, float(document['merit']), forces, float(document['noise'])),
+            pairs=[(table[2 * STATE_ROWS + 2 * p].reshape(-1, 3).copy(),
+                    table[2 * STATE_ROWS + 2 * p + 1].reshape(-1, 3).copy())
+                   for p in pairs],
+            model=dict(document['model']))
+        self._slot = slot
+        self._pairs = {id(s): (s, p) for (s, _), p in zip(state.pairs, pairs, strict=True)}
+        return {'step': int(document['step']), 'x': x, 'state': state,
+                'monitor': document['monitor'], 'fmax_now': float(document['fmax_now'])}
+
+    @staticmethod
+    def _write_rows(handle, first: int, rows: int, arrays: list[np.ndarray]) -> None:
+        handle.seek(first * rows * 8)
+        for array in arrays:
+            handle.write(np.ascontiguousarray(array, dtype=np.float64).tobytes())
+
+
+def _plain(value: Any) -> Any:
+    """``value`` with numpy arrays and scalars as lists and floats (JSON)."""
+    if isinstance(value, dict):
+        return {key: _plain(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(item) for item in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _replace(path: Path, text: str) -> None:
+    """Replace ``path`` by ``text`` atomically: a temporary file in the same
+    folder, flushed and synced, then ``os.replace``."""
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.',
+                                         suffix='.tmp')
+    try:
+        with os.fdopen(handle, 'w') as fd:
+            fd.write(text)
+            fd.flush()
+            os.fsync(fd.fileno())
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise

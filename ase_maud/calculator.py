@@ -67,7 +67,7 @@ class MaudCalculator(Calculator):
         Explicit: ``numba`` (compiled direct sum, parallel over numba's
         threads), ``numpy`` (the slow reference) or ``fmm`` (FMM3D's fast
         multipole method at ``fmm_eps``, O(N);
-        ``pip install 'ase-maud[fmm]'``).
+        installed with ase-maud).
     **kwargs
         The backends' parameters (each backend declares its own, with its
         default, in :mod:`.backends`; each is checked whichever backend is

@@ -346,9 +346,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f'of: {", ".join(SCENES)} (default: those of '
                    'the suite, at their suite sizes)')
     p.add_argument('--suite', choices=SUITES, default='small',
-                   help='scenes.SUITE (small: under 60 points) or scenes.LARGE '
-                   '(large: collective modes, 40 to 2500 points) '
-                   '(default: %(default)s)')
+                   help='scenes.SUITE (small: under 60 points), scenes.COLLECTIVE '
+                   '(collective: collective modes, 40 to 2500 points) or '
+                   'scenes.LARGE (large: nets, trees and graphs of 2000 to 10^4 '
+                   'points) (default: %(default)s)')
     p.add_argument('--sizes', nargs='+', type=_size, metavar='SIZE',
                    help='sizes of every scene (default: suite sizes)')
     p.add_argument('--seeds', nargs='+', type=int, default=[0], metavar='K',

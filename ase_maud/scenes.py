@@ -23,8 +23,8 @@ from ase.collections import g2
 from ase.constraints import FixAtoms, FixCartesian
 from ase.neighborlist import NeighborList, natural_cutoffs
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import laplacian
-from scipy.spatial import cKDTree
+from scipy.sparse.csgraph import connected_components, laplacian
+from scipy.spatial import Delaunay, cKDTree
 
 from .calculator import MaudCalculator
 from .checks import as_whole
@@ -397,9 +397,93 @@ def cage(size: int = 8, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     return _scene(positions, springs, a, Q, fixed=np.arange(n + 2))
 
 
+def hub_net(size: int = 48, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
+    """A cable net with a hub: ``size`` rings of ``size + 2`` points around a
+    centre point, springs along the rings and along the spokes (the centre
+    sprung to the first ring), the outer ring fixed on a wave ``z = 0.2 size
+    cos(2 phi)``.
+
+    Rings start at radii 1, 2, ... a in the plane z = 0, every free
+    coordinate moved by up to 0.3 a; ``size`` 48 gives 2401 points. The hub
+    gathers ``size + 2`` spokes: stiff there, soft at the rim.
+    """
+    rings = _count(size, 2, 'hub_net')
+    spokes = rings + 2
+    rng = np.random.default_rng(seed)
+    phi = 2 * np.pi * np.arange(spokes) / spokes
+    radius = np.repeat(np.arange(1, rings + 1), spokes)
+    angle = np.tile(phi, rings)
+    positions = np.zeros((1 + rings * spokes, 3))
+    positions[1:, 0], positions[1:, 1] = radius * np.cos(angle), radius * np.sin(angle)
+    index = 1 + np.arange(rings * spokes).reshape(rings, spokes)
+    springs = np.concatenate([
+        np.column_stack([np.zeros(spokes, dtype=int), index[0]]),
+        np.column_stack([index.ravel(), np.roll(index, -1, axis=1).ravel()]),
+        np.column_stack([index[:-1].ravel(), index[1:].ravel()])])
+    fixed = index[-1]
+    positions[fixed, 2] = 0.2 * rings * np.cos(2 * phi)
+    free = np.setdiff1d(np.arange(len(positions)), fixed)
+    positions[free] += rng.uniform(-0.3, 0.3, (len(free), 3))
+    return _scene(positions, springs, a, Q, fixed=fixed)
+
+
+def disc(size: int = 3000, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
+    """A membrane: ``size`` points in a disc of one point per a**2, sprung
+    along the edges of their Delaunay triangulation, the boundary circle
+    fixed on a wave ``z = 0.15 R sin(3 phi)``.
+
+    The boundary holds ``2 pi R`` points at spacing a (R the disc's radius);
+    the interior points are drawn uniformly (none closer than MIN_DISTANCE),
+    flat, each z moved by up to 0.3 a.
+    """
+    n = _count(size, 8, 'disc')
+    rng = np.random.default_rng(seed)
+    radius = np.sqrt(n / np.pi)
+    rim = max(int(2 * np.pi * radius), 3)
+    phi = 2 * np.pi * np.arange(rim) / rim
+    boundary = np.column_stack([radius * np.cos(phi), radius * np.sin(phi), np.zeros(rim)])
+    inner = _ball(rng, n - rim, dim=2) * (radius - 0.5) / radius
+    positions = np.concatenate([boundary, inner])
+    positions[:rim, 2] = 0.15 * radius * np.sin(3 * phi)
+    positions[rim:, 2] = rng.uniform(-0.3, 0.3, n - rim)
+    triangles = Delaunay(positions[:, :2]).simplices
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
+                                    triangles[:, [0, 2]]]), axis=1)
+    return _scene(positions, np.unique(edges, axis=0), a, Q, fixed=np.arange(rim))
+
+
+def neighbour_graph(size: int = 2000, seed: int = 0, a: float = 1.0,
+                    Q: float = 1.0) -> Atoms:
+    """``size`` points uniform in a ball of one point per a**3, each sprung to
+    its 3 nearest neighbours (the graph made connected by tying each other
+    component's point nearest to the largest one to its nearest point
+    there). Nothing fixed: the repulsion blows the ball up to many times its
+    start size, the springs hold it: the repulsion dominates.
+    """
+    n = _count(size, 5, 'neighbour_graph')
+    rng = np.random.default_rng(seed)
+    positions = _ball(rng, n)
+    near = cKDTree(positions).query(positions, k=4)[1][:, 1:]
+    springs = np.unique(np.sort(np.column_stack([np.repeat(np.arange(n), 3),
+                                                 near.ravel()]), axis=1), axis=0)
+    labels = connected_components(coo_matrix((np.ones(len(springs)), springs.T),
+                                             shape=(n, n)), directed=False)[1]
+    largest = np.flatnonzero(labels == np.bincount(labels).argmax())
+    tree = cKDTree(positions[largest])
+    ties = []
+    for label in set(labels.tolist()) - {labels[largest[0]]}:
+        members = np.flatnonzero(labels == label)
+        distance, nearest = tree.query(positions[members])
+        k = int(np.argmin(distance))
+        ties.append(sorted((int(members[k]), int(largest[nearest[k]]))))
+    springs = np.concatenate([springs, np.array(ties, dtype=int).reshape(-1, 2)])
+    return _scene(positions, springs, a, Q)
+
+
 SCENES = {f.__name__: f for f in (dimer, ring, chain, net2d, net3d,
                                   hanging_net, random_graph, all_pairs,
-                                  all_pairs2d, tree, wheel, molecule, cage)}
+                                  all_pairs2d, tree, wheel, molecule, cage,
+                                  hub_net, disc, neighbour_graph)}
 
 #: Small scenes (under 60 points each) for the optimiser tests and benchmark.
 SUITE = [('dimer', 2), ('ring', 16), ('chain', 20), ('net2d', 6),
@@ -410,14 +494,21 @@ SUITE = [('dimer', 2), ('ring', 16), ('chain', 20), ('net2d', 6),
 #: Scenes whose slow modes move many points together (bending chains and
 #: trees, breathing rings, a wheel's buckling rim, a net sagging as a whole,
 #: a cluster's shells): 40 to 2500 points, for ``ase-maud bench --suite
+#: collective``.
+COLLECTIVE = [('chain', 100), ('ring', 100), ('ring', 1000), ('tree', 60),
+              ('tree', 200), ('wheel', 100), ('hanging_net', 20),
+              ('hanging_net', 50), ('random_graph', 200), ('random_graph', 2000),
+              ('all_pairs', 40)]
+
+#: The scenes a form finder relaxes, 2000 to 10**4 points: nets with fixed
+#: boundaries (square, polar with a hub, a triangulated membrane), a tree,
+#: a random graph and a free neighbour graph, for ``ase-maud bench --suite
 #: large``.
-LARGE = [('chain', 100), ('ring', 100), ('ring', 1000), ('tree', 60),
-         ('tree', 200), ('wheel', 100), ('hanging_net', 20),
-         ('hanging_net', 50), ('random_graph', 200), ('random_graph', 2000),
-         ('all_pairs', 40)]
+LARGE = [('hanging_net', 50), ('hanging_net', 100), ('hub_net', 48), ('disc', 3000),
+         ('tree', 2000), ('random_graph', 2000), ('neighbour_graph', 2000)]
 
 #: The named suites of ``ase-maud bench --suite``.
-SUITES = {'small': SUITE, 'large': LARGE}
+SUITES = {'small': SUITE, 'collective': COLLECTIVE, 'large': LARGE}
 
 
 def scene_sizes(names: list[str] | None, sizes: list | None,

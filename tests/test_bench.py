@@ -318,9 +318,11 @@ def test_skipped_over_the_size_limit(tmp_path, monkeypatch):
 
 def test_suite_option_picks_the_large_suite():
     parser = build_parser()
-    args = parser.parse_args(['bench', '--suite', 'large', '--scenes', 'tree'])
+    args = parser.parse_args(['bench', '--suite', 'collective', '--scenes', 'tree'])
     assert scene_sizes(args.scenes, args.sizes, SUITES[args.suite]) == [
         ('tree', 60), ('tree', 200)]
+    args = parser.parse_args(['bench', '--suite', 'large', '--scenes', 'tree'])
+    assert scene_sizes(args.scenes, args.sizes, SUITES[args.suite]) == [('tree', 2000)]
     args = parser.parse_args(['bench'])
     assert SUITES[args.suite] is not LARGE
 

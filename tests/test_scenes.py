@@ -12,7 +12,7 @@ from scipy.spatial.distance import pdist
 
 from ase_maud import Maud
 from ase_maud.calculator import MaudCalculator
-from ase_maud.scenes import LARGE, SCENES, SUITE, SUITES, build
+from ase_maud.scenes import COLLECTIVE, LARGE, SCENES, SUITE, SUITES, build
 from ase_maud.topology import fixed_atoms
 
 CASES = [(name, None) for name in SCENES] + SUITE
@@ -104,6 +104,7 @@ def test_build_names_sizes_and_errors():
     assert {name for suite in SUITES.values() for name, _ in suite} == set(SCENES)
     assert all(len(build(name, size)) < 60 for name, size in SUITE)
     assert SUITES['small'] is SUITE and SUITES['large'] is LARGE
+    assert SUITES['collective'] is COLLECTIVE
 
 
 # The chain takes FIRE longest by far: in the full run only.
@@ -119,10 +120,11 @@ def test_fire_reaches_a_minimum(name, size):
 
 
 @pytest.mark.integration
-@pytest.mark.parametrize('name, size', LARGE)
+@pytest.mark.parametrize('name, size', COLLECTIVE + LARGE)
 def test_large_suite_scenes_are_large_and_valid(name, size):
     atoms = build(name, size)
-    assert len(atoms) == {'hanging_net': size**2, 'wheel': size + 1}.get(name, size)
+    assert len(atoms) == {'hanging_net': size**2, 'wheel': size + 1,
+                          'hub_net': 1 + size * (size + 2)}.get(name, size)
     assert len(atoms) >= 40
     forces = atoms.get_forces()
     assert np.isfinite(atoms.get_potential_energy()) and np.isfinite(forces).all()

@@ -1,7 +1,7 @@
 """The ``fmm`` backend: the unit repulsion ``sum_{i<j} 1/L_ij`` in O(N).
 
 The repulsion is the 3D Laplace kernel, so FMM3D's ``lfmm3d`` (package
-``fmm3dpy``, the optional extra ``pip install ase-maud[fmm]``) gives at every
+``fmm3dpy``, a dependency of ase-maud) gives at every
 point the potential of all the others, its gradient and its Hessian. FMM3D's
 kernel is ``1/(4 pi r)`` and it drops each point's own term; with unit charges
 
@@ -84,8 +84,7 @@ def _lfmm3d():
     try:
         from fmm3dpy import lfmm3d
     except ImportError as err:
-        raise ImportError("backend='fmm' needs fmm3dpy: "
-                          "pip install 'ase-maud[fmm]'") from err
+        raise ImportError("backend='fmm' needs fmm3dpy: pip install fmm3dpy") from err
     return lfmm3d
 
 
@@ -185,4 +184,4 @@ BACKEND = Backend(
     force_tolerance=force_tolerance,
     summary="FMM3D's fast multipole method, O(N), forces to fmm_eps; "
     'one thread with the PyPI wheel (OMP_NUM_THREADS if built with '
-    "OpenMP); pip install 'ase-maud[fmm]'")
+    "OpenMP)")

@@ -403,15 +403,17 @@ def hub_net(size: int = 48, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> At
     sprung to the first ring), the outer ring fixed on a wave ``z = 0.2 size
     cos(2 phi)``.
 
-    Rings start at radii 1, 2, ... a in the plane z = 0, every free
-    coordinate moved by up to 0.3 a; ``size`` 48 gives 2401 points. The hub
-    gathers ``size + 2`` spokes: stiff there, soft at the rim.
+    The rings start a apart in the plane z = 0, the first at the radius where
+    its points are a apart, every free coordinate moved by up to 0.3 a (none
+    closer than MIN_DISTANCE); ``size`` 48 gives 2401 points. The hub gathers
+    ``size + 2`` spokes: stiff there, soft at the rim.
     """
     rings = _count(size, 2, 'hub_net')
     spokes = rings + 2
     rng = np.random.default_rng(seed)
     phi = 2 * np.pi * np.arange(spokes) / spokes
-    radius = np.repeat(np.arange(1, rings + 1), spokes)
+    first = spokes / (2 * np.pi)
+    radius = np.repeat(first + np.arange(rings), spokes)
     angle = np.tile(phi, rings)
     positions = np.zeros((1 + rings * spokes, 3))
     positions[1:, 0], positions[1:, 1] = radius * np.cos(angle), radius * np.sin(angle)
@@ -424,7 +426,7 @@ def hub_net(size: int = 48, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> At
     positions[fixed, 2] = 0.2 * rings * np.cos(2 * phi)
     free = np.setdiff1d(np.arange(len(positions)), fixed)
     positions[free] += rng.uniform(-0.3, 0.3, (len(free), 3))
-    return _scene(positions, springs, a, Q, fixed=fixed)
+    return _scene(_separated(positions, _jitter(rng)), springs, a, Q, fixed=fixed)
 
 
 def disc(size: int = 3000, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:

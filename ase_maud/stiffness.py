@@ -63,7 +63,7 @@ from .topology import spring_components
 #: ``model='auto'`` takes the exact model up to this many free degrees of
 #: freedom (dense eigen-decomposition cost against a calculator call; see
 #: docs/optimizer.md for the measurement), the global model above.
-EXACT_MAX_DOFS = 300
+EXACT_MAX_DOFS = 150
 #: Sparse symmetric positive-definite matrices of this many rows or more are
 #: solved by algebraic multigrid, smaller ones are factorised
 #: (:func:`spd_inverse`; docs/benchmarks.md has the measurement).

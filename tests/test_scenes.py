@@ -191,3 +191,21 @@ def test_maud_and_bfgs_reach_a_minimum(name, size):
         energies[opt.__name__] = atoms.get_potential_energy()
     # The same minimum or, for Maud, a lower one.
     assert energies['Maud'] <= energies['BFGS'] * (1 + 1e-8)
+
+
+@pytest.mark.parametrize('seed', [0, 3])
+def test_form_finding_scenes_are_what_they_say(seed):
+    hub = build('hub_net', 6, seed=seed)
+    degree = np.bincount(hub.calc.springs.ravel(), minlength=len(hub))
+    assert len(hub) == 1 + 6 * 8 and degree[0] == 8       # the hub holds 8 spokes
+    assert fixed_atoms(hub).sum() == 8                     # the outer ring
+    disc = build('disc', 200, seed=seed)
+    rim = np.flatnonzero(fixed_atoms(disc))
+    radius = np.linalg.norm(disc.positions[rim, :2], axis=1)
+    np.testing.assert_allclose(radius, np.sqrt(200 / np.pi))
+    inner = np.linalg.norm(disc.positions[~fixed_atoms(disc), :2], axis=1)
+    assert inner.max() < radius[0]
+    graph = build('neighbour_graph', 300, seed=seed)
+    degree = np.bincount(graph.calc.springs.ravel(), minlength=300)
+    assert degree.min() >= 3 and not fixed_atoms(graph).any()
+    assert_held_together(graph)

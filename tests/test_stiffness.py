@@ -177,7 +177,8 @@ MULTI_BASIN = ('all_pairs', 'all_pairs2d')  # clusters with several minima
 @pytest.mark.parametrize('name', sorted(set(SCENES) - set(MULTI_BASIN)))
 def test_default_maud_reaches_bfgs_minimum(name):
     seed = int(np.random.default_rng(sum(map(ord, name))).integers(1000))
-    size = {'molecule': 'C6H6', 'all_pairs': 10, 'hanging_net': 5}.get(name)
+    size = {'molecule': 'C6H6', 'all_pairs': 10, 'hanging_net': 5, 'hub_net': 4, 'disc': 40,
+            'neighbour_graph': 30}.get(name)
     atoms, reference = build(name, size, seed=seed), build(name, size, seed=seed)
     with Maud(atoms, logfile=None) as opt:
         assert opt.run(fmax=1e-7, steps=5000)

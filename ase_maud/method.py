@@ -342,20 +342,22 @@ class MaudMethod:
         grows, so three log-spaced grids of :data:`TRUST_GRID` values, each
         within the bracket the last one found, pin it down (each grid is one
         batch of shifted solves)."""
-        solver, forces, gamma = state.solver, state.last.forces, state.gamma
+        solver, gamma = state.solver, state.gamma
+        moves_at = solver.shifted_solve(state.last.forces)
 
         def longest(mus):
-            moves = solver.shifted_solve(forces, mus)
-            return (gamma * np.linalg.norm(moves, axis=2) / limit).max(axis=1), moves
+            moves = moves_at(mus)
+            lengths = np.sqrt(np.einsum('sij,sij->si', moves, moves))
+            return (gamma * lengths / limit).max(axis=1), moves
 
         if (gamma * np.linalg.norm(direction, axis=1) / limit).max() <= 1:
             return direction
         high = np.abs(solver.values).max()
-        while longest([high])[0][0] > 1:
+        while longest(np.array([high]))[0][0] > 1:
             high *= 10.0
         low = high * 1e-12
         for _ in range(3):
-            mus = np.geomspace(low, high, TRUST_GRID)
+            mus = np.exp(np.linspace(np.log(low), np.log(high), TRUST_GRID))
             ratio, moves = longest(mus)
             first = int(np.argmax(ratio <= 1)) if (ratio <= 1).any() else len(mus) - 1
             low, high, best = mus[max(first - 1, 0)], mus[first], moves[first]

@@ -398,16 +398,20 @@ class _EigenSolver(_DofSolver):
         values, vectors = self.decomposed()._pairs
         return vectors @ ((vectors.T @ rhs) / values)
 
-    def shifted_solve(self, forces: np.ndarray, shifts: np.ndarray) -> np.ndarray:
-        """The moves ``(K + mu I)^-1 f`` (each eigenvalue moved ``mu >= 0``
-        away from zero: shorter moves, turned towards the forces), one per
-        ``mu`` in ``shifts``: shape (len(shifts), N, 3)."""
+    def shifted_solve(self, forces: np.ndarray) -> Any:
+        """``shifts -> moves``: the moves ``(K + mu I)^-1 f`` (each eigenvalue
+        moved ``mu >= 0`` away from zero: shorter moves, turned towards the
+        forces), one per ``mu`` in ``shifts``, shape (len(shifts), N, 3); the
+        forces are projected on the eigenvectors once, here."""
         values, vectors = self.decomposed()._pairs
-        shifts = np.asarray(shifts, dtype=float)
         rhs = np.asarray(forces, dtype=float).reshape(-1, 3)[:, :self.dim][self.free]
-        damped = values + np.sign(values) * shifts[:, None]
-        moves = np.zeros((len(shifts), len(self.free), 3))
-        moves[:, :, :self.dim][:, self.free] = ((vectors.T @ rhs) / damped) @ vectors.T
+        coefficients = vectors.T @ rhs
+
+        def moves(shifts: np.ndarray) -> np.ndarray:
+            damped = values + np.sign(values) * np.asarray(shifts, dtype=float)[:, None]
+            out = np.zeros((len(damped), len(self.free), 3))
+            out[:, :, :self.dim][:, self.free] = (coefficients / damped) @ vectors.T
+            return out
         return moves
 
 
@@ -443,8 +447,8 @@ class _CholeskySolver(_DofSolver):
     def values(self) -> np.ndarray:
         return self.eigen.values
 
-    def shifted_solve(self, forces: np.ndarray, shifts: np.ndarray) -> np.ndarray:
-        return self.eigen.shifted_solve(forces, shifts)
+    def shifted_solve(self, forces: np.ndarray) -> Any:
+        return self.eigen.shifted_solve(forces)
 
 
 # -- global sparse -------------------------------------------------------------

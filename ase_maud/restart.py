@@ -12,12 +12,16 @@ model's learnt state) and which rows of the arrays file hold what.
   once, into a slot the committed JSON does not name (at most ``memory + 1``
   slots are ever used).
 
-A step writes its rows (a few times 3N numbers, not the whole memory), syncs
-the arrays file, then replaces ``NAME`` atomically (a temporary file in the
-same folder, synced, then ``os.replace``): killed at any moment, ``NAME``
-names rows that were whole before it was replaced, so the files hold the old
-step or the new one, never a mixture. The momentum ``v`` is the positions
-minus the last point and is not stored.
+A step writes its rows (a few times 3N numbers, not the whole memory), then
+replaces ``NAME`` atomically (a temporary file in the same folder, then
+``os.replace``): a process killed at any moment leaves ``NAME`` naming rows
+that were whole before it was replaced (the operating system keeps what was
+written), so the files hold the old step or the new one, never a mixture.
+Against a crash of the machine itself both files are also flushed to disk
+(``fsync``) at most every :data:`SYNC_SECONDS`, which bounds what a crash can
+take; ``NAME`` holds a CRC-32 of every row group it names, so rows that never
+reached the disk are found on reading, never taken. The momentum ``v`` is the
+positions minus the last point and is not stored.
 """
 
 from __future__ import annotations
@@ -26,6 +30,8 @@ import itertools
 import json
 import os
 import tempfile
+import time
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +43,9 @@ from .method import MaudState, Point
 FORMAT = 'maud-restart-2'
 #: Rows per state slot: positions, the last point, its forces.
 STATE_ROWS = 3
+#: Longest time between two flushes of the files to disk (``fsync``): each
+#: costs milliseconds, more than a whole step of a small scene.
+SYNC_SECONDS = 1.0
 
 
 class RestartFile:
@@ -47,9 +56,10 @@ class RestartFile:
         self.path = Path(path)
         self.arrays = self.path.with_name(self.path.name + '.arrays')
         self._slot = 1   # the state slot written last
-        # id(s) of each pair the committed file names -> (s, its pair slot);
-        # s is kept so that its id cannot be reused by a new array
-        self._pairs: dict[int, tuple[np.ndarray, int]] = {}
+        self._synced = -np.inf   # time.monotonic() of the last fsync
+        # id(s) of each pair the committed file names -> (s, its pair slot, the
+        # CRC-32 of its rows); s is kept so that its id cannot be reused
+        self._pairs: dict[int, tuple[np.ndarray, int, int]] = {}
 
     def write(self, step: int, x: np.ndarray, state: MaudState,
               monitor: dict[str, Any], fmax_now: float) -> None:
@@ -58,26 +68,31 @@ class RestartFile:
         rows = x.size
         self._slot = 1 - self._slot
         kept = {id(s): self._pairs[id(s)] for s, _ in state.pairs if id(s) in self._pairs}
-        taken = {slot for _, slot in self._pairs.values()}
+        taken = {slot for _, slot, _ in self._pairs.values()}
         free = (slot for slot in itertools.count() if slot not in taken)
+        sync = time.monotonic() - self._synced >= SYNC_SECONDS
         with open(self.arrays, 'r+b' if self.arrays.exists() else 'w+b') as handle:
-            self._write_rows(handle, self._slot * STATE_ROWS, rows,
-                             [x, state.last.x, state.last.forces])
+            state_crc = self._write_rows(handle, self._slot * STATE_ROWS, rows,
+                                         [x, state.last.x, state.last.forces])
             for s, y in state.pairs:
                 if id(s) not in kept:
-                    kept[id(s)] = s, next(free)
-                    self._write_rows(handle, 2 * STATE_ROWS + 2 * kept[id(s)][1], rows,
-                                     [s, y])
-            handle.flush()
-            os.fsync(handle.fileno())
+                    slot = next(free)
+                    kept[id(s)] = s, slot, self._write_rows(
+                        handle, 2 * STATE_ROWS + 2 * slot, rows, [s, y])
+            if sync:
+                handle.flush()
+                os.fsync(handle.fileno())
         self._pairs = kept
         document = {
             'format': FORMAT, 'rows': rows, 'step': step, 'slot': self._slot,
             'pairs': [kept[id(s)][1] for s, _ in state.pairs],
+            'crc': {'state': state_crc, 'pairs': [kept[id(s)][2] for s, _ in state.pairs]},
             'gamma': state.gamma, 'k': state.k, 'moving': state.v is not None,
             'merit': state.last.merit, 'noise': state.last.noise,
             'model': state.model, 'monitor': _plain(monitor), 'fmax_now': fmax_now}
-        _replace(self.path, json.dumps(document))
+        _replace(self.path, json.dumps(document), sync)
+        if sync:
+            self._synced = time.monotonic()
 
     def read(self) -> dict[str, Any]:
         """What :meth:`write` saved: ``step``, ``x`` (N, 3), ``state`` (a
@@ -102,6 +117,15 @@ class RestartFile:
                              f'{str(self.arrays)!r} is missing or short; delete both')
         table = np.fromfile(self.arrays, dtype=np.float64, count=last_row * rows
                             ).reshape(-1, rows)
+        crc = document['crc']
+        groups = [(slot * STATE_ROWS, STATE_ROWS, crc['state'])] + [
+            (2 * STATE_ROWS + 2 * p, 2, c) for p, c in zip(pairs, crc['pairs'], strict=True)]
+        for first, count, expected in groups:
+            if zlib.crc32(table[first:first + count].tobytes()) != expected:
+                raise ValueError(f'restart file {str(self.path)!r}: rows {first}-'
+                                 f'{first + count - 1} of {str(self.arrays)!r} are not '
+                                 'what it wrote (a crash of the machine before they '
+                                 'reached the disk?); delete both files')
         x, last_x, forces = (table[slot * STATE_ROWS + k].reshape(-1, 3).copy()
                              for k in range(STATE_ROWS))
         state = MaudState(
@@ -113,15 +137,20 @@ class RestartFile:
                    for p in pairs],
             model=dict(document['model']))
         self._slot = slot
-        self._pairs = {id(s): (s, p) for (s, _), p in zip(state.pairs, pairs, strict=True)}
+        self._pairs = {id(s): (s, p, c) for (s, _), p, c
+                       in zip(state.pairs, pairs, crc['pairs'], strict=True)}
         return {'step': int(document['step']), 'x': x, 'state': state,
                 'monitor': document['monitor'], 'fmax_now': float(document['fmax_now'])}
 
     @staticmethod
-    def _write_rows(handle, first: int, rows: int, arrays: list[np.ndarray]) -> None:
+    def _write_rows(handle, first: int, rows: int, arrays: list[np.ndarray]) -> int:
+        """Write ``arrays`` (``rows`` numbers each) from row ``first`` on;
+        return the CRC-32 of what was written."""
+        data = b''.join(np.ascontiguousarray(array, dtype=np.float64).tobytes()
+                        for array in arrays)
         handle.seek(first * rows * 8)
-        for array in arrays:
-            handle.write(np.ascontiguousarray(array, dtype=np.float64).tobytes())
+        handle.write(data)
+        return zlib.crc32(data)
 
 
 def _plain(value: Any) -> Any:
@@ -135,16 +164,17 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def _replace(path: Path, text: str) -> None:
+def _replace(path: Path, text: str, sync: bool) -> None:
     """Replace ``path`` by ``text`` atomically: a temporary file in the same
-    folder, flushed and synced, then ``os.replace``."""
+    folder (flushed to disk if ``sync``), then ``os.replace``."""
     handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.',
                                          suffix='.tmp')
     try:
         with os.fdopen(handle, 'w') as fd:
             fd.write(text)
-            fd.flush()
-            os.fsync(fd.fileno())
+            if sync:
+                fd.flush()
+                os.fsync(fd.fileno())
         os.replace(temporary, path)
     except BaseException:
         Path(temporary).unlink(missing_ok=True)

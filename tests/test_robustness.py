@@ -392,3 +392,18 @@ def test_a_second_run_sees_a_changed_calculator(seed):
     BFGS(reference, logfile=None).run(fmax=1e-7, steps=2000)
     assert atoms.get_potential_energy() == pytest.approx(
         reference.get_potential_energy(), rel=1e-9)
+
+
+def test_rows_that_never_reached_the_disk_are_refused(tmp_path):
+    atoms = build('hanging_net', 12, seed=2)     # the springs model: L-BFGS pairs too
+    restart = tmp_path / 'maud.json'
+    with Maud(atoms, logfile=None, restart=restart, model='springs') as opt:
+        opt.run(fmax=1e-9, steps=6)
+    assert RestartFile(restart).read()['step'] == 6
+    arrays = tmp_path / 'maud.json.arrays'
+    data = bytearray(arrays.read_bytes())
+    data[-8:] = bytes(range(1, 9))                # the last pair's last number
+    arrays.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match="rows .* of '.*maud.json.arrays' are not what it "
+                                         'wrote'):
+        Maud(build('hanging_net', 12, seed=2), logfile=None, restart=restart)

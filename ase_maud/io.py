@@ -57,8 +57,6 @@ from .checks import as_whole
 from .topology import fixed_atoms
 
 PathLike = str | os.PathLike
-#: Parameters of :class:`MaudCalculator` that a trajectory brings back.
-CALC_PARAMETERS = ('springs', 'a', 'Q', 'dim', 'backend', 'fmm_eps', 'tol', 'crossover')
 #: The name under which ASE's trajectory stores a MaudCalculator.
 CALC_NAME = 'maudcalculator'
 #: Vertex (node) attributes of COMPAS data that fix a point when true.
@@ -166,7 +164,8 @@ def _read_ase(path, index):
     calc = frames[0].calc
     stored = {}
     if calc is not None and getattr(calc, 'name', '') == CALC_NAME:
-        stored = {k: v for k, v in calc.parameters.items() if k in CALC_PARAMETERS}
+        stored = {k: v for k, v in calc.parameters.items()
+                  if k in MaudCalculator.default_parameters}
     for atoms in frames:
         atoms.calc = None
     return frames, stored

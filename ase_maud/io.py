@@ -52,6 +52,7 @@ import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms
 
+from .atomic import replace_text, replace_with
 from .calculator import MaudCalculator
 from .checks import as_whole
 from .topology import fixed_atoms
@@ -391,22 +392,23 @@ def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None) -> lis
     if like is not None and net_format(like) != kind:
         raise ValueError(f'cannot write {path.name} like {Path(like).name}: '
                          'they are of different formats')
+    # everything is read (``like`` may be ``path``) before anything is
+    # replaced, and each file is replaced whole (ase_maud.atomic)
     if kind == 'obj':
-        path.write_text(_obj_text(atoms, like))
+        replace_text(path, _obj_text(atoms, like))
     elif kind == 'json':
-        with open(path, 'w') as f:
-            json.dump(_compas_document(atoms, like), f)
+        replace_text(path, json.dumps(_compas_document(atoms, like)))
     elif kind == 'traj':
-        ase.io.write(path, atoms, format='traj')
+        replace_with(path, lambda temporary: ase.io.write(temporary, atoms, format='traj'))
     else:
         if path.suffix.lower() in ('.xyz', '.extxyz'):
-            path.write_text(_extxyz_text(atoms))
+            replace_text(path, _extxyz_text(atoms))
         else:
-            ase.io.write(path, atoms)
+            replace_with(path, lambda temporary: ase.io.write(temporary, atoms))
         edges = edges_path(path)
-        with open(edges, 'w') as f:
-            f.write(f'# springs of {path.name}: two 0-based point indices a line\n')
-            np.savetxt(f, atoms.calc.springs, fmt='%d')
+        springs = '\n'.join(f'{i} {j}' for i, j in atoms.calc.springs)
+        replace_text(edges, f'# springs of {path.name}: two 0-based point indices a line\n'
+                     + springs + ('\n' if springs else ''))
         return [path, edges]
     return [path]
 

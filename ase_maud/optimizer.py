@@ -31,6 +31,7 @@ every energy and force is finite. The step is
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
@@ -166,6 +167,7 @@ class Maud(Optimizer):
         return d
 
     def initialize(self) -> None:
+        self._handoff: _Handoff | None = None
         self.state = self.maud.start()
         calc = getattr(self._atoms(), 'calc', None)
         self.monitor = RunMonitor(
@@ -257,6 +259,7 @@ class Maud(Optimizer):
         return float(np.vdot(forces, forces))
 
     def step(self) -> None:
+        self._afresh_if_changed()
         opt = self.optimizable
         x = opt.get_x().reshape(-1, 3)
         forces = -opt.get_gradient().reshape(-1, 3)
@@ -277,6 +280,24 @@ class Maud(Optimizer):
         opt.set_x((here.x + move).ravel())
         self.maud.moved(state, opt.get_x().reshape(-1, 3))
         self._evaluate()
+        self._handoff = self._handoff_now()
+
+    def _afresh_if_changed(self) -> None:
+        """Start the step rule and the run monitor afresh if the atoms, the
+        calculator or its potential changed since the last step (between two
+        runs, or by an observer): the last point and the secant pairs belong
+        to another landscape."""
+        if self._handoff is not None and self._handoff != self._handoff_now():
+            self.initialize()
+            self.logfile.write(f'Maud: the atoms or the calculator changed after step '
+                               f'{self.nsteps}: the step rule starts afresh\n')
+
+    def _handoff_now(self) -> _Handoff:
+        """Where a step left the run: the positions, the calculator and its
+        potential (compared at the next run's start)."""
+        calc = getattr(self._atoms(), 'calc', None)
+        return _Handoff(self.optimizable.get_x().copy(), calc,
+                        getattr(calc, 'potential', None))
 
     def _solver_at(self, x: np.ndarray) -> Any:
         """The stiffness model at positions ``x`` (the atoms are moved there
@@ -315,10 +336,12 @@ class Maud(Optimizer):
     def _preflight(self) -> None:
         """Say in the log if the scene has no finite minimum; evaluate.
         Energy and forces held from an earlier run are dropped (the
-        calculator or the band may have changed since)."""
+        calculator or the band may have changed since), and the step rule
+        starts afresh if the scene changed (:meth:`_afresh_if_changed`)."""
         self.optimizable.held = None
         atoms = self._atoms()
         calc = getattr(atoms, 'calc', None)
+        self._afresh_if_changed()
         if hasattr(calc, 'unbounded_components') and self.target == 'minimum':
             self.monitor.unbounded = calc.unbounded_components(atoms)
             if self.monitor.unbounded:
@@ -330,6 +353,21 @@ class Maud(Optimizer):
         """Write ``error``'s message to the log and raise it."""
         self.logfile.write(f'Maud: stopped: {error}\n')
         raise error
+
+
+@dataclass(eq=False)
+class _Handoff:
+    """Positions, calculator and potential at the end of a step; equal to
+    another when the positions are equal in every bit and the calculator and
+    potential are the same objects."""
+
+    x: np.ndarray
+    calc: Any
+    potential: Any
+
+    def __eq__(self, other: object) -> bool:
+        return (isinstance(other, _Handoff) and np.array_equal(self.x, other.x)
+                and self.calc is other.calc and self.potential is other.potential)
 
 
 class _CheckedOptimizable:
@@ -349,7 +387,8 @@ class _CheckedOptimizable:
         self.inner = inner
         self.optimizer = optimizer
         self.good: tuple[np.ndarray, int] | None = None  # positions, step
-        self.held: tuple[np.ndarray, float, np.ndarray] | None = None  # x, E, gradient
+        # x, E, gradient, and the calculator's forces object they came from
+        self.held: tuple[np.ndarray, float, np.ndarray, Any] | None = None
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.inner, name)
@@ -362,8 +401,9 @@ class _CheckedOptimizable:
 
     def _results(self) -> tuple[np.ndarray, float, np.ndarray]:
         x = self.inner.get_x()
-        if self.held is not None and np.array_equal(x, self.held[0]):
-            return self.held
+        if (self.held is not None and np.array_equal(x, self.held[0])
+                and self.held[3] is self._witness()):
+            return self.held[:3]
         gradient = self.inner.get_gradient()
         rows = gradient.reshape(-1, 3)
         bad = np.flatnonzero(~np.isfinite(rows).all(axis=1))
@@ -375,8 +415,16 @@ class _CheckedOptimizable:
         if not np.isfinite(value):
             self._fail(f'a non-finite energy ({value})')
         self.good = (x.copy(), self.optimizer.nsteps)
-        self.held = (x.copy(), value, gradient)
-        return self.held
+        self.held = (x.copy(), value, gradient, self._witness())
+        return self.held[:3]
+
+    def _witness(self) -> Any:
+        """The calculator's forces object behind the results held: a new
+        calculation or a ``calc.set`` that drops the results (from an
+        observer, say) replaces it, and the results are fetched again."""
+        calc = getattr(getattr(self.inner, 'atoms', None), 'calc', None)
+        results = getattr(calc, 'results', None)
+        return results.get('forces') if isinstance(results, dict) else None
 
     def _fail(self, what: str) -> None:
         if self.good is None:

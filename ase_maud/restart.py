@@ -29,7 +29,6 @@ from __future__ import annotations
 import itertools
 import json
 import os
-import tempfile
 import time
 import zlib
 from pathlib import Path
@@ -37,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from .atomic import replace_text
 from .method import MaudState, Point
 
 #: The version of the layout; a file of another one is refused by name.
@@ -90,7 +90,7 @@ class RestartFile:
             'gamma': state.gamma, 'k': state.k, 'moving': state.v is not None,
             'merit': state.last.merit, 'noise': state.last.noise,
             'model': state.model, 'monitor': _plain(monitor), 'fmax_now': fmax_now}
-        _replace(self.path, json.dumps(document), sync)
+        replace_text(self.path, json.dumps(document), sync)
         if sync:
             self._synced = time.monotonic()
 
@@ -162,20 +162,3 @@ def _plain(value: Any) -> Any:
     if isinstance(value, np.generic):
         return value.item()
     return value
-
-
-def _replace(path: Path, text: str, sync: bool) -> None:
-    """Replace ``path`` by ``text`` atomically: a temporary file in the same
-    folder (flushed to disk if ``sync``), then ``os.replace``."""
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.',
-                                         suffix='.tmp')
-    try:
-        with os.fdopen(handle, 'w') as fd:
-            fd.write(text)
-            if sync:
-                fd.flush()
-                os.fsync(fd.fileno())
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise

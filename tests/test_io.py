@@ -275,3 +275,32 @@ def test_write_refuses_a_mismatched_original(tmp_path):
         write_net(tmp_path / 'out.json', atoms, like=path)
     with pytest.raises(ValueError, match='has 16 vertices, the net 9 points'):
         write_net(tmp_path / 'out.obj', atoms[:9], like=path)
+
+
+@pytest.mark.parametrize('kind', FORMATS)
+def test_writing_over_the_file_read_keeps_it_whole(tmp_path, kind):
+    # like= the output itself: it is read before anything is replaced
+    path, *_ = write_quad_net(tmp_path, kind, seed=4)
+    atoms = read_net(path)
+    atoms.positions += np.random.default_rng(5).normal(size=atoms.positions.shape)
+    write_net(path, atoms, like=path if kind != 'xyz' else None)
+    again = read_net(path)
+    np.testing.assert_array_equal(again.positions, atoms.positions)
+    np.testing.assert_array_equal(again.calc.springs, atoms.calc.springs)
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith('.')) == []
+
+
+@pytest.mark.parametrize('kind', FORMATS)
+def test_a_failed_write_leaves_the_old_file(tmp_path, kind, monkeypatch):
+    path, *_ = write_quad_net(tmp_path, kind, seed=6)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    atoms = read_net(path)
+    atoms.positions += 1.0
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, 'No space left on device')
+
+    monkeypatch.setattr('ase_maud.atomic.os.replace', full_disk)
+    with pytest.raises(OSError, match='No space left'):
+        write_net(path, atoms, like=path if kind != 'xyz' else None)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before

@@ -265,3 +265,48 @@ def test_stationary_result_is_an_index_one_saddle(seed, model):
     relax(atoms, Maud, fmax=1e-10, target='stationary', model=model)
     point = classify(atoms)
     assert (point.verdict, point.index) == ('saddle', 1)
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_a_second_run_from_moved_atoms_starts_afresh(seed):
+    atoms = build('hanging_net', 6, seed=seed)
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-6)
+        first = atoms.positions.copy()
+        free = ~np.isin(np.arange(len(atoms)), atoms.constraints[0].index)
+        kick = np.random.default_rng(seed).uniform(-0.3, 0.3, (free.sum(), 3))
+        atoms.positions[free] += kick
+        opt.run(fmax=1e-6, steps=1)
+        # one step from the moved atoms, not back to where the first run ended
+        assert np.abs(atoms.positions - first).max() > 0.1
+        assert opt.run(fmax=1e-6)
+    reference = build('hanging_net', 6, seed=seed)
+    reference.positions[:] = first
+    reference.positions[free] += kick
+    with BFGS(reference, logfile=None) as bfgs:
+        bfgs.run(fmax=1e-8)
+    assert atoms.get_potential_energy() == pytest.approx(reference.get_potential_energy(),
+                                                         rel=1e-9)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_changed_calculator_between_runs_starts_afresh(seed):
+    atoms = build('random_graph', 24, seed=seed)
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-6)
+        atoms.calc.set(a=2.0)
+        assert opt.run(fmax=1e-6)
+    check = atoms.copy()
+    check.calc = MaudCalculator(atoms.calc.springs, a=2.0)
+    assert np.linalg.norm(check.get_forces(), axis=1).max() <= 1e-6
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_calc_set_by_an_observer_is_seen(seed):
+    atoms = build('ring', 16, seed=seed)
+    with Maud(atoms, logfile=None) as opt:
+        opt.attach(lambda: atoms.calc.set(Q=2.0) if opt.nsteps == 2 else None)
+        assert opt.run(fmax=1e-6)
+    check = atoms.copy()
+    check.calc = MaudCalculator(atoms.calc.springs, Q=2.0, dim=2)
+    assert np.linalg.norm(check.get_forces(), axis=1).max() <= 1e-6

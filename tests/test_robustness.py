@@ -279,7 +279,7 @@ def test_restart_file_is_replaced_whole(tmp_path, monkeypatch):
         replaced.append(destination)
         real_replace(source, destination)
 
-    monkeypatch.setattr('ase_maud.restart.os.replace', checked_replace)
+    monkeypatch.setattr('ase_maud.atomic.os.replace', checked_replace)
     with Maud(atoms, logfile=None, restart='maud.json') as opt:
         opt.attach(lambda: seen.append(sorted(os.listdir('.'))))
         opt.run(fmax=1e-6, steps=5)

@@ -37,10 +37,12 @@ stiffness solver ``K^-1`` (:mod:`ase_maud.stiffness`)::
   (ASE's NEB) the nearest point is sought within each image
   (``image_size``). Each point's move is scaled down on its own; or
   (``trust_region``, for a model that can damp itself, the exact one) the
-  move becomes ``gamma (K + mu I)^-1 f`` with the smallest ``mu >= 0`` that
-  keeps every point within its bound (Levenberg-Marquardt): far from a
-  minimum this turns the step towards the forces instead of shortening the
-  Newton step as a whole. With ``bound='whole'`` the whole move is scaled
+  move is taken along the dogleg path from the Cauchy point to the Newton
+  move (a definite model with ``dot``), or becomes ``gamma (K + mu I)^-1 f``
+  with the smallest ``mu >= 0`` that keeps every point within its bound
+  (Levenberg-Marquardt, a model with ``shifted_solve``): far from a minimum
+  this turns the step towards the forces instead of shortening the Newton
+  step as a whole. With ``bound='whole'`` the whole move is scaled
   by one factor instead, so that a descent direction stays one; and
   ``maxstep_size`` bounds every point's move by that fraction of the scene's
   size (the largest distance from the centroid), a bound that needs no
@@ -65,10 +67,12 @@ from .stiffness import Solver, StiffnessModel
 #: The step rule's defaults: ``'common'`` for every model, then each model's
 #: own (by :attr:`StiffnessModel.name`; a model not listed takes
 #: ``'nodal'``'s), chosen by measurement (docs/optimizer.md). The Newton-like
-#: global and exact models take gamma = 1 with no momentum (the exact one
-#: with no memory and a trust-region bound, the global one with an L-BFGS
-#: memory over ``P``); the nodal and secant models keep Day's momentum, as
-#: the specification has it.
+#: models take gamma = 1 with no momentum: the exact one with no memory and a
+#: trust-region bound; the global and springs ones with an L-BFGS memory over
+#: their ``P`` and the whole move scaled by one factor (the springs one by the
+#: scene's size only, gamma back to 1 after every accepted step and a cubic
+#: cut on a rise, as a line search). The nodal and secant models keep Day's
+#: momentum, as the specification has it.
 STEP_DEFAULTS: dict[str, dict[str, Any]] = {
     'common': {'gamma': 1.0, 'gamma_growth': 1.1, 'overshoot_shrink': 0.6,
                'maxstep_nn': 0.45, 'maxstep': None, 'maxstep_size': None,

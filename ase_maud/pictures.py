@@ -12,6 +12,7 @@ display needed and no global backend changed.
 
 from __future__ import annotations
 
+import io
 import os
 from collections.abc import Sequence
 
@@ -28,6 +29,20 @@ from .topology import fixed_atoms
 
 #: Longest force arrow, as a fraction of the picture's largest extent.
 ARROW = 0.1
+
+
+def save_png(fig: Figure, path: str | os.PathLike, dpi: int = 72, colours: int = 64) -> None:
+    """Save ``fig`` as a PNG of at most ``colours`` colours (Pillow's
+    palette quantisation): line plots lose nothing visible and take a
+    fraction of a full-colour file (the benchmark's figures kept in the
+    docs)."""
+    from PIL import Image  # matplotlib's own dependency
+
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format='png', dpi=dpi)
+    buffer.seek(0)
+    image = Image.open(buffer).convert('RGB').quantize(colours)
+    image.save(path, optimize=True)
 
 
 def _limits(frames: Sequence[Atoms]) -> tuple[np.ndarray, np.ndarray]:

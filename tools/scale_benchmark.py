@@ -113,6 +113,8 @@ def _plot(calls: list[dict], relax: list[dict], path: Path) -> None:
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
+    from ase_maud.pictures import save_png
+
     fig, (left, middle, right) = plt.subplots(1, 3, figsize=(13, 4))
     for backend in sorted({r['backend'] for r in calls}):
         for blocks, style in ((False, '-o'), (True, '--s')):
@@ -136,7 +138,7 @@ def _plot(calls: list[dict], relax: list[dict], path: Path) -> None:
         ax.legend(fontsize=7)
         ax.grid(True, which='both', alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=80)
+    save_png(fig, path)
 
 
 def _summary(calls, relax, args) -> str:

@@ -26,6 +26,7 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.figure import Figure
 
+from ..pictures import save_png
 from ..threads import THREAD_VARIABLES
 from .optimizers import ASE_BASELINES, SCIPY_BASELINE
 from .runner import CALLS, ENERGY, FMAX, TIME_S, Run
@@ -263,7 +264,7 @@ def plot_convergence(runs: list[Run], outdir: Path,
                 handles.setdefault(label, handle)
         fig.legend(handles.values(), handles.keys(), loc='outside right upper')
         path = outdir / f'{stem}.png'
-        fig.savefig(path, dpi=110)
+        save_png(fig, path)
         paths.append(path)
     return paths
 
@@ -295,5 +296,5 @@ def plot_backends(rows, path, reference='numpy'):
              ylabel='time per call [s]')
     right.set(xlabel='N (points)', ylabel='time per call [s]')
     right.legend(fontsize='small')
-    fig.savefig(path, dpi=110)
+    save_png(fig, path)
     return path

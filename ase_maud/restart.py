@@ -43,9 +43,12 @@ from .method import MaudState, Point
 FORMAT = 'maud-restart-2'
 #: Rows per state slot: positions, the last point, its forces.
 STATE_ROWS = 3
-#: Longest time between two flushes of the files to disk (``fsync``): each
-#: costs milliseconds, more than a whole step of a small scene.
-SYNC_SECONDS = 1.0
+#: Longest time between two flushes of the files to disk (``fsync``), from
+#: the first write on: what a crash of the machine (not of the process) can
+#: take. A flush waits for the disk (milliseconds to a tenth of a second for
+#: the megabytes of a large scene), more than a whole step of a small one;
+#: rows overwritten between two flushes reach the disk once.
+SYNC_SECONDS = 10.0
 
 
 class RestartFile:
@@ -56,7 +59,7 @@ class RestartFile:
         self.path = Path(path)
         self.arrays = self.path.with_name(self.path.name + '.arrays')
         self._slot = 1   # the state slot written last
-        self._synced = -np.inf   # time.monotonic() of the last fsync
+        self._synced = time.monotonic()   # of the last fsync (or of the start)
         # id(s) of each pair the committed file names -> (s, its pair slot, the
         # CRC-32 of its rows); s is kept so that its id cannot be reused
         self._pairs: dict[int, tuple[np.ndarray, int, int]] = {}

@@ -407,3 +407,23 @@ def test_rows_that_never_reached_the_disk_are_refused(tmp_path):
     with pytest.raises(ValueError, match="rows .* of '.*maud.json.arrays' are not what it "
                                          'wrote'):
         Maud(build('hanging_net', 12, seed=2), logfile=None, restart=restart)
+
+
+@pytest.mark.parametrize('sync_seconds,flushes', [(0.0, 'every step'), (1e9, 'none')])
+@pytest.mark.parametrize('seed', [4, 9])
+def test_restart_files_reach_the_disk_on_the_schedule(tmp_path, monkeypatch, seed,
+                                                      sync_seconds, flushes):
+    # both files flushed at each write when SYNC_SECONDS has passed; never
+    # within it, not even at the first step
+    from ase_maud import restart as restart_module
+    monkeypatch.setattr(restart_module, 'SYNC_SECONDS', sync_seconds)
+    synced = []
+    real_fsync = os.fsync
+    monkeypatch.setattr(os, 'fsync', lambda fd: (synced.append(fd), real_fsync(fd)))
+    steps = int(np.random.default_rng(seed).integers(3, 8))
+    with Maud(build('hanging_net', 6, seed=seed), logfile=None,
+              restart=tmp_path / 'maud.json', model='springs') as opt:
+        opt.run(fmax=1e-12, steps=steps)
+    assert opt.nsteps == steps
+    writes = opt.nsteps if flushes == 'every step' else 0   # one write per step
+    assert len(synced) == 2 * writes

@@ -230,7 +230,7 @@ class MaudCalculator(Calculator):
     def check_atoms(self, atoms: Atoms) -> np.ndarray:
         """Validate ``atoms`` for this potential; return its positions.
 
-        Raises ValueError naming the problem: periodic boundaries, a spring
+        Raises ValueError naming the problem: no atoms, periodic boundaries, a spring
         index beyond the last atom, a non-finite position, or (``dim=2``) a
         point off the plane of the others.
         """
@@ -239,6 +239,8 @@ class MaudCalculator(Calculator):
                              f'{atoms.pbc.tolist()}): 1/L needs an Ewald sum;'
                              ' set atoms.pbc = False')
         natoms = len(atoms)
+        if natoms == 0:
+            raise ValueError('no atoms: a scene needs at least one point')
         check_range(self.springs, natoms)   # the rest was checked by set
         positions = atoms.get_positions()
         bad = np.flatnonzero(~np.isfinite(positions).all(axis=1))

@@ -29,6 +29,7 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
+from .checks import check
 from .threads import pin_threads
 
 
@@ -38,6 +39,18 @@ def _size(text):
         return int(text)
     except ValueError:
         return text
+
+
+def _ruled(name: str, parse=float):
+    """An argparse type: the text parsed by ``parse``, then checked by
+    ``ase_maud.checks.RULES[name]`` (its message on a bad value)."""
+    def convert(text):
+        try:
+            return check(name, parse(text))
+        except ValueError as error:
+            raise argparse.ArgumentTypeError(str(error)) from None
+    convert.__name__ = name   # argparse names the type in its own messages
+    return convert
 
 
 def _net_options(args: argparse.Namespace) -> dict:
@@ -196,10 +209,10 @@ def _add_net_options(parser):
                         help='0-based indices of the points held fixed, one or more per '
                         "line (default: the file's own: trajectory constraints, COMPAS "
                         'is_anchor)')
-    parser.add_argument('--a', type=float,
+    parser.add_argument('--a', type=_ruled('a'),
                         help='length a of the repulsion a^3 Q / L (default: stored in a '
                         'trajectory, else 1)')
-    parser.add_argument('--Q', type=float,
+    parser.add_argument('--Q', type=_ruled('Q'),
                         help='spring constant Q (default: stored in a trajectory, else 1)')
     parser.add_argument('--dim', type=int, choices=(2, 3),
                         help='2: points on a plane z = const; 3 (default: stored in a '
@@ -215,7 +228,7 @@ def _command(commands, name, help, description, examples):
 
 
 def _add_threads(parser, default, default_text):
-    parser.add_argument('--threads', type=int, default=default, metavar='N',
+    parser.add_argument('--threads', type=_ruled('count', int), default=default, metavar='N',
                         help='pin OpenMP, BLAS and numba to N threads '
                         f'(default: {default_text})')
 
@@ -264,17 +277,17 @@ def build_parser() -> argparse.ArgumentParser:
                    '(default: %(default)s)')
     p.add_argument('--size', type=_size, help="scene size (default: the "
                    "builder's; molecule takes a name such as C6H6)")
-    p.add_argument('--seed', type=int, default=0,
+    p.add_argument('--seed', type=_ruled('seed', int), default=0,
                    help='seed of the start (default: %(default)s)')
     p.add_argument('--model', default='auto',
                    choices=('auto', *MODELS),
                    help='stiffness model of the step (default: %(default)s)')
     p.add_argument('--method', default='tensor', choices=RULES['method'].choices,
                    help='nodal Maud step (default: %(default)s)')
-    p.add_argument('--fmax', type=float, default=1e-3,
+    p.add_argument('--fmax', type=_ruled('fmax'), default=1e-3,
                    help='largest atomic force norm at convergence '
                    '(default: %(default)s)')
-    p.add_argument('--steps', type=int, default=1000,
+    p.add_argument('--steps', type=_ruled('steps', int), default=1000,
                    help='step budget (default: %(default)s)')
     p.add_argument('--traj', default='maud.traj',
                    help='trajectory file (default: %(default)s)')
@@ -302,7 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('-o', '--output', metavar='PICTURE',
                    help='image file (default: FILE with .png, or .gif with --gif)')
     p.add_argument('--gif', action='store_true', help='animate the frames to a GIF')
-    p.add_argument('--fps', type=int, default=8,
+    p.add_argument('--fps', type=_ruled('count', int), default=8,
                    help='frames per second of the GIF (default: %(default)s)')
     _add_net_options(p)
     _add_threads(p, None, 'leave the environment alone')
@@ -319,10 +332,10 @@ def build_parser() -> argparse.ArgumentParser:
         ['ase-maud classify maud.traj',
          'ase-maud classify relaxed.obj --fixed fixed.txt -k 10'])
     _add_file(p)
-    p.add_argument('-k', type=int, default=6,
+    p.add_argument('-k', type=_ruled('count', int), default=6,
                    help='eigenvalues to print (and to compute, above 2000 free '
                    'coordinates) (default: %(default)s)')
-    p.add_argument('--ftol', type=float,
+    p.add_argument('--ftol', type=_ruled('fmax'),
                    help='fmax above which the point is not stationary '
                    '(default: 1e-6 Q a)')
     _add_net_options(p)
@@ -352,22 +365,22 @@ def build_parser() -> argparse.ArgumentParser:
                    'points) (default: %(default)s)')
     p.add_argument('--sizes', nargs='+', type=_size, metavar='SIZE',
                    help='sizes of every scene (default: suite sizes)')
-    p.add_argument('--seeds', nargs='+', type=int, default=[0], metavar='K',
+    p.add_argument('--seeds', nargs='+', type=_ruled('seed', int), default=[0], metavar='K',
                    help='seeds of the starts (default: 0)')
     p.add_argument('--optimizers', nargs='+', choices=OPTIMIZERS,
                    default=list(OPTIMIZERS), metavar='NAME',
                    help=f'of: {", ".join(OPTIMIZERS)} (default: all)')
-    p.add_argument('--fmax', nargs='+', type=float, default=[1e-3, 1e-6],
+    p.add_argument('--fmax', nargs='+', type=_ruled('fmax'), default=[1e-3, 1e-6],
                    help='fmax levels of the summary; runs stop at the lowest '
                    '(default: 1e-3 1e-6)')
-    p.add_argument('--steps', type=int, default=10000,
+    p.add_argument('--steps', type=_ruled('steps', int), default=10000,
                    help='step budget of every run (default: %(default)s)')
     p.add_argument('--reference', choices=OPTIMIZERS, default='LBFGS',
                    metavar='NAME', help='optimiser of the reference runs '
                    '(default: %(default)s)')
-    p.add_argument('--ref-fmax', type=float, default=1e-9,
+    p.add_argument('--ref-fmax', type=_ruled('fmax'), default=1e-9,
                    help='fmax of the reference runs (default: %(default)s)')
-    p.add_argument('--energy-rtol', type=float, default=1e-6,
+    p.add_argument('--energy-rtol', type=_ruled('energy_rtol'), default=1e-6,
                    help='relative energy difference from the reference '
                    'beyond which a converged run is in another minimum '
                    '(default: %(default)s)')
@@ -385,7 +398,7 @@ def build_parser() -> argparse.ArgumentParser:
         'relative error against the numpy reference. Writes backends.csv, '
         'backends.md and backends.png.',
         ['ase-maud backends --natoms 1000 10000 --backends numba fmm'])
-    p.add_argument('--natoms', nargs='+', type=int,
+    p.add_argument('--natoms', nargs='+', type=_ruled('count', int),
                    default=[100, 300, 1000, 3000], metavar='N',
                    help='numbers of points (default: 100 300 1000 3000)')
     needs = '; '.join(f'{b.name} needs {", ".join(b.requires)}'
@@ -395,10 +408,10 @@ def build_parser() -> argparse.ArgumentParser:
                    metavar='NAME',
                    help=f'of: {", ".join(registry.names())} (default: all '
                    f"that are installed but auto, which picks one of them; {needs})")
-    p.add_argument('--repeats', type=int, default=3,
+    p.add_argument('--repeats', type=_ruled('count', int), default=3,
                    help='timed calls per point, the best kept '
                    '(default: %(default)s)')
-    p.add_argument('--seed', type=int, default=0,
+    p.add_argument('--seed', type=_ruled('seed', int), default=0,
                    help='seed of the points (default: %(default)s)')
     p.add_argument('--out', default='maud-bench',
                    help='output directory (default: %(default)s)')

@@ -173,12 +173,27 @@ def _read_ase(path, index):
 
 
 def _lines(path: PathLike) -> Iterator[tuple[int, list[str]]]:
-    """(line number, tokens) of every line with tokens, ``#`` comments cut."""
-    with open(path) as f:
-        for number, line in enumerate(f, 1):
-            tokens = line.split('#', 1)[0].split()
-            if tokens:
-                yield number, tokens
+    """(line number, tokens) of every line with tokens, ``#`` comments cut;
+    a UTF-8 byte-order mark is skipped, other bytes than UTF-8 text are a
+    ValueError naming the line."""
+    number = 0
+    try:
+        with open(path, encoding='utf-8-sig') as f:
+            for number, line in enumerate(f, 1):
+                tokens = line.split('#', 1)[0].split()
+                if tokens:
+                    yield number, tokens
+    except UnicodeDecodeError:
+        raise ValueError(f'{path} line {number + 1} or near it: not UTF-8 text') from None
+
+
+def _finite(path, where, values):
+    """``values`` (floats), or ValueError naming ``where`` if one is not
+    finite (nan, inf, or beyond the float64 range such as 1e400)."""
+    if not np.isfinite(values).all():
+        raise ValueError(f'{path} {where}: coordinates must be finite numbers, got '
+                         f'{values}')
+    return values
 
 
 def _integers(path, number, tokens, what):
@@ -256,13 +271,14 @@ def read_obj(path: PathLike) -> tuple[np.ndarray, np.ndarray]:
         keyword, rest = tokens[0], tokens[1:]
         if keyword == 'v':
             try:
-                points.append([float(t) for t in rest[:3]])
+                xyz = [float(t) for t in rest[:3]]
             except ValueError:
                 raise ValueError(f"{path} line {number}: expected 'v x y z' "
                                  f'with numbers, got {" ".join(tokens)!r}') from None
             if len(rest) < 3:
                 raise ValueError(f"{path} line {number}: expected 'v x y z', "
                                  f'got {len(rest)} coordinates')
+            points.append(_finite(path, f'line {number}', xyz))
         elif keyword in ('f', 'l'):
             least = 3 if keyword == 'f' else 2
             if len(rest) < least:
@@ -300,12 +316,22 @@ def read_obj(path: PathLike) -> tuple[np.ndarray, np.ndarray]:
 
 def _compas_data(path: PathLike) -> tuple[Any, dict[str, Any]]:
     """The whole JSON document of a COMPAS file and its data dict."""
+    def unique_keys(pairs):
+        keys = [key for key, _ in pairs]
+        if len(set(keys)) < len(keys):
+            twice = next(key for key in keys if keys.count(key) > 1)
+            raise ValueError(f'{path}: key {twice!r} appears twice in one object '
+                             '(JSON keeps only the last; name each vertex once)')
+        return dict(pairs)
+
     try:
-        with open(path) as f:
-            document = json.load(f)
+        with open(path, encoding='utf-8-sig') as f:
+            document = json.load(f, object_pairs_hook=unique_keys)
     except json.JSONDecodeError as error:
         raise ValueError(f'{path} line {error.lineno}: not valid JSON '
                          f'({error.msg})') from None
+    except UnicodeDecodeError:
+        raise ValueError(f'{path}: not UTF-8 text') from None
     data = document
     if isinstance(data, dict) and 'dtype' in data:
         data = data.get('data', data.get('value'))
@@ -334,6 +360,9 @@ def read_compas(path: PathLike) -> tuple[np.ndarray, np.ndarray, list[int]]:
     keys = {str(k): n for n, k in enumerate(points)}
     positions, anchors = [], []
     for key, attributes in points.items():
+        if not isinstance(attributes, dict):
+            raise ValueError(f'{path}: vertex {key} is {attributes!r}, not an object '
+                             'of attributes ({"x": ..., "y": ..., "z": ...})')
         xyz = []
         for axis in 'xyz':
             value = attributes.get(axis, defaults.get(axis))
@@ -341,8 +370,13 @@ def read_compas(path: PathLike) -> tuple[np.ndarray, np.ndarray, list[int]]:
                 raise ValueError(f'{path}: vertex {key} has no number {axis} '
                                  f'(got {value!r})')
             xyz.append(float(value))
-        positions.append(xyz)
-        if any(attributes.get(name, defaults.get(name)) for name in ANCHOR_ATTRIBUTES):
+        positions.append(_finite(path, f'vertex {key}', xyz))
+        flags = [attributes.get(name, defaults.get(name)) for name in ANCHOR_ATTRIBUTES]
+        for name, flag in zip(ANCHOR_ATTRIBUTES, flags, strict=True):
+            if flag is not None and not isinstance(flag, bool) and flag not in (0, 1):
+                raise ValueError(f'{path}: vertex {key} has {name} = {flag!r}; '
+                                 'expected true or false')
+        if any(flags):
             anchors.append(keys[key])
 
     def index(key, where):

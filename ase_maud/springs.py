@@ -5,6 +5,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+#: The largest index an int64 holds (a larger one would wrap around).
+INDEX_MAX = np.iinfo(np.int64).max
+
 
 def check_springs(springs: ArrayLike | None,
                   natoms: int | None = None) -> np.ndarray:
@@ -20,11 +23,13 @@ def check_springs(springs: ArrayLike | None,
         return np.zeros((0, 2), dtype=int)
     if raw.ndim != 2 or raw.shape[1] != 2:
         raise ValueError(f'springs must have shape (K, 2), got {raw.shape}')
+    if np.issubdtype(raw.dtype, np.unsignedinteger) and raw.max() > INDEX_MAX:
+        raw = raw.astype(float)   # refused below, by value
     if not np.issubdtype(raw.dtype, np.integer):
-        if not np.issubdtype(raw.dtype, np.number):
+        if not np.issubdtype(raw.dtype, np.floating):
             raise ValueError(f'springs must hold integer atom indices, got '
                              f'dtype {raw.dtype}')
-        bad = ~np.isfinite(raw) | (raw != np.round(raw))
+        bad = ~np.isfinite(raw) | (raw != np.round(raw)) | (np.abs(raw) > INDEX_MAX)
         if bad.any():
             k = int(np.flatnonzero(bad.any(axis=1))[0])
             raise ValueError(f'spring {k} {raw[k].tolist()} is not a pair of '

@@ -25,6 +25,9 @@ def points(n=5, seed=0):
     ([['0', '1']], r'integer atom indices'),
     ([[0, 1], [2, 3], [1, 0]], r'springs \[0, 2\] all tie atoms 0 and 1'),
     ([[3, 4], [3, 4]], r'springs \[0, 1\] all tie atoms 3 and 4'),
+    ([[0, 1], [1, 2j]], r'integer atom indices, got dtype complex'),
+    ([[0, 1], [1, 1e20]], r'spring 1 \[1.0, 1e\+20\] is not .*integer'),
+    (np.array([[0, 1], [1, 2**64 - 1]], dtype=np.uint64), r'spring 1 .* is not .*integer'),
 ])
 def test_bad_springs(springs, match):
     with pytest.raises(ValueError, match=match):
@@ -125,3 +128,17 @@ def test_hessian_size_limit():
     atoms.calc.max_hessian_atoms = 4
     with pytest.raises(ValueError, match='5 atoms exceed max_hessian_atoms'):
         atoms.calc.get_hessian(atoms)
+
+
+@pytest.mark.parametrize('backend', BACKENDS)
+def test_no_atoms_is_named(backend):
+    atoms = Atoms()
+    atoms.calc = MaudCalculator(backend=backend)
+    with pytest.raises(ValueError, match='no atoms'):
+        atoms.get_potential_energy()
+    from ase_maud import Maud
+    from ase_maud.analysis import classify
+    with pytest.raises(ValueError, match='no atoms'):
+        Maud(atoms, logfile=None).run(fmax=1e-3)
+    with pytest.raises(ValueError, match='no atoms'):
+        classify(atoms)

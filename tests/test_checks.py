@@ -47,3 +47,21 @@ def test_the_calculator_and_the_optimizer_use_the_same_rule():
 def test_an_unknown_calculator_parameter_is_named():
     with pytest.raises(ValueError, match="no parameter 'tole'"):
         MaudCalculator(tole=1e-3)
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['bench', '--fmax', '-1'], 'fmax must be a positive finite number'),
+    (['bench', '--fmax', '1e-3', '0'], 'fmax must be a positive finite number'),
+    (['bench', '--energy-rtol', 'nan'], 'energy_rtol must be a positive finite number'),
+    (['bench', '--seeds', '0', '-2'], 'seed must be a whole number >= 0'),
+    (['backends', '--natoms', '-5'], 'count must be a whole number >= 1'),
+    (['classify', 'net.obj', '-k', '-3'], 'count must be a whole number >= 1'),
+    (['relax', '--steps', '-1'], 'steps must be a whole number >= 0'),
+    (['relax', '--a', '0'], 'a must be a positive finite number'),
+    (['relax', '--threads', '0'], 'count must be a whole number >= 1'),
+])
+def test_command_line_values_follow_the_rules(argv, message, capsys):
+    from ase_maud.cli import build_parser
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(argv)
+    assert message in capsys.readouterr().err

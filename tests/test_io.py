@@ -221,6 +221,16 @@ BROKEN = [
      r"net\.json: edge 0-7 names vertex '7'"),
     ('net.json', '{"dtype": "compas.geometry/Point", "data": [0, 0, 0]}',
      r'expected COMPAS mesh data'),
+    ('net.obj', 'v 0 0 0\nv nan 0 0\n', r'net\.obj line 2: coordinates must be finite'),
+    ('net.obj', 'v 0 0 0\nv 1 1e400 0\n', r'net\.obj line 2: coordinates must be finite'),
+    ('net.json', '{"node": {"0": {"x": NaN, "y": 0, "z": 0}}, "edge": {}}',
+     r'net\.json vertex 0: coordinates must be finite'),
+    ('net.json', '{"node": {"0": {"x": 0, "y": 0, "z": 0}, "0": {"x": 1, "y": 0, "z": 0}},'
+     ' "edge": {}}', r"net\.json: key '0' appears twice"),
+    ('net.json', '{"node": {"0": {"x": 0, "y": 0, "z": 0, "is_anchor": "false"}}, "edge": {}}',
+     r"net\.json: vertex 0 has is_anchor = 'false'; expected true or false"),
+    ('net.json', '{"node": {"0": [0, 0, 0]}, "edge": {}}',
+     r'net\.json: vertex 0 is \[0, 0, 0\], not an object'),
 ]
 
 
@@ -228,6 +238,24 @@ BROKEN = [
 def test_malformed_net_files_name_the_line(tmp_path, name, text, message):
     (tmp_path / name).write_text(text)
     with pytest.raises(ValueError, match=message):
+        read_net(tmp_path / name)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_byte_order_mark_is_skipped(tmp_path, seed):
+    for kind in ('obj', 'mesh2.json'):
+        net = write_quad_net(tmp_path, kind, seed=seed)[0]
+        marked = tmp_path / f'bom.{kind}'
+        marked.write_bytes(b'\xef\xbb\xbf' + net.read_bytes())
+        plain, marked = read_net(net), read_net(marked)
+        np.testing.assert_array_equal(marked.positions, plain.positions)
+        np.testing.assert_array_equal(marked.calc.springs, plain.calc.springs)
+
+
+@pytest.mark.parametrize('name', ['net.obj', 'net.json'])
+def test_bytes_that_are_not_text_are_named(tmp_path, name):
+    (tmp_path / name).write_bytes(b'v 0 0 0\nv 1 0 0\nv \xff\xfe 0 0\n')
+    with pytest.raises(ValueError, match=r'net\.(obj|json).*not UTF-8 text'):
         read_net(tmp_path / name)
 
 

@@ -54,8 +54,9 @@ def share(sx: float, sy: float, sz: float, ox: np.ndarray, oy: np.ndarray,
 TILE = 256
 
 
-def _make_numba_kernel(with_blocks):
-    """Compile the direct sum, with or without the nodal blocks.
+def _make_numba_kernel(with_blocks, parallel):
+    """Compile the direct sum, with or without the nodal blocks, on numba's
+    threads or (``parallel=False``) on the caller's alone.
 
     ``with_blocks`` is a closure constant, so numba removes the block code from
     the energy-and-forces variant instead of testing it in the inner loop.
@@ -84,7 +85,7 @@ def _make_numba_kernel(with_blocks):
     nacc = 8 if with_blocks else 3  # fx fy fz [kxx kyy kxy kxz kyz]
     inv_row = 3 + nacc  # buffer rows: x y z, the nacc sums, 1 / L
 
-    @numba.njit(parallel=True, fastmath=True, error_model='numpy', cache=True)
+    @numba.njit(parallel=parallel, fastmath=True, error_model='numpy', cache=True)
     def kernel(x, y, z, energy, acc):
         n, nchunks = x.size, energy.size
         ntiles = (n + TILE - 1) // TILE
@@ -163,8 +164,9 @@ def _make_numba_kernel(with_blocks):
     return kernel
 
 
-_numba_forces = _make_numba_kernel(False)
-_numba_blocks = _make_numba_kernel(True)
+#: The kernels by (with blocks, parallel).
+_KERNELS = {(blocks, parallel): _make_numba_kernel(blocks, parallel)
+            for blocks in (False, True) for parallel in (False, True)}
 
 
 def direct_sum(x: np.ndarray, y: np.ndarray, z: np.ndarray, nchunks: int,
@@ -175,11 +177,16 @@ def direct_sum(x: np.ndarray, y: np.ndarray, z: np.ndarray, nchunks: int,
     The buffers are made and summed here, outside the compiled kernel: in a
     parallel numba function every array expression is a parallel region of its
     own, whose start and end cost a thread wake-up each on a busy machine.
+    Chunks beyond the ``(ntiles + 1) // 2`` that have work are not made, and a
+    scene of one chunk (up to ``2 TILE`` points) runs on the caller's thread
+    alone: a parallel region waits for every thread, and on a machine whose
+    other cores are busy that wait is many times a small scene's sum.
     """
     n = x.size
+    nchunks = max(1, min(nchunks, (-(-n // TILE) + 1) // 2))
     energy = np.zeros(nchunks)
     acc = np.zeros((nchunks, 8 if want_blocks else 3, n))
-    (_numba_blocks if want_blocks else _numba_forces)(x, y, z, energy, acc)
+    _KERNELS[want_blocks, nchunks > 1](x, y, z, energy, acc)
     total = acc.sum(axis=0)
     if not want_blocks:
         return energy.sum(), total.T.copy(), None

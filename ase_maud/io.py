@@ -149,6 +149,16 @@ def _read(path, edges, fixed, a, Q, dim, index):
     return frames
 
 
+def stored_parameters(frame: Atoms) -> dict[str, Any]:
+    """The MaudCalculator parameters a frame read from a file stores with
+    its energy and forces (an ASE trajectory does), or {}."""
+    calc = frame.calc
+    if calc is None or getattr(calc, 'name', '') != CALC_NAME:
+        return {}
+    return {k: v for k, v in calc.parameters.items()
+            if k in MaudCalculator.default_parameters}
+
+
 def _read_ase(path, index):
     """Frames of an ASE-readable file, and the MaudCalculator parameters its
     (first) frame stores, if any."""
@@ -162,11 +172,7 @@ def _read_ase(path, index):
     frames = frames if isinstance(frames, list) else [frames]
     if not frames:
         raise ValueError(f'{path}: no frame at index {index}')
-    calc = frames[0].calc
-    stored = {}
-    if calc is not None and getattr(calc, 'name', '') == CALC_NAME:
-        stored = {k: v for k, v in calc.parameters.items()
-                  if k in MaudCalculator.default_parameters}
+    stored = stored_parameters(frames[0])
     for atoms in frames:
         atoms.calc = None
     return frames, stored

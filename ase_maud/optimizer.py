@@ -44,7 +44,7 @@ from .checks import check, check_all
 from .method import MaudMethod, StepRule, merit_tolerance, step_rule
 from .monitor import DivergenceError, MaudError, RunMonitor, StagnationError
 from .neighbours import NearestDistances
-from .restart import RestartFile
+from .restart import RestartFile, difference, signature
 from .stiffness import StiffnessModel, choose_model
 from .topology import describe_unbounded
 
@@ -181,11 +181,11 @@ class Maud(Optimizer):
         state belongs to them; a line in the log says if the atoms moved)."""
         data = self._restart_file().read()
         x, here = data['x'].ravel(), self.optimizable.get_x()
-        if x.shape != here.shape:
+        held = data['scene'] if x.shape == here.shape else {'points': x.size // 3}
+        if (why := difference(held, {'points': here.size // 3, **self._scene()})):
             raise ValueError(
-                f'restart file {str(self.restart)!r} holds {x.size // 3} points, '
-                f'the atoms given {here.size // 3}: give the atoms of that run, '
-                'or delete the file')
+                f'restart file {str(self.restart)!r} is of another scene: {why}; '
+                'give the atoms of that run, or delete the file')
         if not np.array_equal(x, here):
             gap = np.abs(x - here).max()
             self.optimizable.set_x(x)
@@ -205,7 +205,21 @@ class Maud(Optimizer):
         if self.restart is not None and self.comm.rank == 0 and self.state.last is not None:
             self._restart_file().write(self.nsteps, self.optimizable.get_x().reshape(-1, 3),
                                        self.state, self.monitor.todict(self.nsteps),
-                                       self.fmax_now)
+                                       self.fmax_now, self._scene())
+
+    def _scene(self) -> dict[str, Any]:
+        """The :func:`~ase_maud.restart.signature` of the atoms (empty for a
+        filter); computed once per calculator and constraints."""
+        atoms = self._atoms()
+        if atoms is None:
+            return {}
+        calc = atoms.calc
+        key = (id(calc), id(getattr(calc, 'potential', None)), len(atoms),
+               tuple(map(id, atoms.constraints)))
+        if getattr(self, '_scene_key', None) != key:
+            self._scene_key = key
+            self._scene_held = signature(atoms, getattr(calc, 'potential', None))
+        return self._scene_held
 
     def _restart_file(self) -> RestartFile:
         """The run's :class:`~ase_maud.restart.RestartFile` (one per run, so
@@ -229,9 +243,10 @@ class Maud(Optimizer):
         """
         frame = last_frame(trajectory)
         if frame is not None:
-            if len(frame) != len(atoms):
-                raise ValueError(f'trajectory {str(trajectory)!r} holds {len(frame)} '
-                                 f'atoms, the atoms given {len(atoms)}')
+            if (why := _other_scene(frame, atoms)):
+                raise ValueError(f'trajectory {str(trajectory)!r} is of another scene: '
+                                 f'{why}; give the atoms of that run, or another '
+                                 'trajectory')
             atoms.set_positions(frame.positions, apply_constraint=False)
         return cls(atoms, restart=restart, trajectory=trajectory,
                    append_trajectory=True, **kwargs)
@@ -434,6 +449,20 @@ class _CheckedOptimizable:
             where = f'positions restored to step {self.good[1]}'
         self.optimizer._stop(MaudError(f'the calculator returned {what} at step '
                                        f'{self.optimizer.nsteps}; {where}'))
+
+
+def _other_scene(frame: Atoms, atoms: Atoms) -> str | None:
+    """How a trajectory's ``frame`` and the ``atoms`` given differ (points,
+    fixed points, and with a MaudCalculator its springs, a, Q, dim), or None."""
+    from .calculator import MaudCalculator
+    from .io import stored_parameters
+    if len(frame) != len(atoms):
+        return f'points {len(frame)} in it, {len(atoms)} in the atoms given'
+    potential = getattr(atoms.calc, 'potential', None)
+    stored = stored_parameters(frame)
+    held = signature(frame, MaudCalculator(**stored).potential
+                     if stored and potential is not None else None)
+    return difference(held, signature(atoms, potential))
 
 
 def last_frame(trajectory: str | Path) -> Atoms | None:

@@ -35,12 +35,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from ase import Atoms
 
 from .atomic import replace_text
 from .method import MaudState, Point
+from .topology import fixed_atoms
 
 #: The version of the layout; a file of another one is refused by name.
-FORMAT = 'maud-restart-2'
+FORMAT = 'maud-restart-3'
 #: Rows per state slot: positions, the last point, its forces.
 STATE_ROWS = 3
 #: Longest time between two flushes of the files to disk (``fsync``), from
@@ -65,9 +67,10 @@ class RestartFile:
         self._pairs: dict[int, tuple[np.ndarray, int, int]] = {}
 
     def write(self, step: int, x: np.ndarray, state: MaudState,
-              monitor: dict[str, Any], fmax_now: float) -> None:
+              monitor: dict[str, Any], fmax_now: float, scene: dict[str, Any]) -> None:
         """Save the run at ``step``: positions ``x`` (N, 3), the step rule's
-        ``state`` (whose ``last`` is set), the monitor's state."""
+        ``state`` (whose ``last`` is set), the monitor's state and the
+        scene's :func:`signature`."""
         rows = x.size
         self._slot = 1 - self._slot
         kept = {id(s): self._pairs[id(s)] for s, _ in state.pairs if id(s) in self._pairs}
@@ -92,14 +95,15 @@ class RestartFile:
             'crc': {'state': state_crc, 'pairs': [kept[id(s)][2] for s, _ in state.pairs]},
             'gamma': state.gamma, 'k': state.k, 'moving': state.v is not None,
             'merit': state.last.merit, 'noise': state.last.noise,
-            'model': state.model, 'monitor': _plain(monitor), 'fmax_now': fmax_now}
+            'model': state.model, 'monitor': _plain(monitor), 'fmax_now': fmax_now,
+            'scene': scene}
         replace_text(self.path, json.dumps(document), sync)
         if sync:
             self._synced = time.monotonic()
 
     def read(self) -> dict[str, Any]:
         """What :meth:`write` saved: ``step``, ``x`` (N, 3), ``state`` (a
-        :class:`MaudState`), ``monitor``, ``fmax_now``. A file of another
+        :class:`MaudState`), ``monitor``, ``fmax_now``, ``scene``. A file of another
         layout or one whose arrays file is missing or short is a ValueError
         naming it."""
         try:
@@ -143,7 +147,8 @@ class RestartFile:
         self._pairs = {id(s): (s, p, c) for (s, _), p, c
                        in zip(state.pairs, pairs, crc['pairs'], strict=True)}
         return {'step': int(document['step']), 'x': x, 'state': state,
-                'monitor': document['monitor'], 'fmax_now': float(document['fmax_now'])}
+                'monitor': document['monitor'], 'fmax_now': float(document['fmax_now']),
+                'scene': document['scene']}
 
     @staticmethod
     def _write_rows(handle, first: int, rows: int, arrays: list[np.ndarray]) -> int:
@@ -154,6 +159,33 @@ class RestartFile:
         handle.seek(first * rows * 8)
         handle.write(data)
         return zlib.crc32(data)
+
+
+def signature(atoms: Atoms, potential: Any = None) -> dict[str, Any]:
+    """What a run's files are checked against when it is resumed onto
+    ``atoms``: the number of points, the fixed ones and, with a ``potential``
+    (a :class:`~ase_maud.potential.MaudPotential`), its springs, ``a``, ``Q``
+    and ``dim``; plain values, long lists as a count and a CRC-32."""
+    fixed = np.flatnonzero(fixed_atoms(atoms))
+    scene = {'points': len(atoms), 'fixed points': len(fixed),
+             'fixed points crc': zlib.crc32(fixed.astype(np.int64).tobytes())}
+    if potential is not None:
+        pairs = np.unique(np.sort(potential.springs, axis=1), axis=0).astype(np.int64)
+        scene.update({'springs': len(pairs), 'springs crc': zlib.crc32(pairs.tobytes()),
+                      'a': potential.a, 'Q': potential.Q, 'dim': potential.dim})
+    return scene
+
+
+def difference(held: dict[str, Any], given: dict[str, Any]) -> str | None:
+    """The first way the scene of a file (``held``) and the atoms given
+    differ, in words (None if they agree on every key both have)."""
+    for key in held:
+        if key in given and held[key] != given[key]:
+            what = key.removesuffix(' crc')
+            if key.endswith(' crc'):
+                return f'its {what} are other ones (as many: {held[what]})'
+            return f'{key} {held[key]!r} in it, {given[key]!r} in the atoms given'
+    return None
 
 
 def _plain(value: Any) -> Any:

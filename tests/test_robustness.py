@@ -311,7 +311,8 @@ def test_restart_of_another_scene_is_refused(tmp_path):
     restart = tmp_path / 'maud.json'
     with Maud(build('hanging_net', 5, seed=1), logfile=None, restart=restart) as opt:
         opt.run(fmax=1e-6, steps=2)
-    with pytest.raises(ValueError, match=r'holds 25 points, the atoms given 36'):
+    with pytest.raises(ValueError, match=r'of another scene: points 25 in it, 36 in the '
+                                         'atoms given'):
         Maud(build('hanging_net', 6, seed=1), logfile=None, restart=restart)
     restart.write_text('{"method": {}}')
     with pytest.raises(ValueError, match='not written by this version of Maud'):
@@ -427,3 +428,34 @@ def test_restart_files_reach_the_disk_on_the_schedule(tmp_path, monkeypatch, see
     assert opt.nsteps == steps
     writes = opt.nsteps if flushes == 'every step' else 0   # one write per step
     assert len(synced) == 2 * writes
+
+
+@pytest.mark.parametrize('seed', [3, 8])
+def test_files_of_another_scene_with_as_many_points_are_refused(tmp_path, seed):
+    # a ring's run resumed onto a net of as many points (issue 22, item 5):
+    # other springs, then the same springs with another a, or other fixed points
+    ring = build('ring', 25, seed=seed)
+    restart, trajectory = tmp_path / 'maud.json', tmp_path / 'maud.traj'
+    with Maud(ring, logfile=None, restart=restart, trajectory=trajectory) as opt:
+        opt.run(fmax=1e-6, steps=3)
+    net = build('hanging_net', 5, seed=seed)
+    with pytest.raises(ValueError, match=r"restart file .* of another scene: fixed points "
+                                         r'0 in it, \d+ in the atoms given'):
+        Maud(net, logfile=None, restart=restart)
+    with pytest.raises(ValueError, match=r"trajectory .* of another scene: fixed points"):
+        Maud.resume(net, restart=restart, trajectory=trajectory, logfile=None)
+    net.set_constraint()
+    with pytest.raises(ValueError, match=r'of another scene: its springs are other ones '
+                                         r'\(as many: 25\)|springs 25 in it'):
+        Maud(net, logfile=None, restart=restart)
+    wider = build('ring', 25, seed=seed)
+    wider.calc.set(a=2.0)
+    for resume in (lambda: Maud(wider, logfile=None, restart=restart),
+                   lambda: Maud.resume(wider, restart=restart, trajectory=trajectory,
+                                       logfile=None)):
+        with pytest.raises(ValueError, match=r'of another scene: a 1\.0 in it, 2\.0 in the '
+                                             'atoms given'):
+            resume()
+    same = build('ring', 25, seed=seed)
+    with Maud.resume(same, restart=restart, trajectory=trajectory, logfile=None) as opt:
+        assert opt.run(fmax=1e-6)

@@ -85,9 +85,13 @@ def _make_numba_kernel(with_blocks, parallel):
     nacc = 8 if with_blocks else 3  # fx fy fz [kxx kyy kxy kxz kyz]
     inv_row = 3 + nacc  # buffer rows: x y z, the nacc sums, 1 / L
 
+    # ``parallel`` is read in the body so that it is a closure variable:
+    # numba's cache keys a closure by its code and closure values, not by its
+    # compile options, and would otherwise give both variants one entry.
     @numba.njit(parallel=parallel, fastmath=True, error_model='numpy', cache=True)
     def kernel(x, y, z, energy, acc):
         n, nchunks = x.size, energy.size
+        assert parallel or nchunks == 1
         ntiles = (n + TILE - 1) // TILE
         for t in numba.prange(nchunks):
             out = acc[t]

@@ -173,3 +173,12 @@ def test_a_new_backend_is_one_registration(monkeypatch, random_points):
     np.testing.assert_allclose(atoms.get_forces(), expected, rtol=1e-13)
     atoms.calc.get_stiffness(atoms)
     assert calls == [False, True]
+
+
+def test_kernel_variants_have_their_own_cache_entries():
+    """numba keys a cached closure by its code and closure values only, so
+    the four kernels (with or without blocks, parallel or not) must differ in
+    their closure values, or a run would load another variant's machine code."""
+    keys = {tuple(cell.cell_contents for cell in kernel.py_func.__closure__)
+            for kernel in direct._KERNELS.values()}
+    assert len(keys) == len(direct._KERNELS) == 4

@@ -6,8 +6,35 @@ from __future__ import annotations
 
 import os
 import tempfile
+import time
 from collections.abc import Callable
 from pathlib import Path
+
+#: A temporary file of :func:`replace_with` older than this (seconds) was
+#: left by a writer that was killed, and is removed by :func:`remove_leftovers`
+#: (a live writer keeps its own for milliseconds).
+LEFTOVER_SECONDS = 60.0
+
+
+def _temporary_pattern(path: Path) -> tuple[str, str]:
+    """The prefix and suffix of :func:`replace_with`'s temporary files."""
+    return f'.{path.stem}.', f'.tmp{path.suffix}'
+
+
+def remove_leftovers(path: str | os.PathLike) -> list[Path]:
+    """Remove the temporary files that writers of ``path`` killed before their
+    replace left beside it (older than :data:`LEFTOVER_SECONDS`); return them."""
+    path = Path(path)
+    prefix, suffix = _temporary_pattern(path)
+    removed = []
+    for leftover in path.parent.glob(f'{prefix}*{suffix}'):
+        try:
+            if time.time() - leftover.stat().st_mtime > LEFTOVER_SECONDS:
+                leftover.unlink()
+                removed.append(leftover)
+        except FileNotFoundError:   # another process took it first
+            pass
+    return removed
 
 
 def replace_with(path: str | os.PathLike, write: Callable[[Path], None],
@@ -18,8 +45,8 @@ def replace_with(path: str | os.PathLike, write: Callable[[Path], None],
     untouched until the new one is complete; a failure removes the temporary
     file and is raised."""
     path = Path(path)
-    handle, name = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.stem}.',
-                                    suffix=f'.tmp{path.suffix}')
+    prefix, suffix = _temporary_pattern(path)
+    handle, name = tempfile.mkstemp(dir=path.parent, prefix=prefix, suffix=suffix)
     os.close(handle)
     temporary = Path(name)
     try:

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from ase import Atoms
 
-from .atomic import replace_text
+from .atomic import remove_leftovers, replace_text
 from .method import MaudState, Point
 from .topology import fixed_atoms
 
@@ -60,6 +60,7 @@ class RestartFile:
     def __init__(self, path: str | os.PathLike):
         self.path = Path(path)
         self.arrays = self.path.with_name(self.path.name + '.arrays')
+        remove_leftovers(self.path)   # of runs killed while replacing it
         self._slot = 1   # the state slot written last
         self._synced = time.monotonic()   # of the last fsync (or of the start)
         # id(s) of each pair the committed file names -> (s, its pair slot, the

@@ -432,7 +432,7 @@ def test_restart_files_reach_the_disk_on_the_schedule(tmp_path, monkeypatch, see
 
 @pytest.mark.parametrize('seed', [3, 8])
 def test_files_of_another_scene_with_as_many_points_are_refused(tmp_path, seed):
-    # a ring's run resumed onto a net of as many points (issue 22, item 5):
+    # a ring's run resumed onto a net of as many points:
     # other springs, then the same springs with another a, or other fixed points
     ring = build('ring', 25, seed=seed)
     restart, trajectory = tmp_path / 'maud.json', tmp_path / 'maud.traj'
@@ -459,3 +459,26 @@ def test_files_of_another_scene_with_as_many_points_are_refused(tmp_path, seed):
     same = build('ring', 25, seed=seed)
     with Maud.resume(same, restart=restart, trajectory=trajectory, logfile=None) as opt:
         assert opt.run(fmax=1e-6)
+
+
+@pytest.mark.parametrize('seed', [1, 2])
+def test_temporary_files_of_killed_writers_are_removed(tmp_path, seed):
+    # a kill between writing the restart file's temporary and replacing it
+    # leaves the temporary; the next run removes those
+    # older than a minute and leaves a live writer's alone
+    import time
+
+    from ase_maud import atomic
+    restart = tmp_path / 'maud.json'
+    with Maud(build('hanging_net', 5, seed=seed), logfile=None, restart=restart) as opt:
+        opt.run(fmax=1e-9, steps=2)
+    old, fresh = tmp_path / '.maud.k1ll3d.tmp.json', tmp_path / '.maud.l1ve.tmp.json'
+    for leftover in (old, fresh):
+        leftover.write_text('{"format": "half')
+    past = time.time() - 2 * atomic.LEFTOVER_SECONDS
+    os.utime(old, (past, past))
+    with Maud(build('hanging_net', 5, seed=seed), logfile=None, restart=restart) as opt:
+        opt.run(fmax=1e-9, steps=2)
+    assert not old.exists() and fresh.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        fresh.name, 'maud.json', 'maud.json.arrays']

@@ -46,17 +46,19 @@ def _peak_mb() -> float:
 
 
 def one_call(side: int, backend: str, blocks: bool, tol: float) -> dict:
-    """Time one calculator call on a fresh net (after one warm-up call on a
-    small net, so numba's compilation is not counted)."""
+    """Time one calculator call on a fresh net (after warm-up calls on nets
+    of 16 and 576 points, which load the one-thread and the parallel kernels,
+    so numba's compilation is not counted)."""
     from ase_maud.scenes import build
 
     kwargs = {'backend': backend, 'tol': tol}
     if backend == 'fmm':
         from ase_maud.backends.fmm import eps_for
         kwargs = {'backend': 'fmm', 'fmm_eps': eps_for(tol)}
-    warm = build('hanging_net', 4)
-    warm.calc.set(**kwargs)
-    warm.calc.get_property('stiffness' if blocks else 'forces', warm)
+    for warm_side in (4, 24):
+        warm = build('hanging_net', warm_side)
+        warm.calc.set(**kwargs)
+        warm.calc.get_property('stiffness' if blocks else 'forces', warm)
     atoms = build('hanging_net', side)
     atoms.calc.set(**kwargs)
     wall, cpu = time.perf_counter(), time.process_time()
@@ -77,8 +79,9 @@ def one_relax(side: int, optimiser: str, fmax: float, steps: int) -> dict:
     from ase_maud.bench.runner import calls_and_cpu
     from ase_maud.scenes import build
 
-    warm = build('hanging_net', 4)   # numba compiles outside the timing
-    OPTIMIZERS[optimiser](warm).run(fmax=fmax, steps=steps)
+    for warm_side in (4, 24):   # numba compiles both kernels outside the timing
+        warm = build('hanging_net', warm_side)
+        OPTIMIZERS[optimiser](warm).run(fmax=fmax, steps=20)
     atoms = build('hanging_net', side)
     wall = time.perf_counter()
     calls, cpu, done = calls_and_cpu(atoms, OPTIMIZERS[optimiser](atoms), fmax, steps)

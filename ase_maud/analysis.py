@@ -305,13 +305,7 @@ def near_field_stiffness(atoms: Atoms, cutoff: float = 1.5) -> sp.csr_matrix:
     blocks *= potential.Q
     values, vectors = np.linalg.eigh(blocks)
     blocks = np.einsum('pak,pk,pbk->pab', vectors, np.abs(values), vectors)
-    axis = np.arange(dim)
-    rows = dim * np.stack([i, j, i, j])[:, :, None, None] + axis[:, None]
-    cols = dim * np.stack([j, i, i, j])[:, :, None, None] + axis
-    data = np.stack([-blocks, -blocks, blocks, blocks])
-    rows, cols = (np.broadcast_to(r, data.shape).ravel() for r in (rows, cols))
-    return sp.csr_matrix((data.ravel(), (rows, cols)),
-                         shape=(dim * n, dim * n))
+    return physics.pair_block_laplacian(i, j, blocks, n)
 
 
 def displace_along_mode(atoms: Atoms, point: StationaryPoint, mode: int = 0,

@@ -114,6 +114,21 @@ def spring_laplacian(springs: np.ndarray, natoms: int) -> sp.csr_matrix:
     return sp.csr_matrix(degrees - adjacency)
 
 
+def pair_block_laplacian(i: np.ndarray, j: np.ndarray, blocks: np.ndarray,
+                         natoms: int) -> sp.csr_matrix:
+    """``sum_p (e_i - e_j)(e_i - e_j)^T (x) blocks[p]`` over the pairs
+    ``(i[p], j[p])``: each (dim, dim) block on both diagonal places and its
+    negative on both off-diagonal ones (block rows sum to zero), shape
+    (dim N, dim N), coordinates point by point."""
+    dim = blocks.shape[-1]
+    axis = np.arange(dim)
+    rows = dim * np.stack([i, j, i, j])[:, :, None, None] + axis[:, None]
+    cols = dim * np.stack([j, i, i, j])[:, :, None, None] + axis
+    data = np.stack([-blocks, -blocks, blocks, blocks])
+    rows, cols = (np.broadcast_to(r, data.shape).ravel() for r in (rows, cols))
+    return sp.csr_matrix((data.ravel(), (rows, cols)), shape=(dim * natoms,) * 2)
+
+
 def spring_hessian_entries(springs: np.ndarray, natoms: int, Q: float,
                            dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The springs' exact, constant Hessian ``Q (L (x) I_dim)`` as entries

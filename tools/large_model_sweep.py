@@ -58,13 +58,7 @@ class NearField(SpringsModel):
         if self.positive:
             values, vectors = np.linalg.eigh(blocks)
             blocks = np.einsum('pak,pk,pbk->pab', vectors, np.abs(values), vectors)
-        axis = np.arange(dim)
-        rows = dim * np.stack([i, j, i, j])[:, :, None, None] + axis[:, None]
-        cols = dim * np.stack([j, i, i, j])[:, :, None, None] + axis
-        data = np.stack([-blocks, -blocks, blocks, blocks])
-        rows, cols = (np.broadcast_to(r, data.shape).ravel() for r in (rows, cols))
-        matrix = potential.spring_hessian(n) + sp.csr_matrix(
-            (data.ravel(), (rows, cols)), shape=(dim * n, dim * n))
+        matrix = potential.spring_hessian(n) + physics.pair_block_laplacian(i, j, blocks, n)
         free = free_dofs(atoms, dim)
         keep = np.flatnonzero(free.ravel())
         shift = 1e-6 * abs(matrix.diagonal()).max()

@@ -16,7 +16,9 @@ observed. Its state goes into a restart file (:meth:`RunMonitor.todict`).
   step having been taken back; or no progress for ``patience`` steps,
   progress being fmax falling by 0.1 % below its best and, for
   ``target='minimum'``, the merit (the energy) falling below its lowest by
-  more than its error.
+  more than its error and by more than :data:`ENERGY_PROGRESS` of the
+  descent so far (the first merit minus the lowest): progress relative to the
+  run's own scale, so that a run creeping down at any scale is caught.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from .checks import as_number, as_whole
 from .topology import describe_unbounded
 
 
@@ -44,6 +47,9 @@ class StagnationError(MaudError):
 #: fmax counts as progress when it falls below ``(1 - FMAX_PROGRESS)`` of its
 #: best so far.
 FMAX_PROGRESS = 1e-3
+#: The energy counts as progress when it falls below its lowest by more than
+#: this fraction of the descent so far (and by more than its error).
+ENERGY_PROGRESS = 1e-3
 #: ``gamma`` has underflowed below this fraction of its start.
 GAMMA_UNDERFLOW = 1e-12
 
@@ -67,6 +73,7 @@ class RunMonitor:
     centre0: np.ndarray | None = None
     best: tuple[float, int] = (np.inf, 0)
     lowest: tuple[float, int] = (np.inf, 0)
+    first: float | None = None
 
     def check(self, step: int, x: np.ndarray, merit: float, forces: np.ndarray,
               gamma: float, gamma0: float, tolerance: float) -> None:
@@ -96,14 +103,19 @@ class RunMonitor:
         fmax = float(np.linalg.norm(forces, axis=1).max(initial=0.0))
         if fmax < (1 - FMAX_PROGRESS) * self.best[0]:
             self.best = (fmax, step)
-        if self.merit_name == 'energy' and merit < self.lowest[0] - tolerance:
+        if self.first is None:
+            self.first = merit
+        descent = self.first - self.lowest[0] if np.isfinite(self.lowest[0]) else 0.0
+        if (self.merit_name == 'energy'
+                and merit < self.lowest[0] - max(tolerance, ENERGY_PROGRESS * descent)):
             self.lowest = (merit, step)
         if step - max(self.best[1], self.lowest[1]) > self.patience:
             raise StagnationError(
                 f'stagnant at step {step}: no progress for {self.patience} steps '
                 f'(fmax {fmax:.3g}, best {self.best[0]:.3g} at step {self.best[1]}'
                 f'{self._lowest_text()}; a requested fmax below the rounding '
-                'noise of the forces, or an oscillation)')
+                'noise of the forces, an oscillation, or a creep: the energy '
+                f'falling by less than {ENERGY_PROGRESS:g} of its descent so far)')
         if gamma < GAMMA_UNDERFLOW * gamma0:
             raise StagnationError(
                 f'stagnant at step {step}: the step factor gamma fell to '
@@ -119,14 +131,38 @@ class RunMonitor:
 
     def todict(self, step: int) -> dict[str, Any]:
         """The state to resume from at ``step`` (steps counted from it)."""
-        return {'size0': self.size0, 'centre0': self.centre0,
+        return {'size0': self.size0, 'centre0': self.centre0, 'first': self.first,
                 'best': [self.best[0], self.best[1] - step],
                 'lowest': [self.lowest[0], self.lowest[1] - step]}
 
     def load(self, d: dict[str, Any]) -> None:
         """Take the state :meth:`todict` gave (its steps are relative to the
-        step it was written at, which the resumed run counts as 0)."""
-        self.size0 = None if d['size0'] is None else float(d['size0'])
-        self.centre0 = None if d['centre0'] is None else np.asarray(d['centre0'], float)
-        self.best = (float(d['best'][0]), int(d['best'][1]))
-        self.lowest = (float(d['lowest'][0]), int(d['lowest'][1]))
+        step it was written at, which the resumed run counts as 0); a missing
+        or malformed entry is a ValueError naming it."""
+        def entry(key, valid, what):
+            if key not in d:
+                raise ValueError(f'the monitor\'s state has no {key!r}')
+            if not valid(d[key]):
+                raise ValueError(f'the monitor\'s {key!r} must be {what}, got {d[key]!r}')
+            return d[key]
+
+        def number_or_none(v):
+            return v is None or as_number(v) is not None
+
+        def record(v):   # [a number or inf (not NaN), a step]
+            return (isinstance(v, list) and len(v) == 2 and as_whole(v[1]) is not None
+                    and (as_number(v[0]) is not None or v[0] == np.inf))
+
+        size0 = entry('size0', lambda v: v is None or (as_number(v) or 0) > 0,
+                      'a positive number or null')
+        centre0 = entry('centre0', lambda v: v is None or (
+            np.shape(v) == (3,) and all(as_number(c) is not None for c in v)),
+            'three numbers or null')
+        self.size0 = None if size0 is None else float(size0)
+        self.centre0 = None if centre0 is None else np.asarray(centre0, float)
+        first = entry('first', number_or_none, 'a number or null')
+        self.first = None if first is None else float(first)
+        best = entry('best', record, '[fmax, step]')
+        lowest = entry('lowest', record, '[energy, step]')
+        self.best = (float(best[0]), int(best[1]))
+        self.lowest = (float(lowest[0]), int(lowest[1]))

@@ -186,15 +186,19 @@ class Maud(Optimizer):
             raise ValueError(
                 f'restart file {str(self.restart)!r} is of another scene: {why}; '
                 'give the atoms of that run, or delete the file')
+        self.initialize()
+        try:
+            self.monitor.load(data['monitor'])   # this run counts its steps from 0 again
+        except ValueError as error:
+            raise ValueError(f'restart file {str(self.restart)!r} is damaged: {error}; '
+                             'delete it and its arrays file') from None
         if not np.array_equal(x, here):
             gap = np.abs(x - here).max()
             self.optimizable.set_x(x)
             self.logfile.write(
                 f'Maud: the atoms moved to the positions of step {data["step"]} '
                 f'in {self.restart} (up to {gap:.3g} from the atoms given)\n')
-        self.initialize()
         self.state = data['state']
-        self.monitor.load(data['monitor'])   # this run counts its steps from 0 again
         self.fmax_now = data['fmax_now']   # the accuracy of the next evaluation
 
     def call_observers(self) -> None:

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import os
 import time
 import zlib
@@ -38,11 +39,12 @@ import numpy as np
 from ase import Atoms
 
 from .atomic import remove_leftovers, replace_text
+from .checks import as_number
 from .method import MaudState, Point
 from .topology import fixed_atoms
 
 #: The version of the layout; a file of another one is refused by name.
-FORMAT = 'maud-restart-3'
+FORMAT = 'maud-restart-4'
 #: Rows per state slot: positions, the last point, its forces.
 STATE_ROWS = 3
 #: Longest time between two flushes of the files to disk (``fsync``), from
@@ -109,14 +111,16 @@ class RestartFile:
         naming it."""
         try:
             document = json.loads(self.path.read_text())
-        except (OSError, ValueError) as error:
+        except (OSError, ValueError, RecursionError) as error:
             raise ValueError(f'restart file {str(self.path)!r} cannot be read: '
                              f'{error}') from None
         if not isinstance(document, dict) or document.get('format') != FORMAT:
             raise ValueError(f'restart file {str(self.path)!r} was not written by this '
                              'version of Maud; delete it')
-        rows, slot = int(document['rows']), int(document['slot'])
-        pairs = list(document['pairs'])
+        if (damaged := _damaged_field(document)) is not None:
+            raise ValueError(f'restart file {str(self.path)!r} is damaged: {damaged}; '
+                             'delete it and its arrays file')
+        rows, slot, pairs = document['rows'], document['slot'], document['pairs']
         last_row = max((slot + 1) * STATE_ROWS,
                        2 * STATE_ROWS + 2 * (max(pairs) + 1) if pairs else 0)
         needed = last_row * rows * 8
@@ -134,10 +138,14 @@ class RestartFile:
                                  f'{first + count - 1} of {str(self.arrays)!r} are not '
                                  'what it wrote (a crash of the machine before they '
                                  'reached the disk?); delete both files')
+            if not np.isfinite(table[first:first + count]).all():
+                raise ValueError(f'restart file {str(self.path)!r}: rows {first}-'
+                                 f'{first + count - 1} of {str(self.arrays)!r} hold '
+                                 'non-finite numbers; delete both files')
         x, last_x, forces = (table[slot * STATE_ROWS + k].reshape(-1, 3).copy()
                              for k in range(STATE_ROWS))
         state = MaudState(
-            gamma=float(document['gamma']), k=int(document['k']),
+            gamma=float(document['gamma']), k=document['k'],
             v=x - last_x if document['moving'] else None,
             last=Point(last_x, float(document['merit']), forces, float(document['noise'])),
             pairs=[(table[2 * STATE_ROWS + 2 * p].reshape(-1, 3).copy(),
@@ -147,7 +155,7 @@ class RestartFile:
         self._slot = slot
         self._pairs = {id(s): (s, p, c) for (s, _), p, c
                        in zip(state.pairs, pairs, crc['pairs'], strict=True)}
-        return {'step': int(document['step']), 'x': x, 'state': state,
+        return {'step': document['step'], 'x': x, 'state': state,
                 'monitor': document['monitor'], 'fmax_now': float(document['fmax_now']),
                 'scene': document['scene']}
 
@@ -160,6 +168,57 @@ class RestartFile:
         handle.seek(first * rows * 8)
         handle.write(data)
         return zlib.crc32(data)
+
+
+def _whole(value: Any, low: int = 0) -> bool:
+    """``value`` is an int (JSON's integers; not a bool) >= ``low``."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= low
+
+
+def _positive(value: Any) -> bool:
+    number = as_number(value)
+    return number is not None and number > 0
+
+
+#: What each field of the JSON file must hold, in words and as a test.
+FIELDS: dict[str, tuple[str, Any]] = {
+    'rows': ('a positive multiple of 3', lambda v: _whole(v, 3) and v % 3 == 0),
+    'step': ('a whole number >= 0', _whole),
+    'slot': ('0 or 1', lambda v: _whole(v) and v <= 1),
+    'pairs': ('a list of distinct whole numbers >= 0',
+              lambda v: isinstance(v, list) and all(map(_whole, v)) and len(set(v)) == len(v)),
+    'crc': ('{"state": a CRC-32, "pairs": one per pair}',
+            lambda v: isinstance(v, dict) and _whole(v.get('state'))
+            and isinstance(v.get('pairs'), list) and all(map(_whole, v['pairs']))),
+    'gamma': ('a positive finite number', _positive),
+    'k': ('a whole number >= 0', _whole),
+    'moving': ('true or false', lambda v: isinstance(v, bool)),
+    'merit': ('a finite number', lambda v: as_number(v) is not None),
+    'noise': ('a finite number >= 0', lambda v: as_number(v) == 0 or _positive(v)),
+    'model': ('an object of positive finite numbers',
+              lambda v: isinstance(v, dict) and all(map(_positive, v.values()))),
+    'monitor': ('an object', lambda v: isinstance(v, dict)),
+    'fmax_now': ('a number >= 0',
+                 lambda v: as_number(v) == 0 or _positive(v) or v == math.inf),
+    'scene': ('an object', lambda v: isinstance(v, dict)),
+}
+
+
+def _damaged_field(document: dict[str, Any]) -> str | None:
+    """The first field of a restart file's JSON that is missing or not what
+    :data:`FIELDS` says, in words; or None."""
+    for key, (what, valid) in FIELDS.items():
+        if key not in document:
+            return f'it has no {key!r}'
+        if not valid(document[key]):
+            return f'{key!r} must be {what}, got {document[key]!r}'
+    if len(document['crc']['pairs']) != len(document['pairs']):
+        crc, pairs = len(document['crc']['pairs']), len(document['pairs'])
+        return f'"crc" names {crc} pairs, "pairs" {pairs}'
+    scene_points = document['scene'].get('points', document['rows'] // 3)
+    if scene_points * 3 != document['rows']:
+        return f'"rows" {document["rows"]} is not 3 times its scene\'s points {scene_points!r}'
+    return None
 
 
 def signature(atoms: Atoms, potential: Any = None) -> dict[str, Any]:

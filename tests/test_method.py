@@ -16,7 +16,7 @@ from ase_maud.method import (
     Point,
     step_rule,
 )
-from ase_maud.monitor import DivergenceError, RunMonitor, StagnationError
+from ase_maud.monitor import ENERGY_PROGRESS, DivergenceError, RunMonitor, StagnationError
 from ase_maud.neighbours import NearestDistances
 from ase_maud.stiffness import Solver, StiffnessModel
 
@@ -262,3 +262,29 @@ def test_monitor_state_counts_steps_from_the_restart():
     resumed.load(monitor.todict(step=7))
     assert resumed.best == (monitor.best[0], 0) and resumed.lowest == (2.0, 0)
     assert resumed.size0 == monitor.size0
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_monitor_catches_a_creep_at_any_scale(seed):
+    """An energy that keeps falling, but by less than ENERGY_PROGRESS of its
+    descent so far at every step, with fmax stuck, is a stagnation at every
+    scale of the energy; one falling faster is progress."""
+    rng = np.random.default_rng(seed)
+    scale, patience = 10.0 ** rng.uniform(-8, 16), 20
+    x = rng.uniform(-1, 1, (5, 3))
+    forces = np.ones((5, 3))
+    descent = scale * rng.uniform(1, 10)
+
+    def run(fall):
+        monitor = RunMonitor(divergence_factor=3.0, patience=patience)
+        merit = scale * 100.0
+        monitor.check(0, x, merit, forces, 1.0, 1.0, 1e-16 * merit)
+        merit -= descent
+        for step in range(1, 3 * patience):
+            monitor.check(step, x, merit, forces, 1.0, 1.0, 1e-16 * abs(merit))
+            merit -= fall * descent / patience
+        return monitor
+
+    with pytest.raises(StagnationError, match='creep'):
+        run(fall=0.5 * ENERGY_PROGRESS)
+    assert run(fall=5 * ENERGY_PROGRESS).lowest[1] > 2 * patience

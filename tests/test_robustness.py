@@ -482,3 +482,88 @@ def test_temporary_files_of_killed_writers_are_removed(tmp_path, seed):
     assert not old.exists() and fresh.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         fresh.name, 'maud.json', 'maud.json.arrays']
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_creeping_run_is_stopped_at_any_scale(seed):
+    # a ring flattened to 1e8 by 1e-8: the energy keeps falling, by ever
+    # smaller fractions of its descent, while fmax stays near 4e7
+    atoms = build('ring', 20, seed=seed)
+    atoms.positions *= [1e8, 1e-8, 1.0]
+    with Maud(atoms, logfile=None, patience=300) as opt:
+        with pytest.raises(MaudError, match='no progress for 300 steps.*creep'):
+            opt.run(fmax=1e-3, steps=5000)
+    assert opt.nsteps < 5000 and np.isfinite(atoms.positions).all()
+
+
+def _set(key, value):
+    def edit(document):
+        document[key] = value
+    return edit
+
+
+def _monitor(key, value):
+    def edit(document):
+        document['monitor'][key] = value
+    return edit
+
+
+DAMAGES = {
+    'step a string': (_set('step', 'x'), "'step' must be a whole number"),
+    'gamma missing': (lambda d: d.pop('gamma'), "it has no 'gamma'"),
+    'gamma negative': (_set('gamma', -0.5), "'gamma' must be a positive"),
+    'gamma NaN': (_set('gamma', float('nan')), "'gamma' must be a positive"),
+    'rows off by one': (lambda d: d.update(rows=d['rows'] + 1), "'rows' must be a positive"),
+    'rows of fewer points': (lambda d: d.update(rows=d['rows'] - 3), '"rows" .* is not 3 times'),
+    'slot 2': (_set('slot', 2), "'slot' must be 0 or 1"),
+    'pair -1': (_set('pairs', [-1]), "'pairs' must be"),
+    'pairs and crc disagree': (lambda d: d['crc']['pairs'].append(7), '"crc" names'),
+    'moving a string': (_set('moving', 'yes'), "'moving' must be true or false"),
+    'merit null': (_set('merit', None), "'merit' must be a finite number"),
+    'model negative': (_set('model', {'kappa': -1.0}), "'model' must be an object"),
+    'only its format': (lambda d: [d.pop(k) for k in list(d) if k != 'format'],
+                        "it has no 'rows'"),
+    'monitor empty': (_set('monitor', {}), "the monitor's state has no 'size0'"),
+    'monitor best': (_monitor('best', ['x', 0]), r"the monitor's 'best' must be \[fmax, step\]"),
+    'monitor size0': (_monitor('size0', -1.0), "the monitor's 'size0' must be a positive"),
+}
+
+
+@pytest.mark.parametrize('damage', sorted(DAMAGES))
+@pytest.mark.parametrize('seed', [0, 1])
+def test_damaged_restart_values_are_named_and_leave_the_atoms(tmp_path, damage, seed):
+    edit, match = DAMAGES[damage]
+    restart = tmp_path / 'maud.json'
+    with Maud(build('hanging_net', 8, seed=seed), logfile=None, restart=restart,
+              model='springs') as opt:
+        opt.run(fmax=1e-9, steps=int(np.random.default_rng(seed).integers(3, 7)))
+    document = json.loads(restart.read_text())
+    edit(document)
+    restart.write_text(json.dumps(document))
+    atoms = build('hanging_net', 8, seed=seed)
+    start = atoms.positions.copy()
+    with pytest.raises(ValueError, match=r"restart file '.*maud.json' is damaged: " + match):
+        Maud(atoms, logfile=None, restart=restart)
+    np.testing.assert_array_equal(atoms.positions, start)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_non_finite_restart_rows_are_refused(tmp_path, seed):
+    # NaN written into the positions with a matching CRC: refused all the same
+    import zlib
+    restart = tmp_path / 'maud.json'
+    with Maud(build('hanging_net', 8, seed=seed), logfile=None, restart=restart) as opt:
+        opt.run(fmax=1e-9, steps=3)
+    document = json.loads(restart.read_text())
+    rows, slot = document['rows'], document['slot']
+    arrays = tmp_path / 'maud.json.arrays'
+    table = np.fromfile(arrays).reshape(-1, rows)
+    table[3 * slot, int(np.random.default_rng(seed).integers(rows))] = np.nan
+    table.tofile(arrays)
+    document['crc']['state'] = zlib.crc32(table[3 * slot:3 * slot + 3].tobytes())
+    restart.write_text(json.dumps(document))
+    atoms = build('hanging_net', 8, seed=seed)
+    start = atoms.positions.copy()
+    with pytest.raises(ValueError, match='hold non-finite numbers'):
+        Maud(atoms, logfile=None, restart=restart)
+    np.testing.assert_array_equal(atoms.positions, start)

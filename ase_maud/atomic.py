@@ -1,10 +1,13 @@
 """Files replaced whole: a new version is written beside the old one, then
 swapped in by ``os.replace``, so that a reader (or the writer after a kill,
-or a full disk) sees the old file or the new one, never a part."""
+or a full disk) sees the old file or the new one, never a part. The new
+version keeps the old one's permissions (a new file gets the usual ones,
+``0o666`` less the umask)."""
 
 from __future__ import annotations
 
 import os
+import stat
 import tempfile
 import time
 from collections.abc import Callable
@@ -14,6 +17,9 @@ from pathlib import Path
 #: left by a writer that was killed, and is removed by :func:`remove_leftovers`
 #: (a live writer keeps its own for milliseconds).
 LEFTOVER_SECONDS = 60.0
+
+_UMASK = os.umask(0)   # read once, at import (setting it is the only way)
+os.umask(_UMASK)
 
 
 def _temporary_pattern(path: Path) -> tuple[str, str]:
@@ -50,6 +56,8 @@ def replace_with(path: str | os.PathLike, write: Callable[[Path], None],
     os.close(handle)
     temporary = Path(name)
     try:
+        mode = stat.S_IMODE(path.stat().st_mode) if path.exists() else 0o666 & ~_UMASK
+        os.chmod(temporary, mode)   # mkstemp's are 0o600
         write(temporary)
         if sync:
             with open(temporary, 'rb+') as fd:

@@ -16,9 +16,10 @@ observed. Its state goes into a restart file (:meth:`RunMonitor.todict`).
   step having been taken back; or no progress for ``patience`` steps,
   progress being fmax falling by 0.1 % below its best and, for
   ``target='minimum'``, the merit (the energy) falling below its lowest by
-  more than its error and by more than :data:`ENERGY_PROGRESS` of the
-  descent so far (the first merit minus the lowest): progress relative to the
-  run's own scale, so that a run creeping down at any scale is caught.
+  more than its error and by more than :data:`ENERGY_PROGRESS` times fmax
+  times the scene's size (what the forces could release over a move of that
+  size): progress on the run's own scale of energy and length, so that a run
+  creeping down at any scale is caught.
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ class StagnationError(MaudError):
 #: best so far.
 FMAX_PROGRESS = 1e-3
 #: The energy counts as progress when it falls below its lowest by more than
-#: this fraction of the descent so far (and by more than its error).
+#: this fraction of ``fmax * size`` (and by more than its error).
 ENERGY_PROGRESS = 1e-3
 #: ``gamma`` has underflowed below this fraction of its start.
 GAMMA_UNDERFLOW = 1e-12
@@ -73,7 +74,6 @@ class RunMonitor:
     centre0: np.ndarray | None = None
     best: tuple[float, int] = (np.inf, 0)
     lowest: tuple[float, int] = (np.inf, 0)
-    first: float | None = None
 
     def check(self, step: int, x: np.ndarray, merit: float, forces: np.ndarray,
               gamma: float, gamma0: float, tolerance: float) -> None:
@@ -103,11 +103,8 @@ class RunMonitor:
         fmax = float(np.linalg.norm(forces, axis=1).max(initial=0.0))
         if fmax < (1 - FMAX_PROGRESS) * self.best[0]:
             self.best = (fmax, step)
-        if self.first is None:
-            self.first = merit
-        descent = self.first - self.lowest[0] if np.isfinite(self.lowest[0]) else 0.0
         if (self.merit_name == 'energy'
-                and merit < self.lowest[0] - max(tolerance, ENERGY_PROGRESS * descent)):
+                and merit < self.lowest[0] - max(tolerance, ENERGY_PROGRESS * fmax * size)):
             self.lowest = (merit, step)
         if step - max(self.best[1], self.lowest[1]) > self.patience:
             raise StagnationError(
@@ -115,7 +112,8 @@ class RunMonitor:
                 f'(fmax {fmax:.3g}, best {self.best[0]:.3g} at step {self.best[1]}'
                 f'{self._lowest_text()}; a requested fmax below the rounding '
                 'noise of the forces, an oscillation, or a creep: the energy '
-                f'falling by less than {ENERGY_PROGRESS:g} of its descent so far)')
+                f'falling by less than {ENERGY_PROGRESS:g} fmax times the size of '
+                'the scene)')
         if gamma < GAMMA_UNDERFLOW * gamma0:
             raise StagnationError(
                 f'stagnant at step {step}: the step factor gamma fell to '
@@ -131,7 +129,7 @@ class RunMonitor:
 
     def todict(self, step: int) -> dict[str, Any]:
         """The state to resume from at ``step`` (steps counted from it)."""
-        return {'size0': self.size0, 'centre0': self.centre0, 'first': self.first,
+        return {'size0': self.size0, 'centre0': self.centre0,
                 'best': [self.best[0], self.best[1] - step],
                 'lowest': [self.lowest[0], self.lowest[1] - step]}
 
@@ -146,9 +144,6 @@ class RunMonitor:
                 raise ValueError(f'the monitor\'s {key!r} must be {what}, got {d[key]!r}')
             return d[key]
 
-        def number_or_none(v):
-            return v is None or as_number(v) is not None
-
         def record(v):   # [a number or inf (not NaN), a step]
             return (isinstance(v, list) and len(v) == 2 and as_whole(v[1]) is not None
                     and (as_number(v[0]) is not None or v[0] == np.inf))
@@ -160,8 +155,6 @@ class RunMonitor:
             'three numbers or null')
         self.size0 = None if size0 is None else float(size0)
         self.centre0 = None if centre0 is None else np.asarray(centre0, float)
-        first = entry('first', number_or_none, 'a number or null')
-        self.first = None if first is None else float(first)
         best = entry('best', record, '[fmax, step]')
         lowest = entry('lowest', record, '[energy, step]')
         self.best = (float(best[0]), int(best[1]))

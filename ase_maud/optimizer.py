@@ -31,6 +31,8 @@ every energy and force is finite. The step is
 from __future__ import annotations
 
 import os
+import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
@@ -41,14 +43,16 @@ from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 
 from . import accuracy
 from .checks import check, check_all
+from .lock import FileInUseError, RunLock
 from .method import MaudMethod, StepRule, merit_tolerance, step_rule
 from .monitor import DivergenceError, MaudError, RunMonitor, StagnationError
 from .neighbours import NearestDistances
 from .restart import RestartFile, difference, signature
 from .stiffness import StiffnessModel, choose_model
 from .topology import describe_unbounded
+from .trajectory import last_frame, repair
 
-__all__ = ['DivergenceError', 'Maud', 'MaudError', 'StagnationError', 'last_frame']
+__all__ = ['DivergenceError', 'FileInUseError', 'Maud', 'MaudError', 'StagnationError']
 
 
 
@@ -114,6 +118,11 @@ class Maud(Optimizer):
                           maxstep=maxstep, overshoot_shrink=overshoot_shrink)
         run = check_all(divergence_factor=divergence_factor, patience=patience)
         _check_files(restart, logfile, trajectory, append_trajectory)
+        self._lock = RunLock(restart, trajectory)
+        self._lock.check()   # before ASE empties a trajectory another run writes
+        if append_trajectory and isinstance(trajectory, (str, os.PathLike)):
+            if (repaired := repair(trajectory)):
+                warnings.warn(repaired, stacklevel=2)
         system = atoms.__ase_optimizable__() if hasattr(
             atoms, '__ase_optimizable__') else atoms
         image_size = _image_size(system)
@@ -345,12 +354,17 @@ class Maud(Optimizer):
     def irun(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS):
         self.fmax, steps = check('fmax', fmax), check('steps', steps)
         self._preflight()
-        return super().irun(self.fmax, steps)
+        return self._locked(super().irun(self.fmax, steps))
+
+    def _locked(self, steps: Iterator[bool]) -> Iterator[bool]:
+        with self._lock:
+            yield from steps
 
     def run(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS) -> bool:
         self.fmax, steps = check('fmax', fmax), check('steps', steps)
         self._preflight()
-        return super().run(self.fmax, steps)
+        with self._lock:
+            return super().run(self.fmax, steps)
 
     def _preflight(self) -> None:
         """Say in the log if the scene has no finite minimum; evaluate.
@@ -467,21 +481,6 @@ def _other_scene(frame: Atoms, atoms: Atoms) -> str | None:
     held = signature(frame, MaudCalculator(**stored).potential
                      if stored and potential is not None else None)
     return difference(held, signature(atoms, potential))
-
-
-def last_frame(trajectory: str | Path) -> Atoms | None:
-    """The last complete frame of an ASE trajectory file, or None if it has
-    none (missing, empty, or killed before its first frame was complete).
-
-    ASE's ulm writer counts a frame only once all of it is written, so a
-    trajectory killed mid-write reads as its complete frames.
-    """
-    from ase.io.trajectory import Trajectory
-    path = Path(trajectory)
-    if not path.is_file() or path.stat().st_size == 0:
-        return None
-    with Trajectory(path) as frames:
-        return frames[-1] if len(frames) else None
 
 
 def _check_files(restart: Any, logfile: Any, trajectory: Any,

@@ -44,7 +44,7 @@ from .method import MaudState, Point
 from .topology import fixed_atoms
 
 #: The version of the layout; a file of another one is refused by name.
-FORMAT = 'maud-restart-4'
+FORMAT = 'maud-restart-3'
 #: Rows per state slot: positions, the last point, its forces.
 STATE_ROWS = 3
 #: Longest time between two flushes of the files to disk (``fsync``), from

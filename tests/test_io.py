@@ -2,6 +2,8 @@
 lists, and back; malformed files are ValueErrors naming the line."""
 
 import json
+import os
+import stat
 
 import numpy as np
 import pytest
@@ -332,3 +334,18 @@ def test_a_failed_write_leaves_the_old_file(tmp_path, kind, monkeypatch):
     with pytest.raises(OSError, match='No space left'):
         write_net(path, atoms, like=path if kind != 'xyz' else None)
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+@pytest.mark.parametrize('mode', [0o644, 0o600, 0o664])
+@pytest.mark.parametrize('kind', FORMATS)
+def test_writing_over_a_file_keeps_its_permissions(tmp_path, kind, mode):
+    path, *_ = write_quad_net(tmp_path, kind, seed=mode % 7)
+    os.chmod(path, mode)
+    atoms = read_net(path)
+    write_net(path, atoms, like=path if kind != 'xyz' else None)
+    assert stat.S_IMODE(path.stat().st_mode) == mode
+    fresh = tmp_path / f'new{path.suffix}'
+    write_net(fresh, atoms, like=path if kind != 'xyz' else None)
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(fresh.stat().st_mode) == 0o666 & ~umask

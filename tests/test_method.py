@@ -266,23 +266,23 @@ def test_monitor_state_counts_steps_from_the_restart():
 
 @pytest.mark.parametrize('seed', range(4))
 def test_monitor_catches_a_creep_at_any_scale(seed):
-    """An energy that keeps falling, but by less than ENERGY_PROGRESS of its
-    descent so far at every step, with fmax stuck, is a stagnation at every
-    scale of the energy; one falling faster is progress."""
+    """An energy that keeps falling, but by less than ENERGY_PROGRESS fmax
+    times the scene's size over ``patience`` steps, with fmax stuck, is a
+    stagnation at every scale of energy and length; one falling faster is
+    progress."""
     rng = np.random.default_rng(seed)
-    scale, patience = 10.0 ** rng.uniform(-8, 16), 20
-    x = rng.uniform(-1, 1, (5, 3))
-    forces = np.ones((5, 3))
-    descent = scale * rng.uniform(1, 10)
+    energy, length, patience = 10.0 ** rng.uniform(-8, 16), 10.0 ** rng.uniform(-8, 8), 20
+    x = length * rng.uniform(-1, 1, (5, 3))
+    size = np.linalg.norm(x - x.mean(axis=0), axis=1).max()
+    forces = np.full((5, 3), energy / length)
+    fmax = np.linalg.norm(forces, axis=1).max()
 
     def run(fall):
         monitor = RunMonitor(divergence_factor=3.0, patience=patience)
-        merit = scale * 100.0
-        monitor.check(0, x, merit, forces, 1.0, 1.0, 1e-16 * merit)
-        merit -= descent
-        for step in range(1, 3 * patience):
+        merit = 100.0 * energy
+        for step in range(3 * patience):
             monitor.check(step, x, merit, forces, 1.0, 1.0, 1e-16 * abs(merit))
-            merit -= fall * descent / patience
+            merit -= fall * fmax * size / patience
         return monitor
 
     with pytest.raises(StagnationError, match='creep'):

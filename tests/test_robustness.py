@@ -30,9 +30,9 @@ from hypothesis import strategies as st
 
 from ase_maud import Maud, MaudCalculator, MaudError
 from ase_maud.checks import RULES
-from ase_maud.optimizer import last_frame
 from ase_maud.restart import RestartFile
 from ase_maud.scenes import SCENES, build, keep_on_plane
+from ase_maud.trajectory import last_frame
 
 EXAMPLES = int(os.environ.get('ASE_MAUD_EXAMPLES', 200))
 

@@ -33,12 +33,13 @@ from __future__ import annotations
 import os
 import warnings
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
 from ase import Atoms
+from ase.filters import Filter
 from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 
 from . import accuracy
@@ -49,8 +50,13 @@ from .monitor import DivergenceError, MaudError, RunMonitor, StagnationError
 from .neighbours import NearestDistances
 from .restart import RestartFile, difference, signature
 from .stiffness import StiffnessModel, choose_model
+from .subset import SubsetView
 from .topology import describe_unbounded
 from .trajectory import last_frame, repair
+
+#: The longest move of a row of a cell filter's coordinates when ``maxstep``
+#: is not given (ASE's BFGS default).
+CELL_MAXSTEP = 0.2
 
 __all__ = ['DivergenceError', 'FileInUseError', 'Maud', 'MaudError', 'StagnationError']
 
@@ -125,22 +131,30 @@ class Maud(Optimizer):
                 warnings.warn(repaired, stacklevel=2)
         system = atoms.__ase_optimizable__() if hasattr(
             atoms, '__ase_optimizable__') else atoms
+        self._subset = SubsetView(atoms) if type(atoms) is Filter else None
         image_size = _image_size(system)
+        # what the model sees: the atoms (the whole scene behind a Filter), a
+        # band of images, or nothing (a cell filter: its rows are not points)
+        scene = (self._atoms() if self._subset is not None
+                 else getattr(system, 'atoms', None if image_size is None else atoms))
         chosen_target = target is None and not isinstance(model, StiffnessModel)
         if chosen_target:  # NEB forces are not the gradient of its energy
             target = 'minimum' if image_size is None else 'stationary'
-        nearest = NearestDistances(image_size)
+        nearest = (NearestDistances(image_size) if self._subset is None
+                   else self._subset.nearest())
         if isinstance(model, StiffnessModel):
             if target is not None and check('target', target) != model.target:
                 raise ValueError(f'target={target!r} differs from the target of the '
                                  f'model given ({model.target!r}): leave target out')
         else:
-            model = choose_model(getattr(system, 'atoms', atoms), model, target,
-                                 nearest=nearest, method=method, floor=floor,
-                                 kappa0=kappa0)
+            model = choose_model(scene, model, target, nearest=nearest, method=method,
+                                 floor=floor, kappa0=kappa0)
         self.model = model
-        self.maud = MaudMethod(model, step_rule(model.name, model.target, image_size,
-                                                **steps), nearest)
+        rule = step_rule(model.name, model.target, image_size, **steps)
+        self._points = scene is not None
+        if scene is None:   # no nearest-neighbour bound: ASE's usual maxstep
+            rule = replace(rule, maxstep_nn=None, maxstep=rule.maxstep or CELL_MAXSTEP)
+        self.maud = MaudMethod(model, rule, nearest)
         self.divergence_factor, self.patience = run['divergence_factor'], run['patience']
         super().__init__(atoms, restart, logfile, trajectory,
                          append_trajectory=append_trajectory, **kwargs)
@@ -179,8 +193,8 @@ class Maud(Optimizer):
         self._handoff: _Handoff | None = None
         self.state = self.maud.start()
         calc = getattr(self._atoms(), 'calc', None)
-        self.monitor = RunMonitor(
-            self.divergence_factor, self.patience,
+        self.monitor = RunMonitor(   # a cell filter's rows do not spread like points
+            self.divergence_factor if self._points else np.inf, self.patience,
             merit_name='energy' if self.target == 'minimum' else '|f|^2',
             length_scale=getattr(calc, 'length_scale', 0.0))
         self.fmax_now = np.inf   # largest force at the last step
@@ -190,8 +204,9 @@ class Maud(Optimizer):
         state belongs to them; a line in the log says if the atoms moved)."""
         data = self._restart_file().read()
         x, here = data['x'].ravel(), self.optimizable.get_x()
-        held = data['scene'] if x.shape == here.shape else {'points': x.size // 3}
-        if (why := difference(held, {'points': here.size // 3, **self._scene()})):
+        why = (f'points {x.size // 3} in it, {here.size // 3} in the atoms given'
+               if x.shape != here.shape else difference(data['scene'], self._scene()))
+        if why:
             raise ValueError(
                 f'restart file {str(self.restart)!r} is of another scene: {why}; '
                 'give the atoms of that run, or delete the file')
@@ -267,8 +282,12 @@ class Maud(Optimizer):
     # -- the step ---------------------------------------------------------------
 
     def _atoms(self) -> Atoms | None:
-        """The Atoms behind the optimizable, or None (a filter, say)."""
-        return getattr(self.optimizable, 'atoms', None)
+        """The Atoms the stiffness model and the calculator see: those behind
+        the optimizable, the whole scene behind a Filter (held where the
+        filter leaves atoms out), or None (a band of images, a cell filter)."""
+        if self._subset is not None:
+            return self._subset.current()
+        return getattr(getattr(self, 'optimizable', None), 'atoms', None)
 
     def _evaluate(self) -> None:
         """One calculator call for the energy, the forces and what the model
@@ -333,9 +352,10 @@ class Maud(Optimizer):
         if not np.array_equal(self.optimizable.get_x().reshape(-1, 3), x):
             self.optimizable.set_x(x.ravel())
         try:
-            return self.model.at(self._atoms(), self.state.model)
+            solver = self.model.at(self._atoms(), self.state.model)
         except np.linalg.LinAlgError as error:
             self._no_step(f'the {self.model.name} stiffness model failed ({error})')
+        return solver if self._subset is None else self._subset.solver(solver)
 
     def _no_step(self, why: str) -> None:
         """Stop: no finite step from here; the calculator's non-finite

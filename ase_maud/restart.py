@@ -215,9 +215,6 @@ def _damaged_field(document: dict[str, Any]) -> str | None:
     if len(document['crc']['pairs']) != len(document['pairs']):
         crc, pairs = len(document['crc']['pairs']), len(document['pairs'])
         return f'"crc" names {crc} pairs, "pairs" {pairs}'
-    scene_points = document['scene'].get('points', document['rows'] // 3)
-    if scene_points * 3 != document['rows']:
-        return f'"rows" {document["rows"]} is not 3 times its scene\'s points {scene_points!r}'
     return None
 
 

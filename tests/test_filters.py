@@ -1,0 +1,81 @@
+"""ASE's filters under Maud: a Filter (a subset of the atoms) with every
+stiffness model, and the cell filters of a periodic crystal, each checked
+against BFGS on the same filter from the same start."""
+
+import numpy as np
+import pytest
+from ase.build import bulk
+from ase.calculators.emt import EMT
+from ase.constraints import FixAtoms
+from ase.filters import Filter, FrechetCellFilter, StrainFilter, UnitCellFilter
+from ase.optimize import BFGS
+
+from ase_maud import Maud
+from ase_maud.scenes import build
+
+MODELS = ['auto', 'exact', 'springs', 'nodal', 'global', 'secant']
+
+
+def subset_scene(seed):
+    """A hanging net with its supports taken off, and a random subset of its
+    points (the supports never in it) to move, as indices or as a mask."""
+    atoms = build('hanging_net', 6, seed=seed)
+    held = set(atoms.constraints[0].index)
+    atoms.set_constraint()
+    rng = np.random.default_rng(seed)
+    free = [i for i in range(len(atoms)) if i not in held and rng.random() < 0.7]
+    return atoms, free
+
+
+def bfgs_energy(atoms, subset):
+    reference = atoms.copy()
+    reference.calc = type(atoms.calc)(**atoms.calc.parameters)
+    BFGS(Filter(reference, indices=subset), logfile=None).run(fmax=1e-9, steps=5000)
+    return reference.get_potential_energy()
+
+
+@pytest.mark.parametrize('model', MODELS)
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_filter_moves_its_atoms_to_the_minimum_bfgs_finds(model, seed):
+    atoms, free = subset_scene(seed)
+    expected = bfgs_energy(atoms, free)
+    start = atoms.positions.copy()
+    selected = (Filter(atoms, indices=free) if seed % 2 == 0
+                else Filter(atoms, mask=np.isin(np.arange(len(atoms)), free)))
+    with Maud(selected, logfile=None, model=model) as opt:
+        assert opt.run(fmax=1e-7, steps=3000)
+    left_out = np.setdiff1d(np.arange(len(atoms)), free)
+    np.testing.assert_array_equal(atoms.positions[left_out], start[left_out])
+    energy = atoms.get_potential_energy()
+    if energy != pytest.approx(expected, rel=1e-9):   # another minimum: verified one
+        hessian = atoms.calc.get_property('hessian', atoms)
+        dofs = (3 * np.asarray(free)[:, None] + np.arange(3)).ravel()
+        assert np.linalg.eigvalsh(hessian[np.ix_(dofs, dofs)]).min() > 0
+
+
+@pytest.mark.parametrize('seed', [2, 3])
+def test_a_filter_steps_as_fixing_the_atoms_it_leaves_out(seed):
+    atoms, free = subset_scene(seed)
+    fixed = atoms.copy()
+    fixed.calc = type(atoms.calc)(**atoms.calc.parameters)
+    fixed.set_constraint(FixAtoms(indices=np.setdiff1d(np.arange(len(atoms)), free)))
+    with Maud(Filter(atoms, indices=free), logfile=None, model='exact') as one, \
+            Maud(fixed, logfile=None, model='exact') as other:
+        for _ in zip(one.irun(fmax=1e-7), other.irun(fmax=1e-7), strict=True):
+            np.testing.assert_allclose(atoms.positions, fixed.positions, rtol=0, atol=1e-12)
+    assert one.nsteps == other.nsteps
+
+
+@pytest.mark.parametrize('cell_filter', [StrainFilter, UnitCellFilter, FrechetCellFilter])
+@pytest.mark.parametrize('seed', [0, 1])
+def test_cell_filters_reach_the_energy_bfgs_reaches(cell_filter, seed):
+    crystal = bulk('Cu', cubic=True) * (2, 2, 2)
+    crystal.rattle(0.05, seed=seed)
+    crystal.set_cell(crystal.cell * 1.03, scale_atoms=True)
+    reference = crystal.copy()
+    crystal.calc, reference.calc = EMT(), EMT()
+    BFGS(cell_filter(reference), logfile=None).run(fmax=1e-5, steps=2000)
+    with Maud(cell_filter(crystal), logfile=None) as opt:
+        assert opt.run(fmax=1e-5, steps=2000)
+    assert crystal.get_potential_energy() == pytest.approx(
+        reference.get_potential_energy(), abs=1e-7)

@@ -1,11 +1,9 @@
 """The ase-maud command: help, relax (a scene or a net file), show, classify,
-scene selection, thread pinning."""
+scene selection."""
 
-import os
 import subprocess
 import sys
 
-import numba
 import numpy as np
 import pytest
 from ase.io import read
@@ -15,7 +13,6 @@ from ase_maud import cli
 from ase_maud.cli import main
 from ase_maud.io import read_net, write_net
 from ase_maud.scenes import SUITE, build, scene_sizes
-from ase_maud.threads import THREAD_VARIABLES
 
 
 def test_no_command_prints_help(capsys):
@@ -82,35 +79,6 @@ def test_scene_selection():
     assert scene_sizes(['chain', 'molecule'], None, [('ring', 16)]) == [
         ('chain', 30), ('molecule', 'C6H6')]
     assert cli._size('12') == 12 and cli._size('CH4') == 'CH4'
-
-
-@pytest.mark.parametrize('threads', [1, 2])
-def test_pin_threads(monkeypatch, threads):
-    restarts = []
-
-    def execv(path, args):
-        restarts.append(args)
-        raise SystemExit
-
-    monkeypatch.setattr(os, 'execv', execv)
-    for variable in THREAD_VARIABLES:
-        monkeypatch.delenv(variable, raising=False)
-    before = numba.get_num_threads()
-    try:
-        with pytest.raises(SystemExit):   # numpy is loaded: start again
-            cli.pin_threads(threads, restart=True)
-        assert restarts == [[sys.executable, '-m', 'ase_maud',
-                             *sys.argv[1:]]]
-        assert all(os.environ[v] == str(threads) for v in THREAD_VARIABLES)
-        cli.pin_threads(threads, restart=True)  # now in force: no restart
-        assert len(restarts) == 1
-        assert numba.get_num_threads() == min(
-            threads, numba.config.NUMBA_NUM_THREADS)
-        monkeypatch.delenv('OPENBLAS_NUM_THREADS')
-        with pytest.warns(UserWarning, match='BLAS may use another count'):
-            cli.pin_threads(threads, restart=False)
-    finally:
-        numba.set_num_threads(before)
 
 
 # --- nets from files: relax, show, classify -----------------------------------

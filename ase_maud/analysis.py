@@ -72,8 +72,8 @@ class StationaryPoint:
     ``verdict`` is 'minimum', 'saddle' (of order ``index``), 'maximum' or
     'degenerate' (some non-rigid eigenvalue within ``tolerance`` of zero).
     ``tolerance`` is ``rtol * max|lambda|``. ``stationary`` is
-    ``fmax <= ftol``; if it is False the verdict describes the curvature at
-    a point that is not stationary.
+    ``fmax <= ftol`` (force units, the ``ftol`` used); if it is False the
+    verdict describes the curvature at a point that is not stationary.
     """
 
     verdict: str
@@ -87,6 +87,7 @@ class StationaryPoint:
     n_fixed: int
     tolerance: float
     fmax: float
+    ftol: float
     stationary: bool
     method: str
 
@@ -229,7 +230,7 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
         verdict=verdict, index=n_negative, eigenvalues=values, modes=modes,
         n_negative=n_negative, n_zero=n_zero, n_positive=n_positive,
         n_rigid=rigid.shape[1], n_fixed=int((~free).sum()),
-        tolerance=tolerance, fmax=fmax, stationary=fmax <= ftol,
+        tolerance=tolerance, fmax=fmax, ftol=ftol, stationary=fmax <= ftol,
         method=method)
 
 

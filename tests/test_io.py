@@ -332,3 +332,20 @@ def test_a_failed_write_leaves_the_old_file(tmp_path, kind, monkeypatch):
     with pytest.raises(OSError, match='No space left'):
         write_net(path, atoms, like=path if kind != 'xyz' else None)
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+@pytest.mark.parametrize('seed, fmax', [(0, 1e-2), (1, 3e-4), (2, 1e-5)])
+def test_relaxed_fmax_is_the_one_the_run_was_given(tmp_path, seed, fmax):
+    from ase.optimize import BFGS
+
+    from ase_maud.io import relaxed_fmax
+    from ase_maud.scenes import build
+    for name, optimizer in (('maud', Maud), ('bfgs', BFGS)):
+        atoms = build('ring', 8, seed=seed)
+        with optimizer(atoms, trajectory=str(tmp_path / f'{name}.traj'), logfile=None) as opt:
+            opt.run(fmax=fmax, steps=200)
+        assert relaxed_fmax(tmp_path / f'{name}.traj') == fmax
+    write_net(tmp_path / 'written.traj', atoms)   # no optimizer: nothing stored
+    write_net(tmp_path / 'written.obj', atoms)
+    assert relaxed_fmax(tmp_path / 'written.traj') is None
+    assert relaxed_fmax(tmp_path / 'written.obj') is None

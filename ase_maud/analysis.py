@@ -97,6 +97,13 @@ class StationaryPoint:
         return self.n_negative + self.n_zero + self.n_positive
 
 
+def force_tolerance(potential, ftol: float | None = None) -> float:
+    """``ftol``, by default :data:`FTOL` ``* Q a`` of the
+    :class:`~ase_maud.potential.MaudPotential` ``potential`` (force units):
+    the largest ``|f|`` of a stationary point."""
+    return FTOL * potential.force_unit if ftol is None else ftol
+
+
 def free_mask(atoms: Atoms, dim: int) -> np.ndarray:
     """Boolean (N, dim) mask of the free degrees of freedom.
 
@@ -221,7 +228,7 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
     modes = np.zeros((len(values), len(atoms), 3))
     modes[:, :, :dim][:, free] = vectors.T
     fmax = float(np.linalg.norm(atoms.get_forces(), axis=1).max(initial=0.0))
-    ftol = FTOL * potential.force_unit if ftol is None else ftol
+    ftol = force_tolerance(potential, ftol)
     if fmax > ftol:
         warnings.warn(f'not a stationary point: fmax = {fmax:.3g} > '
                       f'{ftol:.3g}; the verdict {verdict!r} describes the '

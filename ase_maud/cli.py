@@ -137,14 +137,34 @@ def show(args: argparse.Namespace) -> int:
     from .pictures import save_animation, save_picture
 
     out = _picture_path(args)
+    style = {'colour': args.color, 'view': args.view, 'ftol': _judging_fmax(args)[0]}
     if args.gif:
         frames = read_frames(args.file, **_net_options(args))
-        count = save_animation(frames, out, fps=args.fps)
+        count = save_animation(frames, out, fps=args.fps, **style)
         print(f'wrote {out} ({count} of {len(frames)} frames)')
     else:
-        save_picture(read_net(args.file, index=args.frame, **_net_options(args)), out)
+        save_picture(read_net(args.file, index=args.frame, **_net_options(args)), out,
+                     **style)
         print(f'wrote {out}')
     return 0
+
+
+def _judging_fmax(args: argparse.Namespace) -> tuple[float | None, str]:
+    """The fmax at which show and classify call a net converged, and why:
+    --fmax, else the fmax a trajectory was relaxed to
+    (:func:`ase_maud.io.relaxed_fmax`), else None (analysis's 1e-6 Q a)."""
+    from .io import relaxed_fmax
+
+    if args.fmax is not None:
+        return args.fmax, '--fmax'
+    relaxed = relaxed_fmax(args.file)
+    return relaxed, '1e-6 Q a' if relaxed is None else 'the fmax it was relaxed to'
+
+
+def _add_fmax(parser, what: str) -> None:
+    parser.add_argument('--fmax', '--ftol', type=_ruled('fmax'),
+                        help=f'fmax above which the net is {what} (default: the fmax a '
+                        'trajectory of relax was relaxed to, stored in it; else 1e-6 Q a)')
 
 
 def describe(point) -> str:
@@ -162,17 +182,15 @@ def describe(point) -> str:
 def classify(args: argparse.Namespace) -> int:
     """``ase-maud classify``: exit status 0 if stationary, else 1. Stationary
     means fmax at most ``--fmax``, by default the fmax a trajectory was
-    relaxed to (:func:`ase_maud.io.relaxed_fmax`), else analysis's default."""
+    relaxed to, else analysis's default (:func:`_judging_fmax`)."""
     from .analysis import classify as classify_point
-    from .io import read_net, relaxed_fmax
+    from .io import read_net
 
     atoms = read_net(args.file, index=args.frame, **_net_options(args))
-    relaxed = None if args.fmax is not None else relaxed_fmax(args.file)
+    ftol, why = _judging_fmax(args)
     with warnings.catch_warnings():   # "not stationary" is said below
         warnings.simplefilter('ignore', UserWarning)
-        point = classify_point(atoms, k=args.k, ftol=relaxed if args.fmax is None else args.fmax)
-    why = ('--fmax' if args.fmax is not None else 'the fmax it was relaxed to'
-           if relaxed is not None else '1e-6 Q a')
+        point = classify_point(atoms, k=args.k, ftol=ftol)
     print(f'{describe(point)}: {Path(args.file).name} {len(atoms)} points, '
           f'{point.n_modes} free non-rigid modes ({point.n_fixed} fixed coordinates, '
           f'{point.n_rigid} rigid-body modes removed), fmax {point.fmax:.3g} '
@@ -359,12 +377,16 @@ def build_parser() -> argparse.ArgumentParser:
     p = _command(
         commands, 'show', 'draw a net or a trajectory frame (PNG), or animate (GIF)',
         'Draw the net of FILE (any file relax reads; of a trajectory, frame '
-        '--frame): springs as grey lines, free points coloured by their force '
-        '|f| with arrows along it, fixed points as black squares; in the plane '
-        'for dim 2, in 3D otherwise. --gif animates every frame of a '
-        'trajectory (at most 60, evenly picked).',
+        '--frame): springs coloured by their force Q q L (or length) with a '
+        'colour bar, supports (fixed points) as black squares and loaded points '
+        'as triangles, named in a legend; the residual forces as red arrows at '
+        'the scale the legend states, none when the net is converged (max |f| '
+        'at most --fmax). In the plane for dim 2, else an orthographic 3D view '
+        'from --view. --gif animates every frame of a trajectory (at most 60, '
+        'evenly picked) at one colour and arrow scale.',
         ['ase-maud show net.obj                 # net.png',
-         'ase-maud show maud.traj --frame 0 -o start.png',
+         'ase-maud show maud.traj --frame 0 -o start.png --view front',
+         'ase-maud show maud.traj --color length --view top -o lengths.pdf',
          'ase-maud show maud.traj --gif         # maud.gif'])
     _add_file(p)
     p.add_argument('-o', '--output', metavar='PICTURE',
@@ -372,6 +394,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--gif', action='store_true', help='animate the frames to a GIF')
     p.add_argument('--fps', type=_ruled('count', int), default=8,
                    help='frames per second of the GIF (default: %(default)s)')
+    # pictures.COLOURS and VIEWS (named here: importing matplotlib takes a second)
+    p.add_argument('--color', '--colour', choices=('force', 'length', 'none'),
+                   default='force',
+                   help='what colours the springs: their force Q q L, their length, '
+                   'or nothing (default: %(default)s)')
+    p.add_argument('--view', choices=('top', 'front', 'side', 'iso'), default='iso',
+                   help='side a 3D net is seen from, orthographic: top (down z), front '
+                   '(along y), side (along x) or iso (default: %(default)s)')
+    _add_fmax(p, 'drawn with residual-force arrows')
     _add_net_options(p)
     _add_threads(p, None, 'leave the environment alone')
     p.set_defaults(func=show)
@@ -391,10 +422,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('-k', type=_ruled('count', int), default=6,
                    help='eigenvalues to print (and to compute, above 2000 free '
                    'coordinates) (default: %(default)s)')
-    p.add_argument('--fmax', '--ftol', type=_ruled('fmax'),
-                   help='fmax above which the point is not stationary (default: the '
-                   'fmax a trajectory of relax was relaxed to, stored in it; else '
-                   '1e-6 Q a)')
+    _add_fmax(p, 'not stationary')
     _add_net_options(p)
     _add_threads(p, None, 'leave the environment alone')
     p.set_defaults(func=classify)

@@ -222,6 +222,19 @@ def test_show_draws_png_and_gif(tmp_path, capsys, relaxation, dim):
     assert f'wrote {png}' in out and f'wrote {gif} (' in out
 
 
+@pytest.mark.parametrize('colour, view', [('length', 'top'), ('none', 'front'),
+                                          ('force', 'side')])
+def test_show_colours_and_views(tmp_path, capsys, relaxation, colour, view):
+    svg = tmp_path / 'net.svg'
+    assert main(['show', str(relaxation[3]), '--color', colour, '--view', view,
+                 '-o', str(svg)]) == 0
+    text = svg.read_text()
+    assert text.startswith('<?xml') and ('spring length L' in text) == (colour == 'length')
+    assert 'residual force' not in text   # relaxed to --fmax 1e-8: converged
+    assert main(['show', str(relaxation[3]), '--frame', '0', '-o', str(svg)]) == 0
+    assert 'residual force' in svg.read_text()
+
+
 def test_show_writes_beside_the_file_by_default(tmp_path):
     path, *_ = write_quad_net(tmp_path, 'mesh2.json', n=4)
     assert main(['show', str(path)]) == 0

@@ -72,8 +72,8 @@ class StationaryPoint:
     ``verdict`` is 'minimum', 'saddle' (of order ``index``), 'maximum' or
     'degenerate' (some non-rigid eigenvalue within ``tolerance`` of zero).
     ``tolerance`` is ``rtol * max|lambda|``. ``stationary`` is
-    ``fmax <= ftol``; if it is False the verdict describes the curvature at
-    a point that is not stationary.
+    ``fmax <= ftol`` (force units, the ``ftol`` used); if it is False the
+    verdict describes the curvature at a point that is not stationary.
     """
 
     verdict: str
@@ -87,6 +87,7 @@ class StationaryPoint:
     n_fixed: int
     tolerance: float
     fmax: float
+    ftol: float
     stationary: bool
     method: str
 
@@ -94,6 +95,13 @@ class StationaryPoint:
     def n_modes(self) -> int:
         """Free, non-rigid modes counted by the verdict."""
         return self.n_negative + self.n_zero + self.n_positive
+
+
+def force_tolerance(potential, ftol: float | None = None) -> float:
+    """``ftol``, by default :data:`FTOL` ``* Q a`` of the
+    :class:`~ase_maud.potential.MaudPotential` ``potential`` (force units):
+    the largest ``|f|`` of a stationary point."""
+    return FTOL * potential.force_unit if ftol is None else ftol
 
 
 def free_mask(atoms: Atoms, dim: int) -> np.ndarray:
@@ -220,7 +228,7 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
     modes = np.zeros((len(values), len(atoms), 3))
     modes[:, :, :dim][:, free] = vectors.T
     fmax = float(np.linalg.norm(atoms.get_forces(), axis=1).max(initial=0.0))
-    ftol = FTOL * potential.force_unit if ftol is None else ftol
+    ftol = force_tolerance(potential, ftol)
     if fmax > ftol:
         warnings.warn(f'not a stationary point: fmax = {fmax:.3g} > '
                       f'{ftol:.3g}; the verdict {verdict!r} describes the '
@@ -229,7 +237,7 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
         verdict=verdict, index=n_negative, eigenvalues=values, modes=modes,
         n_negative=n_negative, n_zero=n_zero, n_positive=n_positive,
         n_rigid=rigid.shape[1], n_fixed=int((~free).sum()),
-        tolerance=tolerance, fmax=fmax, stationary=fmax <= ftol,
+        tolerance=tolerance, fmax=fmax, ftol=ftol, stationary=fmax <= ftol,
         method=method)
 
 

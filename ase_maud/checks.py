@@ -5,15 +5,18 @@
 calculator's and the backends'. :func:`check` is the only place a value is
 tested against its rule: a bad value is a ValueError that names the keyword,
 the value and what is accepted. Each keyword is checked where it enters (the
-object that keeps it), nowhere else.
+object that keeps it), nowhere else. :func:`check_writable` is the one test of
+a file or directory the package will write.
 """
 
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from numbers import Integral, Real
+from pathlib import Path
 from typing import Any
 
 
@@ -139,3 +142,27 @@ def _matches(value: Any, choice: Any) -> bool:
 def check_all(**values: Any) -> dict[str, Any]:
     """:func:`check` of each keyword, as a dict of the checked values."""
     return {name: check(name, value) for name, value in values.items()}
+
+
+def check_writable(name: str, value: str | os.PathLike, directory: bool = False) -> Path:
+    """``value`` as a Path that can be written, or a ValueError naming
+    ``name`` and the value: a file (not a directory) in a writable directory
+    that exists, or with ``directory`` a writable directory or one that can
+    be made (its nearest existing parent writable, and no part a file)."""
+    path = Path(value)
+    text = f'{name} {str(value)!r}'
+    if directory:
+        existing = next(p for p in (path, *path.parents) if p.exists())   # '.' or '/' at last
+        if not existing.is_dir():
+            raise ValueError(f'{text}: {str(existing)!r} is a file, not a directory')
+        if not os.access(existing, os.W_OK | os.X_OK):
+            raise ValueError(f'{text}: the directory {str(existing)!r} is not writable')
+        return path
+    if path.is_dir():
+        raise ValueError(f'{text} is a directory; give a file name')
+    parent = path.parent
+    if not parent.is_dir():
+        raise ValueError(f'{text}: the directory {str(parent)!r} does not exist')
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f'{text}: the directory {str(parent)!r} is not writable')
+    return path

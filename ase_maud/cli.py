@@ -19,6 +19,13 @@ count, the command starts itself again with them set (or, when
 ``main(argv)`` is called from Python, warns). This module only parses
 arguments and calls the library; each command imports what it needs when it
 runs (relax needs no matplotlib).
+
+Exit status: 0 done (converged, stationary); 1 not converged within
+``--steps`` (relax) or not stationary (classify); 2 an error, said in one line
+``ase-maud: error: ...`` on stderr: a bad argument (argparse's own), a file
+that cannot be read or written, malformed input, or a run that cannot go on
+(:class:`~ase_maud.MaudError`). Every file a command writes is checked before
+any work (:func:`check_outputs`).
 """
 
 from __future__ import annotations
@@ -29,8 +36,13 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from .checks import check
+from .checks import check, check_writable
+from .monitor import MaudError
 from .threads import pin_threads
+
+#: Errors a command reports in one line, exit status 2: bad input, files that
+#: cannot be read or written, a run that cannot go on.
+EXPECTED_ERRORS = (ValueError, OSError, MaudError)
 
 
 def _size(text):
@@ -60,18 +72,18 @@ def _net_options(args: argparse.Namespace) -> dict:
             'dim': args.dim}
 
 
-def _progress_bar(opt, atoms):
-    """A tqdm bar on stderr advanced by every step of the optimizer ``opt``,
-    showing fmax and the energy."""
+def _progress_bar(opt, atoms, fmax: float, steps: int):
+    """A tqdm bar on stderr of the optimizer ``opt``'s steps out of
+    ``steps``, showing fmax against its target ``fmax`` and the energy."""
     from tqdm import tqdm
 
-    bar = tqdm(unit='step', file=sys.stderr, dynamic_ncols=True)
+    bar = tqdm(total=steps, unit='step', file=sys.stderr, dynamic_ncols=True)
 
     def advance():
-        fmax = (atoms.get_forces()**2).sum(axis=1).max() ** 0.5
-        bar.set_postfix_str(f'fmax {fmax:.3g}, energy {atoms.get_potential_energy():.10g}',
-                            refresh=False)
-        bar.update()
+        now = (atoms.get_forces()**2).sum(axis=1).max() ** 0.5
+        bar.set_postfix_str(f'fmax {now:.3g} (target {fmax:.3g}), energy '
+                            f'{atoms.get_potential_energy():.10g}', refresh=False)
+        bar.update(opt.nsteps - bar.n)   # observers run at step 0 too
 
     opt.attach(advance)
     return bar
@@ -101,7 +113,7 @@ def relax(args: argparse.Namespace) -> int:
     with CallRecorder(atoms.calc) as recorder, \
             Maud(atoms, model=args.model, method=args.method, logfile=logfile,
                  trajectory=args.traj) as opt:
-        bar = _progress_bar(opt, atoms) if progress else None
+        bar = _progress_bar(opt, atoms, args.fmax, args.steps) if progress else None
         try:
             converged = opt.run(fmax=args.fmax, steps=args.steps)
         finally:
@@ -124,16 +136,35 @@ def show(args: argparse.Namespace) -> int:
     from .io import read_frames, read_net
     from .pictures import save_animation, save_picture
 
-    suffix = '.gif' if args.gif else '.png'
-    out = args.output or str(Path(args.file).with_suffix(suffix))
+    out = _picture_path(args)
+    style = {'colour': args.color, 'view': args.view, 'ftol': _judging_fmax(args)[0]}
     if args.gif:
         frames = read_frames(args.file, **_net_options(args))
-        count = save_animation(frames, out, fps=args.fps)
+        count = save_animation(frames, out, fps=args.fps, **style)
         print(f'wrote {out} ({count} of {len(frames)} frames)')
     else:
-        save_picture(read_net(args.file, index=args.frame, **_net_options(args)), out)
+        save_picture(read_net(args.file, index=args.frame, **_net_options(args)), out,
+                     **style)
         print(f'wrote {out}')
     return 0
+
+
+def _judging_fmax(args: argparse.Namespace) -> tuple[float | None, str]:
+    """The fmax at which show and classify call a net converged, and why:
+    --fmax, else the fmax a trajectory was relaxed to
+    (:func:`ase_maud.io.relaxed_fmax`), else None (analysis's 1e-6 Q a)."""
+    from .io import relaxed_fmax
+
+    if args.fmax is not None:
+        return args.fmax, '--fmax'
+    relaxed = relaxed_fmax(args.file)
+    return relaxed, '1e-6 Q a' if relaxed is None else 'the fmax it was relaxed to'
+
+
+def _add_fmax(parser, what: str) -> None:
+    parser.add_argument('--fmax', '--ftol', type=_ruled('fmax'),
+                        help=f'fmax above which the net is {what} (default: the fmax a '
+                        'trajectory of relax was relaxed to, stored in it; else 1e-6 Q a)')
 
 
 def describe(point) -> str:
@@ -149,17 +180,21 @@ def describe(point) -> str:
 
 
 def classify(args: argparse.Namespace) -> int:
-    """``ase-maud classify``: exit status 0 if stationary, else 1."""
+    """``ase-maud classify``: exit status 0 if stationary, else 1. Stationary
+    means fmax at most ``--fmax``, by default the fmax a trajectory was
+    relaxed to, else analysis's default (:func:`_judging_fmax`)."""
     from .analysis import classify as classify_point
     from .io import read_net
 
     atoms = read_net(args.file, index=args.frame, **_net_options(args))
+    ftol, why = _judging_fmax(args)
     with warnings.catch_warnings():   # "not stationary" is said below
         warnings.simplefilter('ignore', UserWarning)
-        point = classify_point(atoms, k=args.k, ftol=args.ftol)
+        point = classify_point(atoms, k=args.k, ftol=ftol)
     print(f'{describe(point)}: {Path(args.file).name} {len(atoms)} points, '
           f'{point.n_modes} free non-rigid modes ({point.n_fixed} fixed coordinates, '
-          f'{point.n_rigid} rigid-body modes removed), fmax {point.fmax:.3g}')
+          f'{point.n_rigid} rigid-body modes removed), fmax {point.fmax:.3g} '
+          f'(stationary up to {point.ftol:.3g}, {why})')
     lowest = ' '.join(f'{value:.6g}' for value in point.eigenvalues[:args.k])
     print(f'lowest eigenvalues ({point.method}, units of Q): {lowest}')
     return 0 if point.stationary else 1
@@ -191,6 +226,44 @@ def backends(args: argparse.Namespace) -> int:
                                 argv=args.argv))
     print(f'results in {args.out}/')
     return 0
+
+
+def _picture_path(args: argparse.Namespace) -> str:
+    """The image ``ase-maud show`` writes: -o, or FILE with .png (.gif)."""
+    return args.output or str(Path(args.file).with_suffix('.gif' if args.gif else '.png'))
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Every file the command of ``args`` will write, checked before any
+    work: a ValueError naming the option and what is wrong."""
+    from .io import check_net_path
+
+    if args.command == 'relax':
+        check_writable('--traj', args.traj)
+        if args.log not in (None, '-'):
+            check_writable('--log', args.log)
+        if args.out:
+            check_net_path('--out', args.out)
+    elif args.command == 'show':
+        from matplotlib.figure import Figure
+
+        path = check_writable('--output', _picture_path(args))
+        known = ['gif'] if args.gif else sorted(Figure().canvas.get_supported_filetypes())
+        if path.suffix.lower().lstrip('.') not in known:
+            raise ValueError(f'--output {str(path)!r}: ' + (
+                'an animation (--gif) is written as .gif' if args.gif else
+                f'a picture is written as one of .{", .".join(known)}'))
+    elif args.command in ('bench', 'backends'):
+        check_writable('--out', args.out, directory=True)
+
+
+def _one_line(error: BaseException) -> str:
+    """The message of ``error`` on one line (an OSError's as 'file: reason')."""
+    if isinstance(error, OSError) and error.filename and error.strerror:
+        text = f'{error.filename}: {error.strerror}'
+    else:
+        text = str(error) or type(error).__name__
+    return ' '.join(text.split())
 
 
 def _add_file(parser):
@@ -304,12 +377,16 @@ def build_parser() -> argparse.ArgumentParser:
     p = _command(
         commands, 'show', 'draw a net or a trajectory frame (PNG), or animate (GIF)',
         'Draw the net of FILE (any file relax reads; of a trajectory, frame '
-        '--frame): springs as grey lines, free points coloured by their force '
-        '|f| with arrows along it, fixed points as black squares; in the plane '
-        'for dim 2, in 3D otherwise. --gif animates every frame of a '
-        'trajectory (at most 60, evenly picked).',
+        '--frame): springs coloured by their force Q q L (or length) with a '
+        'colour bar, supports (fixed points) as black squares and loaded points '
+        'as triangles, named in a legend; the residual forces as red arrows at '
+        'the scale the legend states, none when the net is converged (max |f| '
+        'at most --fmax). In the plane for dim 2, else an orthographic 3D view '
+        'from --view. --gif animates every frame of a trajectory (at most 60, '
+        'evenly picked) at one colour and arrow scale.',
         ['ase-maud show net.obj                 # net.png',
-         'ase-maud show maud.traj --frame 0 -o start.png',
+         'ase-maud show maud.traj --frame 0 -o start.png --view front',
+         'ase-maud show maud.traj --color length --view top -o lengths.pdf',
          'ase-maud show maud.traj --gif         # maud.gif'])
     _add_file(p)
     p.add_argument('-o', '--output', metavar='PICTURE',
@@ -317,6 +394,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--gif', action='store_true', help='animate the frames to a GIF')
     p.add_argument('--fps', type=_ruled('count', int), default=8,
                    help='frames per second of the GIF (default: %(default)s)')
+    # pictures.COLOURS and VIEWS (named here: importing matplotlib takes a second)
+    p.add_argument('--color', '--colour', choices=('force', 'length', 'none'),
+                   default='force',
+                   help='what colours the springs: their force Q q L, their length, '
+                   'or nothing (default: %(default)s)')
+    p.add_argument('--view', choices=('top', 'front', 'side', 'iso'), default='iso',
+                   help='side a 3D net is seen from, orthographic: top (down z), front '
+                   '(along y), side (along x) or iso (default: %(default)s)')
+    _add_fmax(p, 'drawn with residual-force arrows')
     _add_net_options(p)
     _add_threads(p, None, 'leave the environment alone')
     p.set_defaults(func=show)
@@ -327,7 +413,8 @@ def build_parser() -> argparse.ArgumentParser:
         'eigenvalues of its Hessian on the free degrees of freedom, rigid-body '
         'modes removed (ase_maud.analysis.classify): minimum, saddle of index k '
         '(k negative eigenvalues), degenerate, or not stationary (fmax above '
-        '--ftol, the curvature there reported). Prints the lowest eigenvalues. '
+        '--fmax, by default the fmax a trajectory was relaxed to; the curvature '
+        'there reported). Prints the lowest eigenvalues. '
         'Exit status 0 if stationary, 1 if not.',
         ['ase-maud classify maud.traj',
          'ase-maud classify relaxed.obj --fixed fixed.txt -k 10'])
@@ -335,9 +422,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('-k', type=_ruled('count', int), default=6,
                    help='eigenvalues to print (and to compute, above 2000 free '
                    'coordinates) (default: %(default)s)')
-    p.add_argument('--ftol', type=_ruled('fmax'),
-                   help='fmax above which the point is not stationary '
-                   '(default: 1e-6 Q a)')
+    _add_fmax(p, 'not stationary')
     _add_net_options(p)
     _add_threads(p, None, 'leave the environment alone')
     p.set_defaults(func=classify)
@@ -422,7 +507,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``ase-maud`` on ``argv`` (default ``sys.argv[1:]``); return the
-    exit status. Without a command, print the help."""
+    exit status (module docstring). Without a command, print the help.
+    :data:`EXPECTED_ERRORS` are said in one line on stderr, status 2."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
@@ -432,6 +518,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.edges or args.fixed or args.dim):
         parser.error('relax: --edges, --fixed and --dim need NET_FILE')
     args.argv = sys.argv[1:] if argv is None else list(argv)
-    if args.threads is not None:
-        pin_threads(args.threads, restart=argv is None)
-    return args.func(args)
+    try:
+        check_outputs(args)
+        if args.threads is not None:
+            pin_threads(args.threads, restart=argv is None)
+        return args.func(args)
+    except EXPECTED_ERRORS as error:
+        print(f'{parser.prog}: error: {_one_line(error)}', file=sys.stderr)
+        return 2

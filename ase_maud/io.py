@@ -48,13 +48,14 @@ from pathlib import Path
 from typing import Any
 
 import ase.io
+import ase.io.formats
 import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms
 
 from .atomic import replace_text, replace_with
 from .calculator import MaudCalculator
-from .checks import as_whole
+from .checks import as_whole, check_writable
 from .topology import fixed_atoms
 
 PathLike = str | os.PathLike
@@ -68,6 +69,36 @@ def net_format(path: PathLike) -> str:
     """'obj', 'json', 'traj' or 'ase' (any other file ASE reads), by suffix."""
     suffix = Path(path).suffix.lower()
     return {'.obj': 'obj', '.json': 'json', '.traj': 'traj'}.get(suffix, 'ase')
+
+
+def check_net_path(name: str, path: PathLike) -> Path:
+    """``path`` checked as a file :func:`write_net` can write, before any
+    work: a writable file (:func:`~ase_maud.checks.check_writable`) whose
+    suffix names a format (one of :func:`net_format`'s, or one ASE writes);
+    else a ValueError naming ``name``, the file and what is accepted."""
+    path = check_writable(name, path)
+    if net_format(path) == 'ase' and path.suffix.lower() not in ('.xyz', '.extxyz'):
+        try:
+            known = ase.io.formats.ioformats[ase.io.formats.filetype(path, read=False)]
+        except (KeyError, ase.io.formats.UnknownFileTypeError):
+            known = None
+        if known is None or not known.can_write:
+            raise ValueError(f'{name} {str(path)!r}: no net format has the suffix '
+                             f'{path.suffix!r}; use .obj, .json, .traj, .xyz or another '
+                             'format ASE writes')
+    return path
+
+
+def relaxed_fmax(path: PathLike) -> float | None:
+    """The fmax an ASE trajectory was relaxed to (the ``fmax`` its
+    optimizer stored in the trajectory's description; force units), or None
+    for other files and for trajectories that do not say."""
+    if net_format(path) != 'traj':
+        return None
+    from ase.io.trajectory import Trajectory
+    with Trajectory(path) as frames:
+        fmax = (frames.description or {}).get('fmax')
+    return None if fmax is None else float(fmax)
 
 
 def edges_path(path: PathLike) -> Path:

@@ -43,7 +43,7 @@ from ase.filters import Filter
 from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 
 from . import accuracy
-from .checks import check, check_all
+from .checks import check, check_all, check_writable
 from .lock import FileInUseError, RunLock
 from .method import MaudMethod, StepRule, merit_tolerance, step_rule
 from .monitor import DivergenceError, MaudError, RunMonitor, StagnationError
@@ -518,16 +518,7 @@ def _check_files(restart: Any, logfile: Any, trajectory: Any,
             dash = ", '-' (standard output)" if name == 'logfile' else ''
             raise ValueError(f'{name} must be None, a file name{opened}{dash}, '
                              f'got {value!r}')
-        path = Path(value)
-        if path.is_dir():
-            raise ValueError(f'{name} {str(value)!r} is a directory; give a file name')
-        parent = path.parent
-        if not parent.is_dir():
-            raise ValueError(f'{name} {str(value)!r}: the directory {str(parent)!r} '
-                             'does not exist')
-        if not os.access(parent, os.W_OK | os.X_OK):
-            raise ValueError(f'{name} {str(value)!r}: the directory {str(parent)!r} '
-                             'is not writable')
+        check_writable(name, value)
     if not isinstance(append_trajectory, (bool, np.bool_)):
         raise ValueError(f'append_trajectory must be True or False, got '
                          f'{append_trajectory!r}')

@@ -1,11 +1,24 @@
-"""Pictures of nets: points, springs and forces, as PNG or an animated GIF.
+"""Pictures of nets, as a form finder reads them: PNG (or any format
+matplotlib writes) or an animated GIF.
 
 A net is an :class:`ase.Atoms` with a :class:`~ase_maud.MaudCalculator`
-(``calc.springs``, ``calc.dim``). Springs are grey lines; free points are
-coloured by the magnitude of their force ``|f|`` (colour bar in units of
-``Q a``), with an arrow along ``f`` (the longest as long as a tenth of the
-picture); fixed points (every coordinate held) are black squares.
-``dim=2`` nets are drawn in their plane, others in 3D (mplot3d). Figures are
+(``calc.springs``, ``calc.dim``). What is drawn:
+
+- springs coloured (:data:`COLOURS`) by their force ``Q q L`` (``q`` the
+  spring's force density, a multiplier of ``Q``, 1 where the calculator has
+  none; force units ``Q a``), by their length ``L``, or plain grey, with a
+  colour bar;
+- supports (points with every coordinate fixed) as black squares, loaded
+  points (a non-zero row of the calculator's ``loads``, where it has loads)
+  as orange triangles, free points as small dots, named in a legend;
+- the residual forces ``f`` of the free points as red arrows at a stated
+  scale: an arrow one length unit long is :func:`arrow_scale` force units
+  (a 1-2-5 number, so that the longest arrow is at most :data:`ARROW` of the
+  picture), said in the legend; none when the net is converged (``max |f|
+  <= ftol``, by default :func:`ase_maud.analysis.force_tolerance`).
+
+``dim=2`` nets are drawn in their plane; others in an orthographic 3D view
+from a side of :data:`VIEWS` with equal scales on the three axes. Figures are
 made without pyplot (:class:`matplotlib.figure.Figure`, rendered by Agg): no
 display needed and no global backend changed.
 """
@@ -13,6 +26,7 @@ display needed and no global backend changed.
 from __future__ import annotations
 
 import io
+import math
 import os
 from collections.abc import Sequence
 
@@ -25,10 +39,22 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
+from .analysis import force_tolerance
+from .physics import spring_force
 from .topology import fixed_atoms
 
-#: Longest force arrow, as a fraction of the picture's largest extent.
-ARROW = 0.1
+#: Longest force arrow at most this fraction of the picture's largest extent.
+ARROW = 0.15
+#: What the springs' colour shows: colour bar label, or None (plain grey).
+COLOURS = {'force': 'spring force Q q L (Q a)', 'length': 'spring length L',
+           'none': None}
+#: 3D views, as matplotlib's (elevation, azimuth) in degrees: top looks down
+#: z (x right, y up), front along +y (x right, z up), side along -x (y right,
+#: z up), iso from (1, -1, 1)-ish.
+VIEWS = {'top': (90.0, -90.0), 'front': (0.0, -90.0), 'side': (0.0, 0.0),
+         'iso': (35.264, -45.0)}
+#: The axis a view looks along, drawn without ticks.
+EDGE_ON = {'top': 'z', 'front': 'y', 'side': 'x'}
 
 
 def save_png(fig: Figure, path: str | os.PathLike, dpi: int = 72, colours: int = 64) -> None:
@@ -45,6 +71,59 @@ def save_png(fig: Figure, path: str | os.PathLike, dpi: int = 72, colours: int =
     image.save(path, optimize=True)
 
 
+def _calculator_value(calc, name: str):
+    """The calculator's attribute ``name``, else its parameter, else None."""
+    value = getattr(calc, name, None)
+    return getattr(calc, 'parameters', {}).get(name) if value is None else value
+
+
+def spring_q(calc) -> np.ndarray:
+    """Each spring's force density ``q`` (a multiplier of ``Q``): the
+    calculator's ``q`` where it has one, else ones."""
+    q = _calculator_value(calc, 'q')
+    count = len(calc.springs)
+    return np.ones(count) if q is None else np.broadcast_to(np.asarray(q, float), (count,))
+
+
+def spring_values(atoms: Atoms, colour: str) -> np.ndarray | None:
+    """What the springs are coloured by (:data:`COLOURS`), one value per
+    spring: the force ``Q q L`` (force units), the length ``L``, or None."""
+    if colour not in COLOURS:
+        raise ValueError(f'colour must be one of {", ".join(COLOURS)}, got {colour!r}')
+    calc = atoms.calc
+    d = atoms.positions[calc.springs[:, 0]] - atoms.positions[calc.springs[:, 1]]
+    if colour == 'length':
+        return np.linalg.norm(d, axis=1)
+    if colour == 'force':
+        Q = calc.potential.Q * spring_q(calc)[:, None]
+        return np.linalg.norm(spring_force(d, Q), axis=1)
+    return None
+
+
+def loaded_points(atoms: Atoms) -> np.ndarray:
+    """Boolean mask of the points with a non-zero load (the calculator's
+    ``loads``, shape (N, 3), where it has loads; else none)."""
+    loads = _calculator_value(atoms.calc, 'loads')
+    if loads is None:
+        return np.zeros(len(atoms), bool)
+    return np.any(np.asarray(loads, float) != 0, axis=1)
+
+
+def arrow_scale(largest_force: float, extent: float) -> float:
+    """Force units per length unit of an arrow: the least 1, 2 or 5 times a
+    power of ten at which an arrow of ``largest_force`` is at most
+    :data:`ARROW` ``* extent`` long."""
+    need = max(largest_force, 1e-300) / (ARROW * max(extent, 1e-300))
+    power = 10.0 ** math.floor(math.log10(need))
+    return next(m * power for m in (1, 2, 5, 10) if m * power >= need * (1 - 1e-12))
+
+
+def _norm(values: Sequence[np.ndarray]) -> Normalize:
+    """The colour scale from the least to the largest of ``values``."""
+    every = np.concatenate(values)
+    return Normalize(*((every.min(), every.max()) if every.size else (0.0, 1.0)))
+
+
 def _limits(frames: Sequence[Atoms]) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper corners of a cube around every frame's points."""
     points = np.concatenate([atoms.positions for atoms in frames])
@@ -53,77 +132,131 @@ def _limits(frames: Sequence[Atoms]) -> tuple[np.ndarray, np.ndarray]:
     return centre - half, centre + half
 
 
-def figure(dim: int) -> tuple[Figure, Axes]:
-    """A figure with one 2D or 3D axes."""
+def figure(dim: int, view: str = 'iso') -> tuple[Figure, Axes]:
+    """A figure with one 2D axes (``dim`` 2) or an orthographic 3D axes
+    seen from ``view`` (:data:`VIEWS`)."""
+    if view not in VIEWS:
+        raise ValueError(f'view must be one of {", ".join(VIEWS)}, got {view!r}')
     fig = Figure(figsize=(6.4, 5.6))
     ax = fig.add_subplot(projection='3d' if dim == 3 else None)
+    orient(ax, view)
     return fig, ax
 
 
-def draw(ax: Axes, atoms: Atoms, limits: tuple[np.ndarray, np.ndarray] | None = None,
-         norm: Normalize | None = None, title: str | None = None):
-    """Draw the net ``atoms`` on ``ax`` (2D axes for dim 2, else 3D);
-    return the points' scatter (for a colour bar). ``limits`` (two corners)
-    and ``norm`` (of ``|f|``) default to this frame's."""
+def orient(ax: Axes, view: str) -> None:
+    """Axis labels; of a 3D axes also the orthographic projection from
+    ``view``, the axis it looks along without ticks."""
+    if ax.name != '3d':
+        ax.set(xlabel='x', ylabel='y')
+        return
+    ax.set_proj_type('ortho')
+    ax.view_init(*VIEWS[view])
+    for axis in 'xyz':
+        if axis == EDGE_ON.get(view):
+            getattr(ax, f'set_{axis}ticks')([])
+        else:
+            getattr(ax, f'set_{axis}label')(axis)
+
+
+def draw(ax: Axes, atoms: Atoms, colour: str = 'force',
+         limits: tuple[np.ndarray, np.ndarray] | None = None,
+         norm: Normalize | None = None, scale: float | None = None,
+         ftol: float | None = None, title: str | None = None) -> LineCollection:
+    """Draw the net ``atoms`` on ``ax`` (2D axes for dim 2, else 3D) as the
+    module docstring says; return the springs (a LineCollection, coloured
+    through ``norm`` unless ``colour`` is 'none').
+
+    Axis labels and the 3D view are the axes' (:func:`figure`).
+    ``limits`` (two corners), ``norm`` (of the spring values) and ``scale``
+    (force units per length unit of an arrow) default to this frame's;
+    ``ftol`` (force units) is the largest ``|f|`` of a converged net.
+    """
     calc = atoms.calc
     dim = 3 if ax.name == '3d' else 2
     x = atoms.positions[:, :dim]
     forces = atoms.get_forces()[:, :dim]
     size = np.linalg.norm(forces, axis=1)
     fixed = fixed_atoms(atoms)
-    low, high = _limits([atoms]) if limits is None else limits
-    norm = Normalize(0, max(size.max(), 1e-300)) if norm is None else norm
-    segments = x[calc.springs]
-    lines = (Line3DCollection if dim == 3 else LineCollection)(
-        segments, colors='0.6', linewidths=0.8, zorder=1)
-    ax.add_collection(lines)
+    loaded = loaded_points(atoms) & ~fixed
     free = ~fixed
-    scatter = ax.scatter(*x[free].T, c=size[free], cmap='viridis', norm=norm, s=14, zorder=3)
-    ax.scatter(*x[fixed].T, c='k', marker='s', s=14, zorder=3)
-    scale = ARROW * (high - low).max() / max(norm.vmax, 1e-300)
-    arrows = scale * forces[free]
-    if dim == 3:
-        ax.quiver(*x[free].T, *arrows.T, color='C3', linewidth=0.8)
-        ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]), zlim=(low[2], high[2]),
-               xlabel='x', ylabel='y', zlabel='z')
+    low, high = _limits([atoms]) if limits is None else limits
+    values = spring_values(atoms, colour)
+    lines = (Line3DCollection if dim == 3 else LineCollection)(
+        x[calc.springs], linewidths=1.2, zorder=1)
+    if values is None:
+        lines.set_color('0.55')
     else:
-        ax.quiver(*x[free].T, *arrows.T, color='C3', angles='xy', scale_units='xy',
-                  scale=1, width=0.003, zorder=2)
-        ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]), xlabel='x', ylabel='y',
-               aspect='equal')
+        lines.set(array=values, cmap='viridis',
+                  norm=_norm([values]) if norm is None else norm)
+    ax.add_collection(lines)
+    ax.scatter(*x[free & ~loaded].T, c='0.2', s=6, zorder=3, label='free point')
+    if loaded.any():
+        ax.scatter(*x[loaded].T, c='C1', marker='v', s=24, zorder=3, label='loaded point')
+    if fixed.any():
+        ax.scatter(*x[fixed].T, c='k', marker='s', s=24, zorder=3, label='support (fixed)')
+    largest = size[free].max(initial=0.0)
+    ftol = force_tolerance(calc.potential) if ftol is None else ftol
+    if largest > ftol:
+        scale = arrow_scale(largest, (high - low).max()) if scale is None else scale
+        arrows = forces[free] / scale
+        label = f'residual force: arrow 1 length unit = {scale:.3g} force units'
+        if dim == 3:
+            ax.quiver(*x[free].T, *arrows.T, color='C3', linewidth=0.8, label=label)
+        else:
+            ax.quiver(*x[free].T, *arrows.T, color='C3', angles='xy', scale_units='xy',
+                      scale=1, width=0.003, zorder=2, label=label)
+    if dim == 3:
+        ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]), zlim=(low[2], high[2]))
+        ax.set_box_aspect((1, 1, 1))
+    else:
+        ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]), aspect='equal')
+    ax.legend(loc='upper left', fontsize=7, framealpha=0.8)
+    state = 'converged' if largest <= ftol else 'not converged'
     ax.set_title(title if title is not None else
                  f'{len(atoms)} points, {len(calc.springs)} springs, '
-                 f'E = {atoms.get_potential_energy():.6g}, max |f| = {size.max():.3g}',
-                 fontsize=9)
-    return scatter
+                 f'E = {atoms.get_potential_energy():.6g}, max |f| = {largest:.3g} '
+                 f'({state}: ftol {ftol:.3g})', fontsize=9)
+    return lines
 
 
-def save_picture(atoms: Atoms, path: str | os.PathLike, title: str | None = None) -> None:
-    """Draw the net ``atoms`` to an image file (PNG by the name)."""
-    fig, ax = figure(atoms.calc.dim)
-    scatter = draw(ax, atoms, title=title)
-    fig.colorbar(scatter, ax=ax, shrink=0.7, label='|f| (Q a)')
+def _colour_bar(fig: Figure, ax: Axes, lines: LineCollection, colour: str) -> None:
+    if COLOURS[colour] is not None:
+        fig.colorbar(lines, ax=ax, shrink=0.7, label=COLOURS[colour])
+
+
+def save_picture(atoms: Atoms, path: str | os.PathLike, colour: str = 'force',
+                 view: str = 'iso', ftol: float | None = None,
+                 title: str | None = None) -> Figure:
+    """Draw the net ``atoms`` (:func:`draw`) to an image file, its format
+    by the name; return the figure."""
+    fig, ax = figure(atoms.calc.dim, view)
+    _colour_bar(fig, ax, draw(ax, atoms, colour, ftol=ftol, title=title), colour)
     fig.savefig(path, dpi=110)
+    return fig
 
 
 def save_animation(frames: Sequence[Atoms], path: str | os.PathLike, fps: int = 8,
-                   max_frames: int = 60) -> int:
+                   max_frames: int = 60, colour: str = 'force', view: str = 'iso',
+                   ftol: float | None = None) -> int:
     """Animate a relaxation (frames of one net) to a GIF (Pillow); at most
-    ``max_frames`` frames, evenly picked, first and last kept. Axes and the
-    colour scale of ``|f|`` are those of the whole run. Return the number of
-    frames written."""
+    ``max_frames`` frames, evenly picked, first and last kept. Axes, the
+    colour scale and the arrow scale are those of the whole run. Return the
+    number of frames written."""
     picked = np.unique(np.linspace(0, len(frames) - 1, min(max_frames, len(frames)))
                        .round().astype(int))
     frames = [frames[i] for i in picked]
     limits = _limits(frames)
     largest = max(np.linalg.norm(a.get_forces(), axis=1).max() for a in frames)
-    norm = Normalize(0, max(largest, 1e-300))
-    fig, ax = figure(frames[0].calc.dim)
-    fig.colorbar(draw(ax, frames[0], limits, norm), ax=ax, shrink=0.7, label='|f| (Q a)')
+    scale = arrow_scale(largest, (limits[1] - limits[0]).max())
+    values = [spring_values(a, colour) for a in frames]
+    norm = None if values[0] is None else _norm(values)
+    fig, ax = figure(frames[0].calc.dim, view)
+    _colour_bar(fig, ax, draw(ax, frames[0], colour, limits, norm, scale, ftol), colour)
 
     def update(k):
         ax.clear()
-        draw(ax, frames[k], limits, norm,
+        orient(ax, view)
+        draw(ax, frames[k], colour, limits, norm, scale, ftol,
              title=f'frame {picked[k]}: E = {frames[k].get_potential_energy():.6g}')
 
     FuncAnimation(fig, update, frames=len(frames)).save(path, writer=PillowWriter(fps=fps))

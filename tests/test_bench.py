@@ -25,7 +25,7 @@ from ase_maud.bench.suite import SAMPLE_COLUMNS, run_suite
 from ase_maud.calculator import MaudCalculator
 from ase_maud.cli import build_parser, main
 from ase_maud.scenes import LARGE, SUITES, build, scene_sizes
-from ase_maud.threads import THREAD_VARIABLES
+from ase_maud.threads import STARTUP_VARIABLES
 
 PLOTS = ('fmax_vs_calls', 'fmax_vs_time', 'energy_error_vs_calls',
          'energy_error_vs_time')
@@ -33,8 +33,9 @@ PLOTS = ('fmax_vs_calls', 'fmax_vs_time', 'energy_error_vs_calls',
 
 @pytest.fixture
 def pinned(monkeypatch):
-    """Thread variables at 1 (as --threads 1 sets them), numba restored."""
-    for variable in THREAD_VARIABLES:
+    """OpenMP and BLAS variables at 1 (as --threads 1 needs them, else it
+    warns), numba restored."""
+    for variable in STARTUP_VARIABLES:
         monkeypatch.setenv(variable, '1')
     threads = numba.get_num_threads()
     yield

@@ -1,6 +1,8 @@
 """The one rules table: each keyword accepted and refused by its rule."""
 
+import os
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -65,3 +67,37 @@ def test_command_line_values_follow_the_rules(argv, message, capsys):
     with pytest.raises(SystemExit):
         build_parser().parse_args(argv)
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('value, directory, match', [
+    ('.', False, "out '.' is a directory; give a file name"),
+    ('missing/net.obj', False, "out 'missing/net.obj': the directory 'missing' does not exist"),
+    ('file.txt/net.obj', False, "the directory 'file.txt' does not exist"),
+    ('file.txt', True, "out 'file.txt': 'file.txt' is a file, not a directory"),
+    ('file.txt/deeper/bench', True, "'file.txt' is a file, not a directory"),
+    ('locked/net.obj', False, "the directory 'locked' is not writable"),
+    ('locked/bench', True, "the directory 'locked' is not writable"),
+])
+def test_check_writable_refuses_what_cannot_be_written(tmp_path, monkeypatch, value,
+                                                       directory, match):
+    from ase_maud import checks
+    from ase_maud.checks import check_writable
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / 'file.txt').write_text('')
+    (tmp_path / 'locked').mkdir()
+    access = os.access   # 'locked' is read-only, also to root
+    monkeypatch.setattr(checks.os, 'access',
+                        lambda path, mode: Path(path).name != 'locked' and access(path, mode))
+    with pytest.raises(ValueError, match=re.escape(match)):
+        check_writable('out', value, directory=directory)
+
+
+@pytest.mark.parametrize('value, directory', [
+    ('net.obj', False), ('sub/net.obj', False), ('.', True), ('new/deeper', True),
+    ('sub', True)])
+def test_check_writable_accepts_what_can_be_written(tmp_path, monkeypatch, value, directory):
+    from ase_maud.checks import check_writable
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / 'sub').mkdir()
+    assert check_writable('out', value, directory=directory) == Path(value)
+    assert not (tmp_path / 'new').exists()   # checked, nothing made

@@ -1,11 +1,9 @@
 """The ase-maud command: help, relax (a scene or a net file), show, classify,
-scene selection, thread pinning."""
+scene selection."""
 
-import os
 import subprocess
 import sys
 
-import numba
 import numpy as np
 import pytest
 from ase.io import read
@@ -15,7 +13,6 @@ from ase_maud import cli
 from ase_maud.cli import main
 from ase_maud.io import read_net, write_net
 from ase_maud.scenes import SUITE, build, scene_sizes
-from ase_maud.threads import THREAD_VARIABLES
 
 
 def test_no_command_prints_help(capsys):
@@ -84,35 +81,6 @@ def test_scene_selection():
     assert cli._size('12') == 12 and cli._size('CH4') == 'CH4'
 
 
-@pytest.mark.parametrize('threads', [1, 2])
-def test_pin_threads(monkeypatch, threads):
-    restarts = []
-
-    def execv(path, args):
-        restarts.append(args)
-        raise SystemExit
-
-    monkeypatch.setattr(os, 'execv', execv)
-    for variable in THREAD_VARIABLES:
-        monkeypatch.delenv(variable, raising=False)
-    before = numba.get_num_threads()
-    try:
-        with pytest.raises(SystemExit):   # numpy is loaded: start again
-            cli.pin_threads(threads, restart=True)
-        assert restarts == [[sys.executable, '-m', 'ase_maud',
-                             *sys.argv[1:]]]
-        assert all(os.environ[v] == str(threads) for v in THREAD_VARIABLES)
-        cli.pin_threads(threads, restart=True)  # now in force: no restart
-        assert len(restarts) == 1
-        assert numba.get_num_threads() == min(
-            threads, numba.config.NUMBA_NUM_THREADS)
-        monkeypatch.delenv('OPENBLAS_NUM_THREADS')
-        with pytest.warns(UserWarning, match='BLAS may use another count'):
-            cli.pin_threads(threads, restart=False)
-    finally:
-        numba.set_num_threads(before)
-
-
 # --- nets from files: relax, show, classify -----------------------------------
 
 FILE_FORMATS = ('obj', 'mesh2.json', 'network1.json', 'xyz')
@@ -152,10 +120,13 @@ def test_relax_progress_bar_and_log_file(tmp_path, capsys):
     path, *_ = write_quad_net(tmp_path, 'obj', n=4)
     log = tmp_path / 'relax.log'
     assert main(['relax', str(path), '--fmax', '1e-4', '--traj', str(tmp_path / 'o.traj'),
-                 '--progress', '--log', str(log)]) == 0
+                 '--progress', '--log', str(log), '--steps', '321']) == 0
     captured = capsys.readouterr()
     assert captured.out.startswith('converged: net.obj 16 points')   # only the summary
-    assert 'step' in captured.err and 'fmax' in captured.err and 'energy' in captured.err
+    steps = int(captured.out.split(' steps,')[0].rsplit(' ', 1)[1])
+    assert f'| {steps}/321 [' in captured.err   # the bar counts steps out of the cap
+    assert 'fmax' in captured.err and '(target 0.0001)' in captured.err
+    assert 'energy' in captured.err
     assert 'Maud:' in log.read_text()
 
 
@@ -165,10 +136,48 @@ def test_relax_net_options_need_a_file(capsys):
     assert '--fixed and --dim need NET_FILE' in capsys.readouterr().err
 
 
-def test_relax_a_malformed_file_names_the_line(tmp_path):
+@pytest.mark.parametrize('argv, message', [
+    (['relax', '--out', 'relaxed.foo'], "--out 'relaxed.foo': no net format has the suffix "
+     "'.foo'; use .obj, .json, .traj, .xyz or another format ASE writes"),
+    (['relax', '--out', 'relaxed'], "--out 'relaxed': no net format has the suffix ''"),
+    (['relax', '--out', '.'], "--out '.' is a directory; give a file name"),
+    (['relax', '--out', 'missing/r.obj'], "--out 'missing/r.obj': the directory 'missing' "
+     'does not exist'),
+    (['relax', '--traj', 'missing/m.traj'], "--traj 'missing/m.traj': the directory"),
+    (['relax', '--log', '.'], "--log '.' is a directory"),
+    (['relax', 'absent.obj'], 'absent.obj: No such file or directory'),
+    (['relax', 'bad.obj'], 'bad.obj line 3: face index 9 out of range'),
+    (['relax', 'net.obj', '--fixed', 'absent.txt'], 'absent.txt: No such file or directory'),
+    (['classify', 'bad.obj'], 'bad.obj line 3: face index 9 out of range'),
+    (['show', 'net.obj', '-o', 'net.txt'], "--output 'net.txt': a picture is written as one "
+     'of .'),
+    (['show', 'net.obj', '--gif', '-o', 'net.png'], "--output 'net.png': an animation "
+     '(--gif) is written as .gif'),
+    (['bench', '--out', 'net.obj'], "--out 'net.obj': 'net.obj' is a file, not a directory"),
+    (['backends', '--out', 'net.obj/sub'], "--out 'net.obj/sub': 'net.obj' is a file, not a "
+     'directory'),
+])
+def test_errors_are_one_line_with_status_2(tmp_path, monkeypatch, capsys, argv, message):
+    """Bad input is one line on stderr, exit status 2, found before any work
+    (no trajectory, no picture, no benchmark output)."""
+    monkeypatch.chdir(tmp_path)
+    write_quad_net(tmp_path, 'obj', n=4)
     (tmp_path / 'bad.obj').write_text('v 0 0 0\nv 1 0 0\nf 1 2 9\n')
-    with pytest.raises(ValueError, match=r'bad\.obj line 3: face index 9 out of range'):
-        main(['relax', str(tmp_path / 'bad.obj')])
+    before = sorted(tmp_path.iterdir())
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert captured.err.startswith(f'ase-maud: error: {message}')
+    assert captured.err.count('\n') == 1 and captured.out == ''
+    assert sorted(tmp_path.iterdir()) == before
+
+
+def test_an_error_is_one_line_from_the_command(tmp_path):
+    done = subprocess.run([sys.executable, '-m', 'ase_maud', 'relax', '--out', 'r.foo'],
+                          cwd=tmp_path, capture_output=True, text=True)
+    assert done.returncode == 2
+    assert done.stderr.startswith("ase-maud: error: --out 'r.foo': no net format")
+    assert done.stderr.count('\n') == 1 and 'Traceback' not in done.stderr
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_relax_a_net_file_in_a_subprocess(tmp_path):
@@ -213,6 +222,19 @@ def test_show_draws_png_and_gif(tmp_path, capsys, relaxation, dim):
     assert f'wrote {png}' in out and f'wrote {gif} (' in out
 
 
+@pytest.mark.parametrize('colour, view', [('length', 'top'), ('none', 'front'),
+                                          ('force', 'side')])
+def test_show_colours_and_views(tmp_path, capsys, relaxation, colour, view):
+    svg = tmp_path / 'net.svg'
+    assert main(['show', str(relaxation[3]), '--color', colour, '--view', view,
+                 '-o', str(svg)]) == 0
+    text = svg.read_text()
+    assert text.startswith('<?xml') and ('spring length L' in text) == (colour == 'length')
+    assert 'residual force' not in text   # relaxed to --fmax 1e-8: converged
+    assert main(['show', str(relaxation[3]), '--frame', '0', '-o', str(svg)]) == 0
+    assert 'residual force' in svg.read_text()
+
+
 def test_show_writes_beside_the_file_by_default(tmp_path):
     path, *_ = write_quad_net(tmp_path, 'mesh2.json', n=4)
     assert main(['show', str(path)]) == 0
@@ -236,6 +258,24 @@ def test_classify_the_cage_centre_is_a_saddle_of_index_1(tmp_path, capsys):
     assert verdict.startswith('saddle of index 1: cage.traj 11 points, 3 free non-rigid')
     values = [float(v) for v in eigenvalues.split(':')[1].split()]
     assert values[0] < 0 < values[1]
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_classify_judges_at_the_fmax_relaxed_to(tmp_path, capsys, seed):
+    """A trajectory relaxed to --fmax 1e-2 is stationary at 1e-2 (stored in
+    it), not at the default 1e-6 Q a, unless --fmax says otherwise."""
+    path, *_ = write_quad_net(tmp_path, 'obj', n=4, seed=seed)
+    traj = tmp_path / 'r.traj'
+    assert main(['relax', str(path), '--fixed', str(tmp_path / 'fixed.txt'),
+                 '--fmax', '1e-2', '--traj', str(traj), '--quiet']) == 0
+    fmax = np.linalg.norm(read(traj).get_forces(), axis=1).max()
+    assert 1e-6 < fmax < 1e-2   # the default would judge otherwise
+    capsys.readouterr()
+    assert main(['classify', str(traj)]) == 0
+    assert '(stationary up to 0.01, the fmax it was relaxed to)' in capsys.readouterr().out
+    assert main(['classify', str(traj), '--fmax', f'{fmax / 2}']) == 1
+    assert capsys.readouterr().out.startswith('not stationary (fmax ')
+    assert main(['classify', str(traj), '--ftol', f'{fmax * 2}']) == 0
 
 
 def test_classify_says_not_stationary(tmp_path, capsys):

@@ -349,3 +349,20 @@ def test_writing_over_a_file_keeps_its_permissions(tmp_path, kind, mode):
     umask = os.umask(0)
     os.umask(umask)
     assert stat.S_IMODE(fresh.stat().st_mode) == 0o666 & ~umask
+
+
+@pytest.mark.parametrize('seed, fmax', [(0, 1e-2), (1, 3e-4), (2, 1e-5)])
+def test_relaxed_fmax_is_the_one_the_run_was_given(tmp_path, seed, fmax):
+    from ase.optimize import BFGS
+
+    from ase_maud.io import relaxed_fmax
+    from ase_maud.scenes import build
+    for name, optimizer in (('maud', Maud), ('bfgs', BFGS)):
+        atoms = build('ring', 8, seed=seed)
+        with optimizer(atoms, trajectory=str(tmp_path / f'{name}.traj'), logfile=None) as opt:
+            opt.run(fmax=fmax, steps=200)
+        assert relaxed_fmax(tmp_path / f'{name}.traj') == fmax
+    write_net(tmp_path / 'written.traj', atoms)   # no optimizer: nothing stored
+    write_net(tmp_path / 'written.obj', atoms)
+    assert relaxed_fmax(tmp_path / 'written.traj') is None
+    assert relaxed_fmax(tmp_path / 'written.obj') is None

@@ -25,12 +25,14 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 from ase.optimize import FIRE, LBFGS
+from matplotlib.colors import Normalize
 from PIL import Image
 
 from ase_maud import Maud
 from ase_maud.analysis import classify
 from ase_maud.bench.runner import CallRecorder
-from ase_maud.pictures import draw
+from ase_maud.pictures import COLOURS as SPRING_COLOURS
+from ase_maud.pictures import draw, orient, spring_values
 from ase_maud.scenes import build
 
 matplotlib.use('Agg')
@@ -58,15 +60,20 @@ def save(fig: plt.Figure | None, path: Path, source: Path | None = None) -> None
 def hanging_net(out: Path) -> None:
     """The default scene of ``ase-maud relax`` before and after Maud, drawn as
     ``ase-maud show`` draws a net (:func:`ase_maud.pictures.draw`)."""
-    atoms = build('hanging_net', 12, seed=0)
-    fig = plt.figure(figsize=(8, 3.8))
-    draw(fig.add_subplot(1, 2, 1, projection='3d'), atoms,
-         title=f'start: E = {atoms.get_potential_energy():.6g}')
+    start, atoms = (build('hanging_net', 12, seed=0) for _ in range(2))
     with Maud(atoms, logfile=None) as opt:
         opt.run(fmax=1e-6)
-    draw(fig.add_subplot(1, 2, 2, projection='3d'), atoms,
-         title=f'after {opt.nsteps} Maud steps: E = {atoms.get_potential_energy():.6g}')
+    forces = np.concatenate([spring_values(a, 'force') for a in (start, atoms)])
+    norm = Normalize(forces.min(), forces.max())   # one colour scale for both
+    fig = plt.figure(figsize=(9, 4.4))
+    axes = [fig.add_subplot(1, 2, k, projection='3d') for k in (1, 2)]
+    for ax in axes:
+        orient(ax, 'iso')
+    draw(axes[0], start, norm=norm, title=f'start: E = {start.get_potential_energy():.6g}')
+    lines = draw(axes[1], atoms, norm=norm, ftol=1e-6, title=f'after {opt.nsteps} Maud '
+                 f'steps: E = {atoms.get_potential_energy():.6g}, converged')
     fig.tight_layout()
+    fig.colorbar(lines, ax=axes, shrink=0.6, label=SPRING_COLOURS['force'])
     save(fig, out / 'hanging_net.png')
 
 

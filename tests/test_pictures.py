@@ -1,0 +1,197 @@
+"""Pictures of nets: what the artists show (spring colours and their scale,
+supports and loads in the legend, residual-force arrows at the stated scale
+and none when converged, the 3D view), not how the pixels look."""
+
+import math
+from types import SimpleNamespace
+
+import matplotlib
+import numpy as np
+import pytest
+from ase import Atoms
+from matplotlib.collections import LineCollection
+from matplotlib.quiver import Quiver
+
+from ase_maud import Maud, MaudCalculator
+from ase_maud.pictures import (
+    ARROW,
+    COLOURS,
+    VIEWS,
+    arrow_scale,
+    draw,
+    figure,
+    save_animation,
+    save_picture,
+    spring_values,
+)
+from ase_maud.scenes import build
+
+matplotlib.use('Agg')
+
+SEEDS = [0, 1, 2]
+
+
+def shaken(scene, seed, size=4, amount=0.3, Q=1.0):
+    """A seeded scene with its points moved at random (not converged)."""
+    atoms = build(scene, size, seed=seed, Q=Q)
+    rng = np.random.default_rng(seed)
+    dim = atoms.calc.dim
+    atoms.positions[:, :dim] += rng.uniform(-amount, amount, (len(atoms), dim))
+    atoms.calc.reset()
+    return atoms
+
+
+def relaxed(scene, seed, size=4):
+    atoms = build(scene, size, seed=seed)
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-9, steps=500)
+    return atoms
+
+
+def legend_texts(ax):
+    legend = ax.get_legend()
+    return [] if legend is None else [t.get_text() for t in legend.get_texts()]
+
+
+def arrows(ax):
+    """The residual-force arrows drawn on ``ax`` (a 2D Quiver or the 3D
+    quiver's line collection), found by their label."""
+    return [c for c in ax.collections if c.get_label().startswith('residual force')]
+
+
+@pytest.mark.parametrize('seed', SEEDS)
+@pytest.mark.parametrize('scene', ['net2d', 'hanging_net'])
+def test_springs_are_coloured_by_force_with_a_colour_bar(tmp_path, scene, seed):
+    Q = 1.5 + seed
+    atoms = shaken(scene, seed, Q=Q)
+    fig = save_picture(atoms, tmp_path / 'net.png')
+    ax, bar = fig.axes
+    lines = next(c for c in ax.collections if isinstance(c, LineCollection)
+                 and c.get_array() is not None)
+    i, j = atoms.calc.springs.T
+    forces = Q * np.linalg.norm(atoms.positions[i] - atoms.positions[j], axis=1)
+    assert np.allclose(lines.get_array(), forces, rtol=1e-12)
+    assert bar.get_ylabel() == COLOURS['force']
+    assert bar.get_ylim() == pytest.approx((forces.min(), forces.max()))
+    expected = lines.cmap(lines.norm(forces))
+    assert np.allclose(lines.get_colors(), expected)   # as drawn (savefig ran)
+    assert (tmp_path / 'net.png').read_bytes()[:4] == b'\x89PNG'
+
+
+@pytest.mark.parametrize('seed', SEEDS)
+def test_spring_force_is_Q_q_L_and_length_is_L(seed):
+    rng = np.random.default_rng(seed)
+    positions = rng.normal(size=(7, 3))
+    springs = np.array([(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (5, 6), (6, 0), (0, 3)])
+    q = rng.uniform(0.1, 3.0, len(springs))
+    Q = rng.uniform(0.5, 2.0)
+    atoms = Atoms(positions=positions)
+    atoms.calc = SimpleNamespace(springs=springs, potential=SimpleNamespace(Q=Q), q=q,
+                                 parameters={})
+    lengths = np.array([math.dist(positions[a], positions[b]) for a, b in springs])
+    assert np.allclose(spring_values(atoms, 'length'), lengths, rtol=1e-12)
+    assert np.allclose(spring_values(atoms, 'force'), Q * q * lengths, rtol=1e-12)
+    atoms.calc.q = None   # no force densities: q = 1
+    assert np.allclose(spring_values(atoms, 'force'), Q * lengths, rtol=1e-12)
+    assert spring_values(atoms, 'none') is None
+    with pytest.raises(ValueError, match="colour must be one of force, length, none"):
+        spring_values(atoms, 'tension')
+
+
+@pytest.mark.parametrize('seed', SEEDS)
+def test_colour_by_length_or_none(tmp_path, seed):
+    atoms = shaken('hanging_net', seed)
+    fig = save_picture(atoms, tmp_path / 'length.png', colour='length')
+    assert fig.axes[1].get_ylabel() == COLOURS['length']
+    fig = save_picture(atoms, tmp_path / 'plain.png', colour='none')
+    assert len(fig.axes) == 1   # no colour bar
+    lines = [c for c in fig.axes[0].collections if isinstance(c, LineCollection)
+             and not c.get_label().startswith('residual')]
+    assert lines[0].get_array() is None
+    assert np.allclose(lines[0].get_colors(), matplotlib.colors.to_rgba('0.55'))
+
+
+@pytest.mark.parametrize('seed', SEEDS)
+@pytest.mark.parametrize('scene', ['net2d', 'hanging_net'])
+def test_no_arrows_when_converged(scene, seed):
+    atoms = relaxed(scene, seed)
+    fig, ax = figure(atoms.calc.dim)
+    draw(ax, atoms)
+    assert arrows(ax) == []
+    assert not any(text.startswith('residual force') for text in legend_texts(ax))
+    assert 'support (fixed)' in legend_texts(ax)
+    # the same net judged at a tolerance below its forces: arrows
+    fmax = np.linalg.norm(atoms.get_forces(), axis=1).max()
+    fig, ax = figure(atoms.calc.dim)
+    draw(ax, atoms, ftol=fmax / 2)
+    assert len(arrows(ax)) == 1
+
+
+@pytest.mark.parametrize('seed', SEEDS)
+def test_arrows_are_forces_at_the_stated_scale(seed):
+    atoms = shaken('net2d', seed)
+    fig, ax = figure(2)
+    draw(ax, atoms)
+    (quiver,) = arrows(ax)
+    assert isinstance(quiver, Quiver)
+    text = next(t for t in legend_texts(ax) if t.startswith('residual force'))
+    scale = float(text.split('= ')[1].split(' force')[0])
+    free = np.ones(len(atoms), bool)
+    free[atoms.constraints[0].index] = False
+    forces = atoms.get_forces()[free, :2]
+    assert np.allclose(np.column_stack([quiver.U, quiver.V]) * scale, forces, rtol=1e-3)
+    assert quiver.scale == 1 and quiver.scale_units == 'xy'   # one data unit per unit
+
+
+@pytest.mark.parametrize('seed', SEEDS)
+def test_arrow_scale_is_the_least_1_2_5_number(seed):
+    rng = np.random.default_rng(seed)
+    for largest, extent in 10.0 ** rng.uniform(-8, 8, (50, 2)):
+        scale = arrow_scale(largest, extent)
+        mantissa = scale / 10.0 ** math.floor(math.log10(scale) + 1e-9)
+        assert min(abs(mantissa - m) for m in (1, 2, 5)) < 1e-9
+        assert largest / scale <= ARROW * extent * (1 + 1e-9)   # short enough
+        assert largest / scale > ARROW * extent / 2.5 * (1 - 1e-9)   # and no shorter
+
+
+@pytest.mark.parametrize('seed', SEEDS)
+def test_supports_and_loads_in_the_legend(seed):
+    atoms = shaken('hanging_net', seed)
+    loads = np.zeros((len(atoms), 3))
+    loaded = np.random.default_rng(seed).choice(len(atoms), 5, replace=False)
+    loads[loaded, 2] = -1.0
+
+    class Loaded(MaudCalculator):
+        """A calculator that reports loads (drawn, not part of its forces)."""
+
+    calc = Loaded(springs=atoms.calc.springs, dim=3)
+    Loaded.loads = loads
+    atoms.calc = calc
+    fig, ax = figure(3)
+    draw(ax, atoms)
+    texts = legend_texts(ax)
+    assert {'free point', 'support (fixed)', 'loaded point'} <= set(texts)
+    fixed = set(atoms.constraints[0].index.tolist())
+    marked = next(c for c in ax.collections if c.get_label() == 'loaded point')
+    assert len(marked.get_offsets()) == len(set(loaded.tolist()) - fixed)
+
+
+@pytest.mark.parametrize('view', list(VIEWS))
+def test_orthographic_view_from_a_side(view):
+    atoms = shaken('hanging_net', 0)
+    fig, ax = figure(3, view)
+    draw(ax, atoms)
+    assert (ax.elev, ax.azim) == VIEWS[view]
+    assert ax._focal_length == np.inf   # matplotlib's orthographic projection
+    edge_on = {'top': 'z', 'front': 'y', 'side': 'x'}.get(view)
+    for axis in 'xyz':
+        ticks = getattr(ax, f'get_{axis}ticks')()
+        assert (len(ticks) == 0) == (axis == edge_on)
+    with pytest.raises(ValueError, match='view must be one of top, front, side, iso'):
+        figure(3, 'below')
+
+
+def test_animation_writes_every_frame(tmp_path):
+    frames = [shaken('net2d', seed, amount=amount) for seed, amount in ((0, 0.3), (0, 0.1))]
+    assert save_animation(frames, tmp_path / 'run.gif') == 2
+    assert (tmp_path / 'run.gif').read_bytes()[:6] == b'GIF89a'

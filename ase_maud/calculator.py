@@ -364,6 +364,18 @@ class MaudCalculator(Calculator):
         (:func:`.topology.unbounded_components`); empty if there are none."""
         return topology.unbounded_components(atoms, self.springs, self.dim)
 
+    def no_equilibrium(self, atoms: Atoms, minimum: bool = True) -> str | None:
+        """Why ``atoms`` can have no finite equilibrium, in words, or None if
+        nothing is proved: loads with a net sum along a direction nothing
+        holds (:func:`.topology.net_load`: no stationary point at all), or,
+        for a ``minimum``, spring components that fly away
+        (:meth:`unbounded_components`)."""
+        total = topology.net_load(atoms, self.potential.loads, self.dim)
+        if total is not None:
+            return topology.describe_net_load(total)
+        components = self.unbounded_components(atoms) if minimum else []
+        return topology.describe_unbounded(components) if components else None
+
 
 def raise_on_closest(scaled: np.ndarray, a: float) -> None:
     """Raise ValueError naming the closest pair of points if it is closer

@@ -82,7 +82,7 @@ class MaudPotential:
         loads[:, :given.shape[1]] = given
         if self.dim == 2 and loads[:, 2].any():
             k = int(np.flatnonzero(loads[:, 2])[0])
-            raise ValueError(f'loads of atom {k} has z = {loads[k, 2]!r}: a dim=2 '
+            raise ValueError(f'loads of atom {k} has z = {float(loads[k, 2])!r}: a dim=2 '
                              'scene takes loads in its plane (z = 0)')
         return loads
 

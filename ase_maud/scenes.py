@@ -28,9 +28,12 @@ from scipy.spatial import Delaunay, cKDTree
 
 from .calculator import MaudCalculator
 from .checks import as_whole
+from .io import free_point_loads
 
 #: Closest start of two points, in units of ``a``.
 MIN_DISTANCE = 0.2
+#: The load on each free point of :func:`weighted_net`, in units of ``a Q``.
+WEIGHT = 0.5
 
 
 def keep_on_plane(atoms: Atoms) -> Atoms:
@@ -243,6 +246,15 @@ def hanging_net(size: int = 8, seed: int = 0, a: float = 1.0, Q: float = 1.0) ->
     positions[edge, 2] = (x**2 - y**2) / n
     positions[~edge] += rng.uniform(-0.3, 0.3, ((n - 2)**2, 3))
     return _scene(positions, springs, a, Q, fixed=np.flatnonzero(edge))
+
+
+def weighted_net(size: int = 8, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
+    """:func:`hanging_net` under its weight: a load of :data:`WEIGHT` ``a Q``
+    in -z on every free point (``loads``), so that it hangs below its
+    saddle boundary; the default scene of ``ase-maud relax``."""
+    atoms = hanging_net(size, seed, a, Q)
+    atoms.calc.set(loads=free_point_loads(atoms, [0.0, 0.0, -WEIGHT * a * Q]))
+    return atoms
 
 
 def random_graph(size: int = 30, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
@@ -483,7 +495,7 @@ def neighbour_graph(size: int = 2000, seed: int = 0, a: float = 1.0,
 
 
 SCENES = {f.__name__: f for f in (dimer, ring, chain, net2d, net3d,
-                                  hanging_net, random_graph, all_pairs,
+                                  hanging_net, weighted_net, random_graph, all_pairs,
                                   all_pairs2d, tree, wheel, molecule, cage,
                                   hub_net, disc, neighbour_graph)}
 

@@ -511,7 +511,8 @@ SUITE = [('dimer', 2), ('ring', 16), ('chain', 20), ('net2d', 6),
 #: collective``.
 COLLECTIVE = [('chain', 100), ('ring', 100), ('ring', 1000), ('tree', 60),
               ('tree', 200), ('wheel', 100), ('hanging_net', 20),
-              ('hanging_net', 50), ('random_graph', 200), ('random_graph', 2000),
+              ('hanging_net', 50), ('weighted_net', 20), ('random_graph', 200),
+              ('random_graph', 2000),
               ('all_pairs', 40)]
 
 #: The scenes a form finder relaxes, 2000 to 10**4 points: nets with fixed

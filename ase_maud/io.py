@@ -617,21 +617,19 @@ def _compas_document(atoms, like):
 def _update_forces(path, data, springs, q, loads):
     """Set ``q`` and ``px``, ``py``, ``pz`` in COMPAS ``data`` (read from
     ``path``) where the net's differ from what it says; a mesh edge without
-    attributes gets an ``edgedata`` entry."""
+    attributes gets an ``edgedata`` entry, a spring that is no edge of the
+    file (from an edge list) no ``q``."""
     points, _ = _compas_points(path, data)
     keys = list(points)
     file_q, file_loads = _compas_forces(path, data, springs)[:2]
     for n in np.flatnonzero((file_loads != loads).any(axis=1)):
         points[keys[n]].update(zip(LOAD_ATTRIBUTES, map(float, loads[n]), strict=True))
     edges = _edge_attributes(data, {str(k): n for n, k in enumerate(keys)})
+    file_edges = {(min(i, j), max(i, j)) for i, j in read_compas(path)[1].tolist()}
     for s in np.flatnonzero(file_q != q):
-        i, j = sorted(springs[s])
-        if (i, j) not in edges:
-            table = data.setdefault('edgedata', {}) if 'face' in data else data['edge']
-            attributes = {}
-            if 'face' in data:
-                table[f'({keys[i]}, {keys[j]})'] = attributes
-            else:
-                table.setdefault(str(keys[i]), {})[str(keys[j])] = attributes
-            edges[(i, j)] = attributes
+        i, j = sorted(springs[s].tolist())
+        if (i, j) not in file_edges:
+            continue
+        if (i, j) not in edges:   # a mesh edge without edgedata
+            edges[(i, j)] = data.setdefault('edgedata', {})[f'({keys[i]}, {keys[j]})'] = {}
         edges[(i, j)]['q'] = float(q[s])

@@ -62,12 +62,18 @@ _use_numba_cache_dir()
 
 from .calculator import MaudCalculator  # noqa: E402  (after the cache is set)
 from .lock import FileInUseError  # noqa: E402
-from .monitor import DivergenceError, MaudError, StagnationError  # noqa: E402
+from .monitor import (  # noqa: E402
+    DivergenceError,
+    MaudError,
+    NoEquilibriumError,
+    StagnationError,
+)
 from .optimizer import Maud  # noqa: E402
 from .potential import MaudPotential  # noqa: E402
 from .precon import MaudPrecon  # noqa: E402
 
 __all__ = ['MaudCalculator', 'Maud', 'MaudPotential', 'MaudPrecon', 'MaudError',
-           'DivergenceError', 'StagnationError', 'FileInUseError', 'kernels_cached',
+           'DivergenceError', 'NoEquilibriumError', 'StagnationError', 'FileInUseError',
+           'kernels_cached',
            'numba_cache_dir']
 __version__ = '0.1.0'

@@ -2,7 +2,11 @@
 
 Energy, each pair counted once (the specification's P double-counts: P = 2E)::
 
-    E = sum_{i<j} a**3 Q / L_ij  +  sum_{(i,j) in springs} Q L_ij**2 / 2
+    E = sum_{i<j} a**3 Q / L_ij  +  sum_{s=(i,j) in springs} Q q_s L_ij**2 / 2
+        - sum_i F_i . r_i
+
+with ``q_s`` each spring's force density multiplier (default 1) and ``F_i``
+constant nodal loads (default none).
 
 ``a`` is a length and ``Q`` a force per length, in whatever units the user
 works in (ASE's eV and Angstrom if the scene is mixed with other ASE tools).
@@ -54,6 +58,18 @@ class MaudCalculator(Calculator):
         Length in the repulsion ``a**3 Q / L`` (default 1).
     Q : float
         Spring constant, force per length (default 1).
+    q : array-like of shape (K,), optional
+        Each spring's force density multiplier of ``Q``, positive and finite,
+        in the order of ``springs``: spring ``s`` has energy ``Q q_s L**2 /
+        2`` and pulls with ``Q q_s L`` (the force density of compas_fd is
+        ``Q q_s``). Default None: every ``q_s = 1``. The springs' Hessian
+        stays constant, ``Q`` times the ``q``-weighted Laplacian.
+    loads : array-like of shape (N, 3), optional
+        Constant nodal loads ``F_i`` in force units (self-weight, say): the
+        energy gains ``-sum_i F_i . r_i``, the forces ``+F_i``; no Hessian or
+        nodal block changes. ``(N, 2)`` for ``dim=2`` (in-plane; a z
+        component must be 0). One row per atom, checked when the atoms are.
+        Default None: no loads.
     dim : 2 or 3
         ``2``: every point lies on one plane ``z = const`` (checked to a
         relative :data:`PLANE_TOLERANCE`), forces have ``z = 0`` exactly and
@@ -117,10 +133,11 @@ class MaudCalculator(Calculator):
     # springs default to a tuple: Calculator.todict compares each parameter
     # with its default by ``!=``, which fails on an ndarray default. The
     # potential's parameters, then the backends' (from their registry).
-    default_parameters = {'springs': (), 'a': 1.0, 'Q': 1.0, 'dim': 3,
-                          'backend': 'auto', **backends.parameter_defaults()}
+    default_parameters = {'springs': (), 'a': 1.0, 'Q': 1.0, 'dim': 3, 'q': None,
+                          'loads': None, 'backend': 'auto',
+                          **backends.parameter_defaults()}
     #: The parameters that make the potential (the rest choose how to sum it).
-    potential_parameters = ('springs', 'a', 'Q', 'dim')
+    potential_parameters = ('springs', 'a', 'Q', 'dim', 'q', 'loads')
     discard_results_on_any_change = True
     nolabel = True
 
@@ -133,14 +150,15 @@ class MaudCalculator(Calculator):
     accuracy_parameters = frozenset({'tol', 'crossover'})
 
     def __init__(self, springs: ArrayLike = (), a: float = 1.0,
-                 Q: float = 1.0, dim: int = 3, backend: str = 'auto',
+                 Q: float = 1.0, dim: int = 3, q: ArrayLike | None = None,
+                 loads: ArrayLike | None = None, backend: str = 'auto',
                  **kwargs: Any) -> None:
         self.potential: MaudPotential = MaudPotential(np.zeros((0, 2), int))
         self.last_backend: str | None = None
         self.last_tolerance: float | None = None
         self.last_force_scale: float | None = None
-        super().__init__(springs=springs, a=a, Q=Q, dim=dim, backend=backend,
-                         **kwargs)
+        super().__init__(springs=springs, a=a, Q=Q, dim=dim, q=q, loads=loads,
+                         backend=backend, **kwargs)
 
     def set(self, **kwargs: Any) -> dict[str, Any]:
         """Set parameters; invalid values raise ValueError and are not kept.
@@ -231,8 +249,8 @@ class MaudCalculator(Calculator):
         """Validate ``atoms`` for this potential; return its positions.
 
         Raises ValueError naming the problem: no atoms, periodic boundaries, a spring
-        index beyond the last atom, a non-finite position, or (``dim=2``) a
-        point off the plane of the others.
+        index beyond the last atom, loads not one per atom, a non-finite
+        position, or (``dim=2``) a point off the plane of the others.
         """
         if np.any(atoms.pbc):
             raise ValueError(f'periodic boundaries are not supported (pbc='
@@ -242,6 +260,7 @@ class MaudCalculator(Calculator):
         if natoms == 0:
             raise ValueError('no atoms: a scene needs at least one point')
         check_range(self.springs, natoms)   # the rest was checked by set
+        self.potential.check_loads(natoms)
         positions = atoms.get_positions()
         bad = np.flatnonzero(~np.isfinite(positions).all(axis=1))
         if bad.size:
@@ -273,13 +292,14 @@ class MaudCalculator(Calculator):
         if not (np.isfinite(e_rep) and np.isfinite(f_rep).all() and (
                 block6 is None or np.isfinite(block6).all())):
             raise_on_closest(scaled, a)
-        e_spr, f_spr = physics.spring_terms(scaled, self.springs, 1.0)
-        results = {'energy': potential.energy_unit * (e_rep + e_spr),
-                   'forces': potential.force_unit * (f_rep + f_spr)}
+        e_spr, f_spr = physics.spring_terms(scaled, self.springs, potential.stiffnesses)
+        e_load, f_load = physics.load_terms(positions, potential.loads)
+        results = {'energy': potential.energy_unit * (e_rep + e_spr) + e_load,
+                   'forces': potential.force_unit * (f_rep + f_spr) + f_load}
         if want_blocks:
             blocks = backends.voigt_to_blocks(block6, dim)
             blocks += physics.spring_nodal_blocks(self.springs, len(scaled),
-                                                  1.0, dim)
+                                                  potential.stiffnesses, dim)
             results['stiffness'] = Q * blocks
         if 'hessian' in properties:
             self.check_hessian_size(len(scaled))
@@ -332,7 +352,8 @@ class MaudCalculator(Calculator):
                 'modes) instead')
 
     def get_spring_hessian(self, atoms: Atoms | None = None) -> sp.csr_matrix:
-        """The springs' exact, constant Hessian ``Q (L (x) I_dim)``, shape
+        """The springs' exact, constant Hessian ``Q (L_q (x) I_dim)`` (``L_q``
+        the Laplacian weighted by ``q``), shape
         (dim N, dim N), kept by :attr:`potential` (built once per number of
         atoms). A spring index beyond the last atom is a ValueError."""
         atoms = atoms if atoms is not None else self.atoms
@@ -342,6 +363,18 @@ class MaudCalculator(Calculator):
         """Spring components of ``atoms`` proved to fly away for ever
         (:func:`.topology.unbounded_components`); empty if there are none."""
         return topology.unbounded_components(atoms, self.springs, self.dim)
+
+    def no_equilibrium(self, atoms: Atoms, minimum: bool = True) -> str | None:
+        """Why ``atoms`` can have no finite equilibrium, in words, or None if
+        nothing is proved: loads with a net sum along a direction nothing
+        holds (:func:`.topology.net_load`: no stationary point at all), or,
+        for a ``minimum``, spring components that fly away
+        (:meth:`unbounded_components`)."""
+        total = topology.net_load(atoms, self.potential.loads, self.dim)
+        if total is not None:
+            return topology.describe_net_load(total)
+        components = self.unbounded_components(atoms) if minimum else []
+        return topology.describe_unbounded(components) if components else None
 
 
 def raise_on_closest(scaled: np.ndarray, a: float) -> None:

@@ -19,6 +19,8 @@ from numbers import Integral, Real
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 
 def as_whole(value: Any) -> int | None:
     """``value`` as an int if it is a whole number (an integer, numpy's
@@ -96,6 +98,10 @@ RULES: dict[str, Rule] = {
     'a': Rule('a positive finite number', lambda v: v > 0),
     'Q': Rule('a positive finite number', lambda v: v > 0),
     'dim': Rule('2 or 3', choices=(2, 3)),
+    # the calculator's arrays, each entry (check_each)
+    'q': Rule('a positive finite number (the force density multiplier of Q)',
+              lambda v: v > 0),
+    'loads': Rule('a finite number (force units)', lambda v: abs(v) < math.inf),
     # the backends
     'tol': Rule('a number in [0, 1), the force error allowed relative to the '
                 'largest repulsive force (0: exact)', lambda v: 0 <= v < 1),
@@ -128,6 +134,29 @@ def check(name: str, value: Any) -> Any:
         if number is not None and rule.test(number):
             return number
     raise ValueError(f'{name} must be {rule.accepted}, got {value!r}')
+
+
+def check_each(name: str, values: Any, what: str) -> np.ndarray:
+    """Every entry of the array ``values`` checked against ``RULES[name]`` (a
+    number rule): a float array of its shape, or a ValueError naming
+    ``name``, the ``what`` (``'spring'``, ``'atom'``) of the first bad entry
+    (its row), the value and what is accepted."""
+    rule = RULES[name]
+    array = np.asarray(values)
+    try:
+        if array.dtype == bool:
+            raise TypeError
+        numbers = array.astype(float)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f'{name} must be an array of numbers, each '
+                         f'{rule.accepted}; got {values!r}') from None
+    with np.errstate(invalid='ignore', over='ignore'):
+        good = np.isfinite(numbers) & rule.test(numbers)
+    if not np.all(good):
+        where = tuple(np.argwhere(~np.asarray(good))[0])
+        at = f' of {what} {where[0]}' if where else ''
+        raise ValueError(f'{name}{at} must be {rule.accepted}, got {array[where]!r}')
+    return numbers
 
 
 def _matches(value: Any, choice: Any) -> bool:

@@ -93,16 +93,18 @@ def relax(args: argparse.Namespace) -> int:
     """``ase-maud relax``: exit status 0 if converged, else 1."""
     from . import kernels_cached
     from .bench.runner import CallRecorder
-    from .io import net_format, read_net, write_net
+    from .io import free_point_loads, net_format, read_net, write_net
     from .optimizer import Maud
     from .scenes import build
 
     if args.net is None:
         atoms = build(args.scene, args.size, seed=args.seed,
                       **{k: v for k, v in (('a', args.a), ('Q', args.Q)) if v is not None})
+        if args.load is not None:
+            atoms.calc.set(loads=free_point_loads(atoms, args.load))
         label = args.scene
     else:
-        atoms = read_net(args.net, **_net_options(args))
+        atoms = read_net(args.net, load=args.load, **_net_options(args))
         label = Path(args.net).name
     if not kernels_cached():
         print('compiling the kernels (first run only, ~20 s)...', file=sys.stderr,
@@ -335,6 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
         'springs, a, Q and dim: every command here reads it back), the relaxed '
         'net with --out (like NET_FILE if of its format), and a one-line summary.',
         ['ase-maud relax                       # the default scene, maud.traj',
+         'ase-maud relax net.obj --fixed fixed.txt --load 0 0 -0.1 --out hung.json',
          'ase-maud relax net.obj --fixed fixed.txt --fmax 1e-6 --traj out.traj '
          '--out relaxed.obj',
          'ase-maud relax points.xyz --edges edges.txt --dim 2 --quiet',
@@ -342,10 +345,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('net', nargs='?', metavar='NET_FILE',
                    help='the net to relax (default: the built-in --scene)')
     _add_net_options(p)
+    p.add_argument('--load', nargs=3, type=_ruled('loads'), metavar=('X', 'Y', 'Z'),
+                   help='a constant load (force units) on every free point, e.g. '
+                   "self-weight --load 0 0 -0.1; replaces the file's or scene's loads "
+                   '(default: those of NET_FILE: COMPAS px, py, pz, or a trajectory\'s; '
+                   'the scene\'s)')
     p.add_argument('--out', metavar='RELAXED_FILE',
                    help='write the relaxed net here, in the format of its suffix '
                    '(.obj, .json, .traj, .xyz plus NAME.edges.txt, ...)')
-    p.add_argument('--scene', default='hanging_net', choices=SCENES,
+    p.add_argument('--scene', default='weighted_net', choices=SCENES,
                    metavar='NAME', help=f'without NET_FILE, of: {", ".join(SCENES)} '
                    '(default: %(default)s)')
     p.add_argument('--size', type=_size, help="scene size (default: the "

@@ -18,9 +18,16 @@ Formats, chosen by the file name's suffix:
   are the edges), bare or in COMPAS's envelope (``{"dtype": ..., "value":
   {...}}`` of COMPAS 1.x, ``{"dtype": ..., "data": {...}}`` of 2.x). Points
   are in the order of the file's vertex (node) keys; a vertex attribute
-  ``is_anchor`` or ``is_fixed`` that is true fixes the point. Written back as
-  the original structure with only ``x``, ``y``, ``z`` replaced.
-- ``.traj``, ASE trajectory: the springs, ``a``, ``Q`` and ``dim`` come back
+  ``is_anchor`` or ``is_fixed`` that is true fixes the point. As in
+  compas_fd, an edge attribute ``q`` is the spring's force density (the
+  calculator's ``q``, a multiplier of ``Q``: ``Q q`` with ``Q = 1``) and
+  vertex attributes ``px``, ``py``, ``pz`` its load (the calculator's
+  ``loads``), each from the item's own attributes, else the file's
+  defaults, else 1 and 0. Written back as the original structure with
+  ``x``, ``y``, ``z`` replaced, and ``q``, ``px``, ``py``, ``pz`` set
+  where the net's differ from the file's.
+- ``.traj``, ASE trajectory: the springs, ``a``, ``Q``, ``dim``, ``q`` and
+  ``loads`` come back
   from the calculator parameters that ASE's trajectory stores with every
   frame (:meth:`MaudCalculator.todict`), the fixed points from its
   constraints.
@@ -55,7 +62,7 @@ from ase.constraints import FixAtoms
 
 from .atomic import replace_text, replace_with
 from .calculator import MaudCalculator
-from .checks import as_whole, check_writable
+from .checks import as_whole, check, check_each, check_writable
 from .topology import fixed_atoms
 
 PathLike = str | os.PathLike
@@ -63,6 +70,8 @@ PathLike = str | os.PathLike
 CALC_NAME = 'maudcalculator'
 #: Vertex (node) attributes of COMPAS data that fix a point when true.
 ANCHOR_ATTRIBUTES = ('is_anchor', 'is_fixed')
+#: Vertex (node) attributes of COMPAS data that hold a load (compas_fd's).
+LOAD_ATTRIBUTES = ('px', 'py', 'pz')
 
 
 def net_format(path: PathLike) -> str:
@@ -110,7 +119,8 @@ def edges_path(path: PathLike) -> Path:
 def read_net(path: PathLike, edges: PathLike | None = None,
              fixed: PathLike | Sequence[int] | None = None,
              a: float | None = None, Q: float | None = None,
-             dim: int | None = None, index: int = -1) -> Atoms:
+             dim: int | None = None, index: int = -1,
+             load: Sequence[float] | None = None) -> Atoms:
     """Read a net: an Atoms with a MaudCalculator attached.
 
     Parameters
@@ -129,22 +139,37 @@ def read_net(path: PathLike, edges: PathLike | None = None,
         trajectory stores, else 1.
     dim : 2 or 3, optional
         Default: what a trajectory stores, else 2 if every point has the
-        same z, else 3.
+        same z and no load has a z component, else 3.
     index : int
         The frame of a trajectory (or multi-frame file), default the last.
+    load : (3,) floats, optional
+        A constant load (force units) on every free point
+        (:func:`free_point_loads`; self-weight, say), replacing the loads
+        the file holds.
     """
-    return _read(path, edges, fixed, a, Q, dim, index)[0]
+    return _read(path, edges, fixed, a, Q, dim, index, load)[0]
 
 
 def read_frames(path: PathLike, edges: PathLike | None = None,
                 fixed: PathLike | Sequence[int] | None = None,
                 a: float | None = None, Q: float | None = None,
-                dim: int | None = None) -> list[Atoms]:
+                dim: int | None = None,
+                load: Sequence[float] | None = None) -> list[Atoms]:
     """Every frame of a file (one for OBJ and JSON), as :func:`read_net`."""
-    return _read(path, edges, fixed, a, Q, dim, slice(None))
+    return _read(path, edges, fixed, a, Q, dim, slice(None), load)
 
 
-def _read(path, edges, fixed, a, Q, dim, index):
+def free_point_loads(atoms: Atoms, load: Sequence[float]) -> np.ndarray:
+    """Loads (N, 3): ``load`` (3 numbers, force units) on every point that
+    no constraint holds in all three directions, 0 on the others."""
+    load = check_each('loads', load, 'component')
+    if load.shape != (3,):
+        raise ValueError(f'a load on every free point needs 3 numbers (x y z), '
+                         f'got shape {load.shape}')
+    return np.where(fixed_atoms(atoms)[:, None], 0.0, load)
+
+
+def _read(path, edges, fixed, a, Q, dim, index, load=None):
     """Frames of ``path`` with their calculators, as :func:`read_net` says."""
     kind = net_format(path)
     if kind in ('obj', 'json'):
@@ -154,6 +179,8 @@ def _read(path, edges, fixed, a, Q, dim, index):
         if len(anchors):
             frames[0].set_constraint(FixAtoms(indices=anchors))
         stored = {'springs': springs} if len(springs) else {}
+        if kind == 'json':
+            stored.update(read_compas_forces(path, springs))
     else:
         frames, stored = _read_ase(path, index)
     natoms = len(frames[0])
@@ -161,6 +188,7 @@ def _read(path, edges, fixed, a, Q, dim, index):
         edges = edges_path(path)
     if edges is not None:
         stored['springs'] = read_edges(edges, natoms)
+        stored.pop('q', None)   # the file's force densities are of its own springs
     if 'springs' not in stored:
         raise ValueError(f'{path} holds no springs: give an edge list '
                          f'(edges=..., --edges, or {edges_path(path).name} '
@@ -172,11 +200,15 @@ def _read(path, edges, fixed, a, Q, dim, index):
                    else _fixed_indices(fixed, natoms))
     for atoms in frames:
         atoms.pbc = False
-        z = atoms.positions[:, 2]
-        inferred = {'dim': 2 if np.all(z == z[:1]) else 3}
-        atoms.calc = MaudCalculator(**{**inferred, **parameters})
         if fixed is not None:
             atoms.set_constraint(FixAtoms(indices=indices))
+        own = dict(parameters)
+        if load is not None:
+            own['loads'] = free_point_loads(atoms, load)
+        z = atoms.positions[:, 2]
+        loads = own.get('loads')
+        flat = np.all(z == z[:1]) and (loads is None or not np.any(np.asarray(loads)[:, 2:]))
+        atoms.calc = MaudCalculator(**{'dim': 2 if flat else 3, **own})
     return frames
 
 
@@ -443,6 +475,66 @@ def read_compas(path: PathLike) -> tuple[np.ndarray, np.ndarray, list[int]]:
             anchors)
 
 
+def _edge_attributes(data: dict[str, Any], keys: dict[str, int]
+                     ) -> dict[tuple[int, int], dict[str, Any]]:
+    """The attribute dicts of the edges of COMPAS ``data`` (the document's
+    own, to read or change), by sorted pair of point indices: a graph's
+    ``edge[u][v]``, a mesh's ``edgedata`` (keys ``"(u, v)"`` or ``"u-v"``)."""
+    if 'face' in data:
+        items = []
+        for key, attributes in (data.get('edgedata') or {}).items():
+            text = str(key).strip('()[] ')
+            ends = [end.strip() for end in text.split(',' if ',' in text else '-')]
+            items.append((ends, attributes))
+    else:
+        items = [((u, v), attributes) for u, neighbours in (data.get('edge') or {}).items()
+                 for v, attributes in (neighbours or {}).items()]
+    found = {}
+    for ends, attributes in items:
+        if len(ends) == 2 and all(str(end) in keys for end in ends) \
+                and isinstance(attributes, dict):
+            i, j = (keys[str(end)] for end in ends)
+            found[(min(i, j), max(i, j))] = attributes
+    return found
+
+
+def _compas_value(path, where, name, attributes, defaults, fallback):
+    """Attribute ``name`` of an item (else the file's default, else
+    ``fallback``) checked by ``checks.RULES`` (``q`` or ``loads``), or a
+    ValueError naming the file and ``where``."""
+    value = attributes.get(name, defaults.get(name, fallback))
+    try:
+        return check('q' if name == 'q' else 'loads', value)
+    except ValueError as error:
+        raise ValueError(f'{path}: {where}, attribute {name}: {error}') from None
+
+
+def _compas_forces(path, data, springs):
+    """``q`` (K,) and loads (N, 3) a COMPAS document says (1 and 0 where it
+    says nothing), and whether it says anything of each."""
+    points, vertex_defaults = _compas_points(path, data)
+    keys = {str(k): n for n, k in enumerate(points)}
+    edge_defaults = data.get('default_edge_attributes', data.get('dea', {})) or {}
+    edges = _edge_attributes(data, keys)
+    q = np.array([_compas_value(path, f'edge {i}-{j}', 'q', edges.get((min(i, j), max(i, j)), {}),
+                                edge_defaults, 1.0) for i, j in springs])
+    loads = np.array([[_compas_value(path, f'vertex {key}', name, attributes, vertex_defaults, 0.0)
+                       for name in LOAD_ATTRIBUTES] for key, attributes in points.items()])
+    said_q = 'q' in edge_defaults or any('q' in a for a in edges.values())
+    said_loads = any(name in vertex_defaults or any(name in a for a in points.values())
+                     for name in LOAD_ATTRIBUTES)
+    return q.reshape(len(springs)), loads.reshape(-1, 3), said_q, said_loads
+
+
+def read_compas_forces(path: PathLike, springs: np.ndarray) -> dict[str, np.ndarray]:
+    """The force densities ``q`` of ``springs`` (as :func:`read_compas` gives
+    them) and the loads of a COMPAS JSON file, as calculator parameters:
+    only those the file says anything of (see the module docstring)."""
+    _, data = _compas_data(path)
+    q, loads, said_q, said_loads = _compas_forces(path, data, springs)
+    return {**({'q': q} if said_q else {}), **({'loads': loads} if said_loads else {})}
+
+
 def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None) -> list[Path]:
     """Write the net ``atoms`` (with a MaudCalculator) to ``path``; return
     the files written.
@@ -451,8 +543,10 @@ def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None) -> lis
     the same format with as many points (the one the net was read from),
     is kept but for the coordinates: OBJ faces, polylines, groups and
     comments, COMPAS attributes. Without it: OBJ gets the springs as ``l``
-    lines, JSON a COMPAS 2.x graph (fixed points ``is_anchor``). A trajectory
-    stores the springs, ``a``, ``Q`` and ``dim`` with the frame. ``.xyz``
+    lines, JSON a COMPAS 2.x graph (fixed points ``is_anchor``, loads
+    ``px``, ``py``, ``pz``, force densities ``q``). A trajectory stores the
+    springs, ``a``, ``Q``, ``dim``, ``q`` and ``loads`` with the frame; OBJ
+    and the other formats hold no ``q`` or loads. ``.xyz``
     (``.extxyz``) is extended XYZ with every digit of the coordinates
     (ASE's writer keeps 8 decimals) and the fixed points as ``move_mask``;
     any other format is written by ASE. Both get the edge list at
@@ -523,14 +617,19 @@ def _obj_text(atoms, like):
 def _compas_document(atoms, like):
     """The COMPAS JSON document of ``atoms``: ``like``'s with new x, y, z,
     or a COMPAS 2.x graph."""
+    potential = atoms.calc.potential
+    q = np.broadcast_to(potential.stiffnesses, len(potential.springs))
+    loads = np.zeros((len(atoms), 3)) if potential.loads is None else potential.loads
     if like is None:
         fixed = set(np.flatnonzero(fixed_atoms(atoms)).tolist())
         node = {str(n): {'x': float(x), 'y': float(y), 'z': float(z),
-                         **({'is_anchor': True} if n in fixed else {})}
+                         **({'is_anchor': True} if n in fixed else {}),
+                         **(dict(zip(LOAD_ATTRIBUTES, map(float, loads[n]), strict=True))
+                            if loads[n].any() else {})}
                 for n, (x, y, z) in enumerate(atoms.positions)}
         edge = {str(n): {} for n in range(len(atoms))}
-        for i, j in atoms.calc.springs:
-            edge[str(i)][str(j)] = {}
+        for (i, j), qs in zip(atoms.calc.springs, q, strict=True):
+            edge[str(i)][str(j)] = {} if potential.q is None else {'q': float(qs)}
         data = {'attributes': {}, 'default_node_attributes': {'x': 0.0, 'y': 0.0, 'z': 0.0},
                 'default_edge_attributes': {}, 'node': node, 'edge': edge,
                 'max_node': len(atoms) - 1}
@@ -542,4 +641,26 @@ def _compas_document(atoms, like):
         raise ValueError(f'{like} has {len(points)} vertices, the net {len(atoms)} points')
     for attributes, x in zip(points.values(), atoms.positions, strict=True):
         attributes.update(zip('xyz', map(float, x), strict=True))
+    _update_forces(like, data, atoms.calc.springs, q, loads)
     return document
+
+
+def _update_forces(path, data, springs, q, loads):
+    """Set ``q`` and ``px``, ``py``, ``pz`` in COMPAS ``data`` (read from
+    ``path``) where the net's differ from what it says; a mesh edge without
+    attributes gets an ``edgedata`` entry, a spring that is no edge of the
+    file (from an edge list) no ``q``."""
+    points, _ = _compas_points(path, data)
+    keys = list(points)
+    file_q, file_loads = _compas_forces(path, data, springs)[:2]
+    for n in np.flatnonzero((file_loads != loads).any(axis=1)):
+        points[keys[n]].update(zip(LOAD_ATTRIBUTES, map(float, loads[n]), strict=True))
+    edges = _edge_attributes(data, {str(k): n for n, k in enumerate(keys)})
+    file_edges = {(min(i, j), max(i, j)) for i, j in read_compas(path)[1].tolist()}
+    for s in np.flatnonzero(file_q != q):
+        i, j = sorted(springs[s].tolist())
+        if (i, j) not in file_edges:
+            continue
+        if (i, j) not in edges:   # a mesh edge without edgedata
+            edges[(i, j)] = data.setdefault('edgedata', {})[f'({keys[i]}, {keys[j]})'] = {}
+        edges[(i, j)]['q'] = float(q[s])

@@ -1,4 +1,5 @@
-"""A run that cannot go on: divergence and stagnation, watched step by step.
+"""A run that cannot go on: divergence and stagnation, watched step by step;
+a scene with no equilibrium, seen before the first step.
 
 :class:`RunMonitor` knows nothing of Maud's step: any optimiser can call
 :meth:`RunMonitor.check` once per step with the positions, the merit, the
@@ -8,10 +9,11 @@ observed. Its state goes into a restart file (:meth:`RunMonitor.todict`).
 
 - Divergence: the points spread beyond ``divergence_factor`` times their
   reference size, ``max(start size, a N)`` (the size is the largest distance
-  from the centroid), or, on a scene known to have no finite minimum
-  (``unbounded``), beyond twice their start size; or the centroid of the
-  scene moves by more than ``divergence_factor`` times that reference (a
-  scene that drifts as a whole).
+  from the centroid); or the centroid of the scene moves by more than
+  ``divergence_factor`` times that reference (a scene that drifts as a
+  whole). A scene proved to have no finite equilibrium is stopped before
+  its first step instead (:class:`NoEquilibriumError`, raised by the
+  optimiser).
 - Stagnation: ``gamma`` (the optimiser's step factor) underflowed, every
   step having been taken back; or no progress for ``patience`` steps,
   progress being fmax falling by 0.1 % below its best and, for
@@ -24,13 +26,12 @@ observed. Its state goes into a restart file (:meth:`RunMonitor.todict`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .checks import as_number, as_whole
-from .topology import describe_unbounded
 
 
 class MaudError(RuntimeError):
@@ -43,6 +44,12 @@ class DivergenceError(MaudError):
 
 class StagnationError(MaudError):
     """No progress: gamma underflowed or fmax stopped improving."""
+
+
+class NoEquilibriumError(MaudError):
+    """The scene can have no finite equilibrium (a net load that nothing
+    holds, spring components that fly away); raised before the first step,
+    the message says what to fix."""
 
 
 #: fmax counts as progress when it falls below ``(1 - FMAX_PROGRESS)`` of its
@@ -61,15 +68,13 @@ class RunMonitor:
 
     ``merit_name``: what the merit is in messages (``'energy'`` for
     ``target='minimum'``, else ``'|f|^2'``, which is not watched for
-    progress); ``length_scale``: the scene's ``a`` (0 if unknown);
-    ``unbounded``: spring components proved to have no finite minimum.
+    progress); ``length_scale``: the scene's ``a`` (0 if unknown).
     """
 
     divergence_factor: float
     patience: int
     merit_name: str = 'energy'
     length_scale: float = 0.0
-    unbounded: list[list[int]] = field(default_factory=list)
     size0: float | None = None
     centre0: np.ndarray | None = None
     best: tuple[float, int] = (np.inf, 0)
@@ -83,12 +88,9 @@ class RunMonitor:
         centre = x.mean(axis=0)
         size = np.linalg.norm(x - centre, axis=1).max()
         if self.size0 is None:
-            reference = size if self.unbounded else max(size, self.length_scale * len(x))
-            self.size0 = max(reference, np.finfo(float).tiny)
+            self.size0 = max(size, self.length_scale * len(x), np.finfo(float).tiny)
             self.centre0 = centre
-        factor = 2.0 if self.unbounded else self.divergence_factor
-        why = (describe_unbounded(self.unbounded) if self.unbounded
-               else 'no stationary point in reach')
+        factor, why = self.divergence_factor, 'no stationary point in reach'
         if size > factor * self.size0:
             raise DivergenceError(
                 f'diverged at step {step}: the points spread to {size:.3g}, '

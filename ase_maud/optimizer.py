@@ -46,19 +46,25 @@ from . import accuracy
 from .checks import check, check_all, check_writable
 from .lock import FileInUseError, RunLock
 from .method import MaudMethod, StepRule, merit_tolerance, step_rule
-from .monitor import DivergenceError, MaudError, RunMonitor, StagnationError
+from .monitor import (
+    DivergenceError,
+    MaudError,
+    NoEquilibriumError,
+    RunMonitor,
+    StagnationError,
+)
 from .neighbours import NearestDistances
 from .restart import RestartFile, difference, signature
 from .stiffness import StiffnessModel, choose_model
 from .subset import SubsetView
-from .topology import describe_unbounded
 from .trajectory import last_frame, repair
 
 #: The longest move of a row of a cell filter's coordinates when ``maxstep``
 #: is not given (ASE's BFGS default).
 CELL_MAXSTEP = 0.2
 
-__all__ = ['DivergenceError', 'FileInUseError', 'Maud', 'MaudError', 'StagnationError']
+__all__ = ['DivergenceError', 'FileInUseError', 'Maud', 'MaudError', 'NoEquilibriumError',
+           'StagnationError']
 
 
 
@@ -387,7 +393,10 @@ class Maud(Optimizer):
             return super().run(self.fmax, steps)
 
     def _preflight(self) -> None:
-        """Say in the log if the scene has no finite minimum; evaluate.
+        """Stop with a NoEquilibriumError before the first step if the
+        calculator proves the scene has no finite equilibrium
+        (``calc.no_equilibrium``: a net load nothing holds; for
+        ``target='minimum'``, spring components that fly away); evaluate.
         Energy and forces held from an earlier run are dropped (the
         calculator or the band may have changed since), and the step rule
         starts afresh if the scene changed (:meth:`_afresh_if_changed`)."""
@@ -395,11 +404,10 @@ class Maud(Optimizer):
         atoms = self._atoms()
         calc = getattr(atoms, 'calc', None)
         self._afresh_if_changed()
-        if hasattr(calc, 'unbounded_components') and self.target == 'minimum':
-            self.monitor.unbounded = calc.unbounded_components(atoms)
-            if self.monitor.unbounded:
-                self.logfile.write('Maud: warning: '
-                                   f'{describe_unbounded(self.monitor.unbounded)}\n')
+        if hasattr(calc, 'no_equilibrium'):
+            why = calc.no_equilibrium(atoms, minimum=self.target == 'minimum')
+            if why:
+                self._stop(NoEquilibriumError(f'before the first step: {why}'))
         self._evaluate()
 
     def _stop(self, error: MaudError) -> None:

@@ -9,7 +9,11 @@ the pair vector ``d = r_i - r_j`` (the last axis of every ``d`` below, of size
   pair block ``3 d d^T / L**5 - I / L**3``; callers multiply all three by
   ``c``;
 - spring (zero unstressed length): energy ``Q L**2 / 2``, force on ``i``
-  ``-Q d``, pair block ``Q I``.
+  ``-Q d``, pair block ``Q I``; ``Q`` is each spring's own constant where
+  one is given per spring (the potential's ``Q q_s``, ``q_s`` its force
+  density multiplier);
+- constant nodal load ``F_i`` (force units): energy ``-F_i . r_i``, force
+  ``F_i``, no block.
 
 - Energies count each pair once (the specification's ``P`` counts it twice:
   ``P = 2E``).
@@ -21,8 +25,9 @@ the pair vector ``d = r_i - r_j`` (the last axis of every ``d`` below, of size
   nodal block ``K_ii = sum_j B_ij`` on it (the stiffness of ``i`` with every
   other point held fixed). ``B`` does not change when ``d`` changes sign.
 
-The spring part of the Hessian is constant: ``Q (L (x) I_dim)`` with ``L``
-the spring graph's Laplacian (:func:`spring_hessian`).
+The spring part of the Hessian is constant: ``L_Q (x) I_dim`` with ``L_Q``
+the spring graph's Laplacian weighted by each spring's constant
+(:func:`spring_laplacian`, :func:`spring_hessian`).
 
 Every backend either calls these functions (the numpy reference, the dense
 Hessian, the near-field model of :mod:`.analysis`) or is tested element-wise
@@ -56,35 +61,58 @@ def repulsion_block(d: np.ndarray) -> np.ndarray:
     return inv**3 * (3.0 * inv * inv * outer - np.eye(d.shape[-1]))
 
 
-def spring_energy(d: np.ndarray, Q: float) -> np.ndarray:
+def _per_pair(Q: float | np.ndarray, d: np.ndarray) -> np.ndarray:
+    """``Q`` (a number, or one value per pair vector of ``d``) shaped to
+    broadcast against the pairs of ``d``: ``d.shape[:-1]``."""
+    return np.broadcast_to(np.asarray(Q, dtype=float), d.shape[:-1])
+
+
+def spring_energy(d: np.ndarray, Q: float | np.ndarray) -> np.ndarray:
     """Spring energy ``Q L**2 / 2`` of each pair vector, shape
-    ``d.shape[:-1]``."""
-    return 0.5 * Q * np.einsum('...k,...k->...', d, d)
+    ``d.shape[:-1]``; ``Q`` a number or one per pair (each spring's ``Q q``)."""
+    return 0.5 * _per_pair(Q, d) * np.einsum('...k,...k->...', d, d)
 
 
-def spring_force(d: np.ndarray, Q: float) -> np.ndarray:
-    """Spring force on ``i``, ``-Q d``, shape of ``d``."""
-    return -Q * d
+def spring_force(d: np.ndarray, Q: float | np.ndarray) -> np.ndarray:
+    """Spring force on ``i``, ``-Q d``, shape of ``d``; ``Q`` as
+    :func:`spring_energy`."""
+    return -_per_pair(Q, d)[..., None] * d
 
 
-def spring_block(d: np.ndarray, Q: float) -> np.ndarray:
-    """Spring pair block ``Q I``, shape ``d.shape + (dim,)``, whatever ``d``."""
-    dim = d.shape[-1]
-    return Q * np.broadcast_to(np.eye(dim), d.shape + (dim,))
+def spring_block(d: np.ndarray, Q: float | np.ndarray) -> np.ndarray:
+    """Spring pair block ``Q I``, shape ``d.shape + (dim,)``, whatever ``d``;
+    ``Q`` as :func:`spring_energy`."""
+    return _per_pair(Q, d)[..., None, None] * np.eye(d.shape[-1])
 
 
-def spring_degrees(springs: np.ndarray, natoms: int) -> np.ndarray:
-    """Number of springs at each point, shape (natoms,)."""
-    return np.bincount(np.asarray(springs, dtype=int).ravel(),
-                       minlength=natoms)
+def load_terms(positions: np.ndarray,
+               loads: np.ndarray | None) -> tuple[float, np.ndarray]:
+    """Energy ``-sum_i F_i . r_i`` and forces ``F_i`` (shape of
+    ``positions``) of constant nodal loads ``F`` (same shape, force units;
+    None: no loads)."""
+    if loads is None:
+        return 0.0, np.zeros_like(positions)
+    return -float(np.einsum('ij,ij->', loads, positions)), loads.copy()
+
+
+def spring_degrees(springs: np.ndarray, natoms: int,
+                   Q: float | np.ndarray = 1.0) -> np.ndarray:
+    """Weighted degree of each point, ``sum`` of ``Q`` over its springs,
+    shape (natoms,); ``Q`` a number or one per spring (1: the number of
+    springs at each point)."""
+    pairs = np.asarray(springs, dtype=int).reshape(-1, 2)
+    weights = np.broadcast_to(np.asarray(Q, dtype=float), len(pairs))
+    return np.bincount(pairs.ravel(), weights=np.repeat(weights, 2),
+                       minlength=natoms).astype(float)
 
 
 def spring_terms(positions: np.ndarray, springs: np.ndarray,
-                 Q: float) -> tuple[float, np.ndarray]:
+                 Q: float | np.ndarray) -> tuple[float, np.ndarray]:
     """Energy and forces (shape of ``positions``) of the springs alone.
 
     ``springs`` is a (K, 2) int array; spring (i, j) has ``d = r_i - r_j``,
-    its force goes to ``i`` and its opposite to ``j``.
+    its force goes to ``i`` and its opposite to ``j``; ``Q`` a number or one
+    per spring.
     """
     d = positions[springs[:, 0]] - positions[springs[:, 1]]
     force = spring_force(d, Q)
@@ -94,23 +122,27 @@ def spring_terms(positions: np.ndarray, springs: np.ndarray,
     return float(spring_energy(d, Q).sum()), forces
 
 
-def spring_nodal_blocks(springs: np.ndarray, natoms: int, Q: float,
+def spring_nodal_blocks(springs: np.ndarray, natoms: int, Q: float | np.ndarray,
                         dim: int) -> np.ndarray:
-    """The springs' part of the nodal blocks, ``deg(i) Q I``, shape
-    (natoms, dim, dim)."""
-    deg = spring_degrees(springs, natoms)
-    return deg[:, None, None] * spring_block(np.zeros((natoms, dim)), Q)
+    """The springs' part of the nodal blocks, the weighted degree times
+    ``I`` (:func:`spring_degrees`), shape (natoms, dim, dim)."""
+    return spring_degrees(springs, natoms, Q)[:, None, None] * np.eye(dim)
 
 
-def spring_laplacian(springs: np.ndarray, natoms: int) -> sp.csr_matrix:
-    """The spring graph's Laplacian ``D - A`` (degrees minus adjacency),
-    shape (natoms, natoms)."""
+def spring_laplacian(springs: np.ndarray, natoms: int,
+                     Q: float | np.ndarray = 1.0) -> sp.csr_matrix:
+    """The spring graph's weighted Laplacian ``sum_s Q_s (e_i - e_j)(e_i -
+    e_j)^T`` (weighted degrees minus weighted adjacency), shape (natoms,
+    natoms); ``Q`` a number or one per spring (1: ``D - A``). The one home
+    of the springs' constant Hessian: :func:`spring_hessian` is it times
+    ``I_dim``."""
     pairs = np.asarray(springs, dtype=int).reshape(-1, 2)
     i, j = pairs.T
-    adjacency = sp.coo_matrix((np.ones(2 * len(pairs)),
+    weights = np.broadcast_to(np.asarray(Q, dtype=float), len(pairs))
+    adjacency = sp.coo_matrix((np.r_[weights, weights],
                                (np.r_[i, j], np.r_[j, i])),
                               shape=(natoms, natoms))
-    degrees = sp.diags(spring_degrees(pairs, natoms).astype(float))
+    degrees = sp.diags(spring_degrees(pairs, natoms, weights))
     return sp.csr_matrix(degrees - adjacency)
 
 
@@ -129,28 +161,14 @@ def pair_block_laplacian(i: np.ndarray, j: np.ndarray, blocks: np.ndarray,
     return sp.csr_matrix((data.ravel(), (rows, cols)), shape=(dim * natoms,) * 2)
 
 
-def spring_hessian_entries(springs: np.ndarray, natoms: int, Q: float,
-                           dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The springs' exact, constant Hessian ``Q (L (x) I_dim)`` as entries
-    ``(rows, columns, values)`` (repeated indices add up), coordinates
-    ordered point by point (x0, y0, z0, x1, ...): each spring's pair block
-    ``Q I`` (:func:`spring_block`) at ``(i, i)`` and ``(j, j)``, its negative
-    at ``(i, j)`` and ``(j, i)``."""
-    i, j = np.asarray(springs, dtype=int).reshape(-1, 2).T
-    axis = np.arange(dim)
-    rows = (dim * np.stack([i, j, i, j])[:, :, None] + axis).ravel()
-    cols = (dim * np.stack([i, j, j, i])[:, :, None] + axis).ravel()
-    block = spring_block(np.zeros(dim), Q)[0, 0]
-    values = np.repeat(np.array([block, block, -block, -block]), len(i) * dim)
-    return rows, cols, values
-
-
-def spring_hessian(springs: np.ndarray, natoms: int, Q: float,
+def spring_hessian(springs: np.ndarray, natoms: int, Q: float | np.ndarray,
                    dim: int) -> sp.csr_matrix:
-    """The springs' exact, constant Hessian ``Q (L (x) I_dim)``, shape
-    (dim N, dim N) (csr), from :func:`spring_hessian_entries`."""
-    rows, cols, values = spring_hessian_entries(springs, natoms, Q, dim)
-    return sp.csr_matrix((values, (rows, cols)), shape=(dim * natoms,) * 2)
+    """The springs' exact, constant Hessian ``L_Q (x) I_dim`` (``L_Q`` the
+    Laplacian weighted by ``Q``, a number or one per spring:
+    :func:`spring_laplacian`), shape (dim N, dim N) (csr), coordinates
+    ordered point by point (x0, y0, z0, x1, ...)."""
+    return sp.kron(spring_laplacian(springs, natoms, Q), sp.identity(dim),
+                   format='csr')
 
 
 def pair_chunks(natoms: int,

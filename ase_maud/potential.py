@@ -1,5 +1,5 @@
-"""The Maud potential as one value: its springs and constants, its units, its
-exact spring Hessian and its whole Hessian.
+"""The Maud potential as one value: its springs and constants, its force
+densities and loads, its units, its exact spring Hessian and its whole Hessian.
 
 :class:`MaudPotential` is what every consumer of the potential takes (the
 calculator, the Hessian and its products, analysis, modes, the stiffness
@@ -22,18 +22,23 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
 from . import backends, physics
-from .checks import check
+from .checks import check, check_each
 from .springs import check_range, check_springs
 
 
 @dataclass(frozen=True, eq=False)
 class MaudPotential:
-    """``E = sum_{i<j} a**3 Q / L_ij + sum_{(i,j) in springs} Q L_ij**2 / 2``.
+    """``E = sum_{i<j} a**3 Q / L_ij + sum_{s=(i,j) in springs} Q q_s L_ij**2 / 2
+    - sum_i F_i . r_i``.
 
     ``springs``: (K, 2) atom index pairs (checked: :func:`.springs.check_springs`);
     ``a``: a length; ``Q``: a force per length; ``dim``: 2 (points on a plane
-    ``z = const``, 2x2 blocks) or 3. Energies count each pair once; forces
-    have ASE's sign, ``f = -dE/dr``. Frozen: a change is a new potential (the
+    ``z = const``, 2x2 blocks) or 3; ``q``: each spring's force density
+    multiplier of ``Q``, (K,) positive (None: every ``q_s = 1``); ``loads``:
+    constant nodal loads ``F``, (N, 3) or, for ``dim=2``, (N, 2), force units
+    (None: none; in 2D their z must be 0). Loads change the energy and
+    forces, never a Hessian. Energies count each pair once; forces have
+    ASE's sign, ``f = -dE/dr``. Frozen: a change is a new potential (the
     spring Hessian it caches stays valid).
     """
 
@@ -41,6 +46,8 @@ class MaudPotential:
     a: float = 1.0
     Q: float = 1.0
     dim: int = 3
+    q: np.ndarray | None = None
+    loads: np.ndarray | None = None
     _cache: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -49,6 +56,47 @@ class MaudPotential:
         object.__setattr__(self, 'springs', springs)
         for name in ('a', 'Q', 'dim'):
             object.__setattr__(self, name, check(name, getattr(self, name)))
+        for name, value in (('q', self._checked_q()), ('loads', self._checked_loads())):
+            if value is not None:
+                value.flags.writeable = False
+            object.__setattr__(self, name, value)
+
+    def _checked_q(self) -> np.ndarray | None:
+        if self.q is None:
+            return None
+        q = check_each('q', self.q, 'spring')
+        if q.shape != (len(self.springs),):
+            raise ValueError(f'q must hold one value per spring, shape '
+                             f'({len(self.springs)},), got shape {q.shape}')
+        return q
+
+    def _checked_loads(self) -> np.ndarray | None:
+        if self.loads is None:
+            return None
+        given = check_each('loads', self.loads, 'atom')
+        if given.ndim != 2 or given.shape[1] not in (self.dim, 3):
+            shapes = '(N, 3) or (N, 2)' if self.dim == 2 else '(N, 3)'
+            raise ValueError(f'loads must have shape {shapes} (one force per atom), '
+                             f'got shape {given.shape}')
+        loads = np.zeros((len(given), 3))
+        loads[:, :given.shape[1]] = given
+        if self.dim == 2 and loads[:, 2].any():
+            k = int(np.flatnonzero(loads[:, 2])[0])
+            raise ValueError(f'loads of atom {k} has z = {float(loads[k, 2])!r}: a dim=2 '
+                             'scene takes loads in its plane (z = 0)')
+        return loads
+
+    @property
+    def stiffnesses(self) -> float | np.ndarray:
+        """Each spring's constant ``Q q_s`` in units of ``Q``: ``q``, or 1
+        (a number) if no ``q`` was given."""
+        return 1.0 if self.q is None else self.q
+
+    def check_loads(self, natoms: int) -> None:
+        """Raise ValueError if the loads are not one per atom of ``natoms``."""
+        if self.loads is not None and len(self.loads) != natoms:
+            raise ValueError(f'loads has {len(self.loads)} rows, one per atom, but '
+                             f'the atoms are {natoms}')
 
     # -- units --------------------------------------------------------------
 
@@ -83,20 +131,24 @@ class MaudPotential:
     # -- the springs: exact, constant ----------------------------------------
 
     def spring_laplacian(self, natoms: int) -> sp.csr_matrix:
-        """The spring graph's Laplacian ``D - A`` (natoms, natoms), kept."""
+        """The spring graph's Laplacian weighted by ``q``, ``sum_s q_s (e_i -
+        e_j)(e_i - e_j)^T`` (``D - A`` if every ``q_s = 1``), (natoms,
+        natoms), kept; the springs' Hessian is ``Q`` times it, times ``I_dim``."""
         return self._kept(('laplacian', natoms), lambda: physics.spring_laplacian(
-            self._springs_within(natoms), natoms))
+            self._springs_within(natoms), natoms, self.stiffnesses))
 
     def spring_hessian(self, natoms: int) -> sp.csr_matrix:
-        """The springs' exact, constant Hessian ``Q (L (x) I_dim)``, shape
-        (dim N, dim N), coordinates point by point; built once per N."""
+        """The springs' exact, constant Hessian ``Q (L_q (x) I_dim)``
+        (:meth:`spring_laplacian`), shape (dim N, dim N), coordinates point
+        by point; built once per N."""
         return self._kept(('hessian', natoms), lambda: physics.spring_hessian(
-            self._springs_within(natoms), natoms, self.Q, self.dim))
+            self._springs_within(natoms), natoms, self.Q * self.stiffnesses, self.dim))
 
     def spring_energy_forces(self, positions: np.ndarray) -> tuple[float, np.ndarray]:
         """The springs' energy and forces (N, 3) at ``positions`` (length units)."""
         check_range(self.springs, len(positions))
-        energy, forces = physics.spring_terms(self.reduced(positions), self.springs, 1.0)
+        energy, forces = physics.spring_terms(self.reduced(positions), self.springs,
+                                              self.stiffnesses)
         return self.energy_unit * energy, self.force_unit * forces
 
     def _springs_within(self, natoms: int) -> np.ndarray:
@@ -115,11 +167,9 @@ class MaudPotential:
         ``Q``: ``-B_ij`` off the diagonal, the nodal block ``K_ii = sum_j
         B_ij`` on it (:mod:`.physics`); the repulsion's part by the
         registry's Hessian backend (:func:`.backends.repulsion_hessian`)."""
-        n = len(positions)
         hess = self.Q * backends.repulsion_hessian(self.reduced(positions), self.dim)
-        rows, cols, values = self._kept(('entries', n), lambda: physics.spring_hessian_entries(
-            self._springs_within(n), n, self.Q, self.dim))
-        np.add.at(hess, (rows, cols), values)
+        springs = self.spring_hessian(len(positions)).tocoo()
+        np.add.at(hess, (springs.row, springs.col), springs.data)
         return hess
 
     def hvp(self, positions: np.ndarray, v: ArrayLike) -> np.ndarray:

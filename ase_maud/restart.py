@@ -221,16 +221,30 @@ def _damaged_field(document: dict[str, Any]) -> str | None:
 def signature(atoms: Atoms, potential: Any = None) -> dict[str, Any]:
     """What a run's files are checked against when it is resumed onto
     ``atoms``: the number of points, the fixed ones and, with a ``potential``
-    (a :class:`~ase_maud.potential.MaudPotential`), its springs, ``a``, ``Q``
-    and ``dim``; plain values, long lists as a count and a CRC-32."""
+    (a :class:`~ase_maud.potential.MaudPotential`), its springs, ``a``, ``Q``,
+    ``dim``, force densities ``q`` (in the order of the sorted springs) and
+    loads; plain values, long lists as a count and a CRC-32."""
     fixed = np.flatnonzero(fixed_atoms(atoms))
     scene = {'points': len(atoms), 'fixed points': len(fixed),
              'fixed points crc': zlib.crc32(fixed.astype(np.int64).tobytes())}
     if potential is not None:
-        pairs = np.unique(np.sort(potential.springs, axis=1), axis=0).astype(np.int64)
-        scene.update({'springs': len(pairs), 'springs crc': zlib.crc32(pairs.tobytes()),
-                      'a': potential.a, 'Q': potential.Q, 'dim': potential.dim})
+        pairs, first = np.unique(np.sort(potential.springs, axis=1), axis=0,
+                                 return_index=True)
+        q = np.broadcast_to(potential.stiffnesses, len(potential.springs))[first]
+        loads = (np.zeros((len(atoms), 3)) if potential.loads is None
+                 else potential.loads)
+        scene.update({'springs': len(pairs),
+                      'springs crc': zlib.crc32(pairs.astype(np.int64).tobytes()),
+                      'a': potential.a, 'Q': potential.Q, 'dim': potential.dim,
+                      'force densities': len(q), 'force densities crc': _crc(q),
+                      'loads': int(np.count_nonzero(loads.any(axis=1))),
+                      'loads crc': _crc(loads)})
     return scene
+
+
+def _crc(values: np.ndarray) -> int:
+    """CRC-32 of ``values`` as contiguous float64."""
+    return zlib.crc32(np.ascontiguousarray(values, dtype=np.float64).tobytes())
 
 
 def difference(held: dict[str, Any], given: dict[str, Any]) -> str | None:

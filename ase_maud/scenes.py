@@ -28,9 +28,12 @@ from scipy.spatial import Delaunay, cKDTree
 
 from .calculator import MaudCalculator
 from .checks import as_whole
+from .io import free_point_loads
 
 #: Closest start of two points, in units of ``a``.
 MIN_DISTANCE = 0.2
+#: The load on each free point of :func:`weighted_net`, in units of ``a Q``.
+WEIGHT = 0.5
 
 
 def keep_on_plane(atoms: Atoms) -> Atoms:
@@ -243,6 +246,15 @@ def hanging_net(size: int = 8, seed: int = 0, a: float = 1.0, Q: float = 1.0) ->
     positions[edge, 2] = (x**2 - y**2) / n
     positions[~edge] += rng.uniform(-0.3, 0.3, ((n - 2)**2, 3))
     return _scene(positions, springs, a, Q, fixed=np.flatnonzero(edge))
+
+
+def weighted_net(size: int = 8, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
+    """:func:`hanging_net` under its weight: a load of :data:`WEIGHT` ``a Q``
+    in -z on every free point (``loads``), so that it hangs below its
+    saddle boundary; the default scene of ``ase-maud relax``."""
+    atoms = hanging_net(size, seed, a, Q)
+    atoms.calc.set(loads=free_point_loads(atoms, [0.0, 0.0, -WEIGHT * a * Q]))
+    return atoms
 
 
 def random_graph(size: int = 30, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
@@ -483,7 +495,7 @@ def neighbour_graph(size: int = 2000, seed: int = 0, a: float = 1.0,
 
 
 SCENES = {f.__name__: f for f in (dimer, ring, chain, net2d, net3d,
-                                  hanging_net, random_graph, all_pairs,
+                                  hanging_net, weighted_net, random_graph, all_pairs,
                                   all_pairs2d, tree, wheel, molecule, cage,
                                   hub_net, disc, neighbour_graph)}
 
@@ -499,7 +511,8 @@ SUITE = [('dimer', 2), ('ring', 16), ('chain', 20), ('net2d', 6),
 #: collective``.
 COLLECTIVE = [('chain', 100), ('ring', 100), ('ring', 1000), ('tree', 60),
               ('tree', 200), ('wheel', 100), ('hanging_net', 20),
-              ('hanging_net', 50), ('random_graph', 200), ('random_graph', 2000),
+              ('hanging_net', 50), ('weighted_net', 20), ('random_graph', 200),
+              ('random_graph', 2000),
               ('all_pairs', 40)]
 
 #: The scenes a form finder relaxes, 2000 to 10**4 points: nets with fixed

@@ -15,7 +15,8 @@ it for a step it may take back. Four models, from the cheapest:
   fixed: the tensor step ``K_mm^-1 f_m`` or the scalar ``f_m / Tr K_mm``.
 - :class:`GlobalModel` (``'global'``): the whole scene, sparse,
   ``P = Q (L (x) I_dim) + blockdiag(|K_mm - Q deg(m) I|)`` with ``L`` the spring
-  graph's Laplacian: the springs' Hessian exactly (it is constant) plus the
+  graph's Laplacian and ``deg(m)`` its diagonal, both weighted by the springs'
+  force densities ``q``: the springs' Hessian exactly (it is constant) plus the
   repulsion's nodal blocks. O(N + K) to build; solved by a sparse LU
   factorisation, by algebraic multigrid (pyamg) when the factorisation would
   be too large, and matrix-free by conjugate gradients when the spring graph
@@ -514,7 +515,7 @@ class GlobalModel(StiffnessModel):
         blocks = calc.get_property('stiffness', atoms)
         n, dim = blocks.shape[:2]
         springs = calc.potential.spring_hessian(n)
-        degree = springs.diagonal()[::dim, None, None] * np.eye(dim)  # Q deg(m) I
+        degree = springs.diagonal()[::dim, None, None] * np.eye(dim)  # Q deg_q(m) I
         values, vectors = np.linalg.eigh(blocks - degree)
         repulsion = np.einsum('nik,nk,njk->nij', vectors,
                               self._absolute(values), vectors)
@@ -595,7 +596,8 @@ class _MatrixFreeSolver(_SparseSolver):
 class SpringsModel(StiffnessModel):
     """``P = Q L + diag(s)`` for each coordinate: the springs' exact, constant
     Hessian ``Q (L (x) I_dim)`` is block diagonal by coordinate, so one N x N
-    matrix (``L`` the spring graph's Laplacian, from the calculator's
+    matrix (``L`` the spring graph's Laplacian weighted by the force densities
+    ``q``, from the calculator's
     :class:`~ase_maud.potential.MaudPotential`) serves every coordinate,
     restricted to the points free in it (FixAtoms, FixCartesian). It is
     factorised once per run (:func:`spd_inverse`), and again only if the

@@ -1,4 +1,5 @@
-"""Whether a scene can have a finite minimum at all, from its spring graph.
+"""Whether a scene can have a finite minimum at all, from its spring graph
+and its loads.
 
 A spring component free to translate in 3D beside other components feels
 their repulsion as a sum of 1/L terms, a harmonic function of its translation:
@@ -8,6 +9,11 @@ for points free in 3D: in a ``dim=2`` scene, or for a component with any atom
 held by a constraint (to a plane or a line, say), 1/L is not harmonic in the
 directions left free and repulsion can hold it (a 2D ring about a point). A
 single free component, alone, is bounded up to rigid motion.
+
+Loads: springs and repulsion are internal forces (they sum to zero), so a
+scene that nothing holds in some direction has no equilibrium at all unless
+its loads sum to zero in that direction: it drifts for ever
+(:func:`net_load`).
 """
 
 from __future__ import annotations
@@ -30,15 +36,53 @@ def spring_components(natoms: int, springs: ArrayLike) -> np.ndarray:
     return connected_components(graph, directed=False)[1]
 
 
-def fixed_atoms(atoms: Atoms) -> np.ndarray:
-    """Boolean mask of atoms held in all three directions by a constraint."""
+#: A net load counts as zero below this fraction of the sum of the loads'
+#: sizes (their rounding).
+NET_LOAD_RTOL = 1e-9
+
+
+def held_directions(atoms: Atoms) -> np.ndarray:
+    """Boolean (N, 3) mask of the directions of each atom that a FixAtoms or
+    FixCartesian holds."""
     held = np.zeros((len(atoms), 3), dtype=bool)
     for c in atoms.constraints:
         if isinstance(c, FixAtoms):
             held[c.index] = True
         elif isinstance(c, FixCartesian):
             held[c.index] |= np.asarray(c.mask, dtype=bool)
-    return held.all(axis=1)
+    return held
+
+
+def fixed_atoms(atoms: Atoms) -> np.ndarray:
+    """Boolean mask of atoms held in all three directions by a constraint."""
+    return held_directions(atoms).all(axis=1)
+
+
+def net_load(atoms: Atoms, loads: np.ndarray | None, dim: int = 3) -> np.ndarray | None:
+    """The sum of ``loads`` (N, 3) over the atoms in each of the first
+    ``dim`` directions in which no constraint holds any atom (0 in the
+    others), if it is not zero beyond :data:`NET_LOAD_RTOL`: then the scene
+    has no equilibrium, it drifts. None if it is zero, if there are no loads,
+    or if a constraint other than FixAtoms and FixCartesian could hold the
+    scene."""
+    if loads is None or any(not isinstance(c, (FixAtoms, FixCartesian))
+                            for c in atoms.constraints):
+        return None
+    free = ~held_directions(atoms).any(axis=0)
+    free[dim:] = False
+    total = np.where(free, loads.sum(axis=0), 0.0)
+    if np.all(np.abs(total) <= NET_LOAD_RTOL * np.abs(loads).sum(axis=0)):
+        return None
+    return total
+
+
+def describe_net_load(total: np.ndarray) -> str:
+    """One sentence on a net load (:func:`net_load`) and what to do."""
+    axes = ', '.join(axis for axis, value in zip('xyz', total, strict=True) if value)
+    return (f'no finite equilibrium: nothing holds the scene along {axes} and its '
+            f'loads sum to {np.array2string(total, precision=6)} there, so it '
+            'drifts for ever; fix some points (FixAtoms, read_net(fixed=...), '
+            '--fixed) or make the loads sum to zero')
 
 
 def constrained_atoms(atoms: Atoms) -> np.ndarray:

@@ -115,6 +115,95 @@ def test_hessian_and_blocks_are_force_derivatives(scene, shape, dim, seed):
                                rtol=0, atol=1e-12 * np.abs(blocks).max())
 
 
+def loaded(scene, shape, n, dim, seed):
+    """``scene(shape, n, dim, seed)`` with a random force density multiplier
+    per spring in [0.2, 3] and a random load on every point, (n, dim)."""
+    atoms = scene(shape, n=n, dim=dim, seed=seed)
+    rng = np.random.default_rng(1000 + seed)
+    atoms.calc.set(q=rng.uniform(0.2, 3.0, len(atoms.calc.springs)),
+                   loads=rng.normal(0.0, 2.0, (n, dim)))
+    return atoms
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('shape', ['chain', 'tree', 'all_pairs'])
+def test_loads_and_force_densities_are_derivatives(scene, shape, dim, seed):
+    """With random loads and force densities: forces against central
+    differences of the energy, the Hessian and the nodal blocks against
+    central differences of the forces."""
+    atoms = loaded(scene, shape, 8, dim, seed)
+    calc = atoms.calc
+    forces = atoms.get_forces()
+    numerical = calculate_numerical_forces(atoms, eps=STEP, icarts=range(dim))
+    assert rel_err(forces[:, :dim], numerical) < FD_RTOL
+    numerical = fd_hessian(atoms, dim)
+    assert rel_err(calc.get_hessian(atoms), numerical) < FD_RTOL
+    assert rel_err(calc.get_stiffness(atoms), block_diagonal(numerical, dim)) < FD_RTOL
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+@pytest.mark.parametrize('dim', [2, 3])
+def test_loads_and_force_densities_by_formula(scene, dim, seed):
+    """Against the formulas written out here: a spring ``Q q L**2 / 2``, a
+    load ``-F . r`` (its force ``F``), on top of the repulsion alone; loads
+    leave the Hessian and the blocks as they are."""
+    atoms = loaded(scene, 'tree', 9, dim, seed)
+    calc = atoms.calc
+    q, loads = calc.parameters['q'], calc.parameters['loads']
+    repulsion = MaudCalculator(a=1.3, Q=0.7, dim=dim)
+    r = atoms.positions
+    i, j = calc.springs.T
+    length2 = ((r[i] - r[j])**2).sum(axis=1)
+    expected = (repulsion.get_potential_energy(atoms) + 0.5 * 0.7 * (q * length2).sum()
+                - (loads * r).sum())
+    assert calc.get_potential_energy(atoms) == pytest.approx(expected, rel=1e-12)
+    unloaded = MaudCalculator(springs=calc.springs, a=1.3, Q=0.7, dim=dim, q=q)
+    np.testing.assert_allclose(calc.get_forces(atoms) - unloaded.get_forces(atoms),
+                               loads, rtol=0, atol=1e-12 * np.abs(loads).max())
+    np.testing.assert_array_equal(calc.get_hessian(atoms), unloaded.get_hessian(atoms))
+    np.testing.assert_array_equal(calc.get_stiffness(atoms), unloaded.get_stiffness(atoms))
+    weighted = np.zeros((9, 9))
+    for (m, k), qs in zip(calc.springs, q, strict=True):
+        weighted[[m, k, m, k], [m, k, k, m]] += [qs, qs, -qs, -qs]
+    np.testing.assert_allclose(calc.get_spring_hessian(atoms).toarray(),
+                               0.7 * np.kron(weighted, np.eye(dim)), rtol=1e-14)
+    v = np.random.default_rng(seed).normal(size=(9, dim))
+    np.testing.assert_allclose(calc.potential.hvp(atoms.positions, v).ravel(),
+                               calc.get_hessian(atoms) @ v.ravel(), rtol=1e-10,
+                               atol=1e-12 * np.abs(calc.get_hessian(atoms)).max())
+
+
+@pytest.mark.parametrize('bad, message', [
+    ({'q': [1.0] * 7 + [0.0]}, r'q of spring 7 must be a positive finite number'),
+    ({'q': [1.0, np.nan] + [1.0] * 6}, r'q of spring 1 must be a positive'),
+    ({'q': [1.0] * 7}, r'q must hold one value per spring, shape \(8,\)'),
+    ({'q': [[1.0] * 8]}, r'q must hold one value per spring'),
+    ({'q': ['x'] * 8}, r'q must be an array of numbers'),
+    ({'loads': [[0, 0, 1.0]] * 4 + [[0, np.inf, 0]]}, r'loads of atom 4 must be a finite'),
+    ({'loads': np.ones((9, 4))}, r'loads must have shape \(N, 3\)'),
+    ({'loads': np.ones(9)}, r'loads must have shape'),
+])
+def test_bad_loads_and_force_densities_are_named(scene, bad, message):
+    atoms = scene('tree', n=9)
+    with pytest.raises(ValueError, match=message):
+        atoms.calc.set(**bad)
+    atoms.get_potential_energy()   # the calculator kept its good parameters
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+def test_loads_not_one_per_atom_are_refused_when_computing(scene, dim):
+    atoms = scene('tree', n=9, dim=dim)
+    atoms.calc.set(loads=np.ones((8, dim)))
+    with pytest.raises(ValueError, match='loads has 8 rows, one per atom, but the atoms are 9'):
+        atoms.get_potential_energy()
+
+
+def test_a_2d_load_off_the_plane_names_the_atom(scene):
+    with pytest.raises(ValueError, match='loads of atom 2 has z = 0.5'):
+        scene('tree', n=9, dim=2).calc.set(loads=[[0, 0, 0]] * 2 + [[0, 0, 0.5]] * 7)
+
+
 # -- analytic cases (design.md section 2) -------------------------------------
 
 def random_rotation(seed):

@@ -7,9 +7,10 @@ import sys
 import numpy as np
 import pytest
 from ase.io import read
+from ase.optimize import BFGS
 from test_io import relaxed_in_python, write_quad_net
 
-from ase_maud import cli
+from ase_maud import NoEquilibriumError, cli
 from ase_maud.cli import main
 from ase_maud.io import read_net, write_net
 from ase_maud.scenes import SUITE, build, scene_sizes
@@ -102,6 +103,68 @@ def test_relax_a_net_file_matches_python(tmp_path, capsys, kind):
     for relaxed in (read_net(traj), read_net(out, fixed=fixed)):
         assert relaxed.get_potential_energy() == pytest.approx(expected, rel=1e-9)
         assert np.linalg.norm(relaxed.get_forces(), axis=1).max() < 1e-6
+
+
+def force_density_solution(positions, springs, fixed, q, loads):
+    """The free points' equilibrium of springs ``q L**2 / 2`` (Q = 1) and
+    loads alone, the fixed points where they are: the linear system
+    ``(L_q x)_free = loads_free`` solved densely."""
+    n = len(positions)
+    laplacian = np.zeros((n, n))
+    for (i, j), qs in zip(springs, q, strict=True):
+        laplacian[[i, j, i, j], [i, j, j, i]] += [qs, qs, -qs, -qs]
+    free = np.setdiff1d(np.arange(n), fixed)
+    x = np.array(positions, dtype=float)
+    rhs = loads[free] - laplacian[np.ix_(free, fixed)] @ x[fixed]
+    x[free] = np.linalg.solve(laplacian[np.ix_(free, free)], rhs)
+    return x
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_relax_with_a_load_on_every_free_point(tmp_path, capsys, seed):
+    """``--load X Y Z`` on a flat net read from a file: with a tiny ``a`` the
+    relaxed net is the force-density solution under that load (solved here
+    directly); the load goes with the trajectory and the COMPAS file
+    written."""
+    path, positions, springs, fixed = write_quad_net(tmp_path, 'obj', seed=seed, flat=True)
+    load = np.random.default_rng(seed).normal(0.0, 0.3, 3)
+    traj, out = tmp_path / 'out.traj', tmp_path / 'relaxed.json'
+    assert main(['relax', str(path), '--fixed', str(tmp_path / 'fixed.txt'), '--a', '1e-4',
+                 '--load', *map(str, load), '--fmax', '1e-10', '--traj', str(traj),
+                 '--out', str(out), '--quiet']) == 0
+    loads = np.where(np.isin(np.arange(25), fixed)[:, None], 0.0, load)
+    expected = force_density_solution(positions, springs, fixed, np.ones(len(springs)), loads)
+    for relaxed in (read_net(traj), read_net(out, a=1e-4)):
+        assert relaxed.calc.dim == 3
+        np.testing.assert_array_equal(relaxed.calc.parameters['loads'], loads)
+        np.testing.assert_allclose(relaxed.positions, expected, rtol=0, atol=1e-8)
+
+
+def test_the_default_scene_hangs_under_its_weight(tmp_path, capsys):
+    """``ase-maud relax``: the weighted net, at the minimum BFGS finds from the
+    same start, every free point below where it hangs without its weight."""
+    traj = tmp_path / 'maud.traj'
+    assert main(['relax', '--fmax', '1e-7', '--traj', str(traj), '--quiet']) == 0
+    assert capsys.readouterr().out.startswith('converged: weighted_net 64 points')
+    relaxed = read_net(traj)
+    reference = build('weighted_net')
+    with BFGS(reference, logfile=None) as opt:
+        assert opt.run(fmax=1e-7, steps=2000)
+    assert relaxed.get_potential_energy() == pytest.approx(
+        reference.get_potential_energy(), rel=1e-10)
+    np.testing.assert_allclose(relaxed.positions, reference.positions, atol=1e-6)
+    unloaded = build('hanging_net')
+    with BFGS(unloaded, logfile=None) as opt:
+        assert opt.run(fmax=1e-7, steps=2000)
+    free = np.flatnonzero(relaxed.calc.parameters['loads'][:, 2])
+    assert len(free) == 36 and (relaxed.positions[free, 2] < unloaded.positions[free, 2]).all()
+
+
+def test_a_free_net_under_a_load_is_refused_before_the_first_step(tmp_path):
+    path, *_ = write_quad_net(tmp_path, 'obj')
+    with pytest.raises(NoEquilibriumError, match='loads sum to .* drifts for ever'):
+        main(['relax', str(path), '--load', '0', '0', '-1', '--traj',
+              str(tmp_path / 'o.traj'), '--quiet'])
 
 
 def test_relax_a_flat_net_in_its_plane(tmp_path, capsys):

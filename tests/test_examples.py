@@ -85,7 +85,7 @@ def test_quick_start_relax_compiles_once_into_the_user_cache(tmp_path):
     first = _fresh_python(relax, tmp_path)
     second = _fresh_python(relax, tmp_path)
     assert first[1].splitlines() == ['compiling the kernels (first run only, ~20 s)...']
-    assert 'converged: hanging_net 16 points' in first[0]
+    assert 'converged: weighted_net 16 points' in first[0]
     assert list((tmp_path / 'xdg' / 'ase_maud' / 'numba').rglob('*.nbi'))
     package = Path(ase_maud.__file__).parent
     assert not [f for f in package.rglob('*.nb[ic]') if f.stat().st_mtime >= start]

@@ -366,3 +366,118 @@ def test_relaxed_fmax_is_the_one_the_run_was_given(tmp_path, seed, fmax):
     write_net(tmp_path / 'written.obj', atoms)
     assert relaxed_fmax(tmp_path / 'written.traj') is None
     assert relaxed_fmax(tmp_path / 'written.obj') is None
+
+
+def compas_net(kind, seed):
+    """A COMPAS mesh (compas's faces.obj) or a graph of its edges, with a
+    random force density ``q`` on half the edges (the rest take the default,
+    2.0) and a random load on a third of the vertices."""
+    compas = pytest.importorskip('compas')
+    from compas.datastructures import Graph, Mesh
+    rng = np.random.default_rng(seed)
+    mesh = Mesh.from_obj(compas.get('faces.obj'))
+    net = mesh if kind == 'mesh' else Graph.from_nodes_and_edges(
+        {v: mesh.vertex_coordinates(v) for v in mesh.vertices()}, list(mesh.edges()))
+    net.update_default_edge_attributes(q=2.0)
+    edges = list(net.edges())
+    for k in rng.choice(len(edges), len(edges) // 2, replace=False):
+        net.edge_attribute(edges[k], 'q', float(rng.uniform(0.2, 3.0)))
+    points = list(net.vertices() if kind == 'mesh' else net.nodes())
+    attributes = net.vertex_attributes if kind == 'mesh' else net.node_attributes
+    for k in rng.choice(len(points), len(points) // 3, replace=False):
+        attributes(points[k], ['px', 'py', 'pz'], rng.normal(size=3).tolist())
+    return net, points
+
+
+def compas_forces(net, points, springs):
+    """``q`` of ``springs`` and the loads of ``points``, as compas reads them."""
+    attribute = getattr(net, 'vertex_attribute', None) or net.node_attribute
+    q = [net.edge_attribute((points[i], points[j]), 'q') if net.has_edge((points[i], points[j]))
+         else net.edge_attribute((points[j], points[i]), 'q') for i, j in springs]
+    loads = [[attribute(p, name) or 0.0 for name in ('px', 'py', 'pz')] for p in points]
+    return np.array(q), np.array(loads)
+
+
+def by_pair(springs, q):
+    return {tuple(sorted(map(int, pair))): float(value) for pair, value in zip(springs, q,
+                                                                               strict=True)}
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+@pytest.mark.parametrize('kind', ['mesh', 'graph'])
+def test_compas_force_densities_and_loads_round_trip(tmp_path, kind, seed):
+    """Edge ``q`` and vertex ``px, py, pz`` written by compas are the
+    calculator's ``q`` and ``loads``; changed, they are written back where
+    compas reads them (like the file, and in a fresh graph), and a
+    trajectory keeps them."""
+    compas = pytest.importorskip('compas')
+    net, points = compas_net(kind, seed)
+    path = tmp_path / f'{kind}.json'
+    net.to_json(str(path))
+    atoms = read_net(path)
+    q, loads = compas_forces(net, points, atoms.calc.springs)
+    np.testing.assert_array_equal(atoms.calc.parameters['q'], q)
+    np.testing.assert_array_equal(atoms.calc.parameters['loads'], loads)
+    rng = np.random.default_rng(100 + seed)
+    changed = rng.choice(len(q), 5, replace=False)
+    q[changed] = rng.uniform(0.2, 3.0, 5)
+    loads[rng.choice(len(loads), 4, replace=False)] = rng.normal(size=(4, 3))
+    atoms.calc.set(q=q, loads=loads)
+    for out, like in ((tmp_path / 'like.json', path), (tmp_path / 'fresh.json', None)):
+        write_net(out, atoms, like=like)
+        again = compas.json_load(str(out))   # a mesh like the file, or a graph
+        keys = list(again.vertices() if hasattr(again, 'vertices') else again.nodes())
+        np.testing.assert_array_equal(compas_forces(again, keys, atoms.calc.springs)[0], q)
+        np.testing.assert_array_equal(compas_forces(again, keys, atoms.calc.springs)[1], loads)
+        back = read_net(out)   # a fresh graph lists its edges in its own order
+        assert by_pair(back.calc.springs, back.calc.parameters['q']) == by_pair(
+            atoms.calc.springs, q)
+        np.testing.assert_array_equal(back.calc.parameters['loads'], loads)
+    write_net(tmp_path / 'net.traj', atoms)
+    back = read_net(tmp_path / 'net.traj')
+    np.testing.assert_array_equal(back.calc.parameters['q'], q)
+    np.testing.assert_array_equal(back.calc.parameters['loads'], loads)
+    np.testing.assert_array_equal(back.get_forces(), atoms.get_forces())
+
+
+def test_a_compas_file_without_forces_leaves_the_defaults(tmp_path):
+    path, *_ = write_quad_net(tmp_path, 'mesh2.json')
+    atoms = read_net(path)
+    assert atoms.calc.parameters['q'] is None and atoms.calc.parameters['loads'] is None
+    write_net(tmp_path / 'out.json', atoms, like=path)
+    data = json.loads((tmp_path / 'out.json').read_text())['data']
+    assert data['edgedata'] == {} and not any('px' in v for v in data['vertex'].values())
+
+
+@pytest.mark.parametrize('where, value, message', [
+    ('edge', -1.0, "edge 0-1, attribute q: q must be a positive finite number"),
+    ('edge', 'x', "edge 0-1, attribute q: q must be"),
+    ('vertex', None, "vertex 3, attribute pz: loads must be a finite number"),
+])
+def test_bad_force_densities_and_loads_name_the_file_and_item(tmp_path, where, value, message):
+    path, *_ = write_quad_net(tmp_path, 'network1.json')
+    document = json.loads(path.read_text())
+    if where == 'edge':
+        document['edge']['0']['1'] = {'q': value}
+    else:
+        document['node']['3']['pz'] = value
+    path.write_text(json.dumps(document))
+    with pytest.raises(ValueError, match=f'{path.name}: {message}'):
+        read_net(path)
+
+
+def test_a_load_on_every_free_point(tmp_path):
+    """``load=``: the same load on every point not fixed, none on the fixed
+    ones; a flat net under a load out of its plane is 3D, under one in its
+    plane still 2D."""
+    path, _, _, fixed = write_quad_net(tmp_path, 'obj', flat=True)
+    atoms = read_net(path, fixed=fixed, load=[0, 0, -0.5])
+    loads = atoms.calc.parameters['loads']
+    free = np.setdiff1d(np.arange(len(atoms)), fixed)
+    assert atoms.calc.dim == 3
+    assert (loads[free] == [0, 0, -0.5]).all() and not loads[fixed].any()
+    assert read_net(path, fixed=fixed, load=[0.1, 0, 0]).calc.dim == 2
+    with pytest.raises(ValueError, match='needs 3 numbers'):
+        read_net(path, load=[0, 1])
+    with pytest.raises(ValueError, match='loads of component 1 must be a finite number'):
+        read_net(path, load=[0, np.nan, 1])

@@ -461,6 +461,38 @@ def test_files_of_another_scene_with_as_many_points_are_refused(tmp_path, seed):
         assert opt.run(fmax=1e-6)
 
 
+@pytest.mark.parametrize('seed', [0, 4])
+def test_loads_and_force_densities_are_part_of_the_scene(tmp_path, seed):
+    # a loaded net with force densities resumed from its files: the same
+    # steps as the run never stopped; other loads or other q are refused
+    def scene():
+        atoms = build('weighted_net', 6, seed=seed)
+        rng = np.random.default_rng(seed)
+        atoms.calc.set(q=rng.uniform(0.5, 2.0, len(atoms.calc.springs)))
+        return atoms
+
+    straight = scene()
+    with Maud(straight, logfile=None) as opt:
+        opt.run(fmax=1e-300, steps=12)
+    restart, trajectory = tmp_path / 'maud.json', tmp_path / 'maud.traj'
+    with Maud(scene(), logfile=None, restart=restart, trajectory=trajectory) as opt:
+        opt.run(fmax=1e-300, steps=5)
+    heavier = scene()
+    heavier.calc.set(loads=2 * heavier.calc.parameters['loads'])
+    softer = scene()
+    softer.calc.set(q=0.5 * softer.calc.parameters['q'])
+    for atoms, what in ((heavier, r'loads are other ones \(as many: 16\)'),
+                        (softer, r'force densities are other ones \(as many: 60\)')):
+        with pytest.raises(ValueError, match=f'of another scene: its {what}'):
+            Maud(atoms, logfile=None, restart=restart)
+        with pytest.raises(ValueError, match=f'of another scene: its {what}'):
+            Maud.resume(atoms, restart=restart, trajectory=trajectory, logfile=None)
+    resumed = scene()
+    with Maud.resume(resumed, restart=restart, trajectory=trajectory, logfile=None) as opt:
+        opt.run(fmax=1e-300, steps=7)
+    np.testing.assert_array_equal(resumed.positions, straight.positions)
+
+
 @pytest.mark.parametrize('seed', [1, 2])
 def test_temporary_files_of_killed_writers_are_removed(tmp_path, seed):
     # a kill between writing the restart file's temporary and replacing it

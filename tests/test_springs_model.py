@@ -16,16 +16,21 @@ from ase_maud.scenes import build
 from ase_maud.stiffness import SpringsModel, choose_model, free_dofs
 
 
-def net(seed, side=7, a=1.0, dim=3, partial=False):
+def net(seed, side=7, a=1.0, dim=3, partial=False, weighted=False):
     """A side x side net of spacing 1 with its boundary fixed on a random
     saddle and a random interior, repelling with ``a``; ``partial``: some
-    interior points held in x only."""
+    interior points held in x only; ``weighted``: random force densities in
+    [0.2, 3] and random loads."""
     rng = np.random.default_rng(seed)
     atoms = build('hanging_net', side, seed=seed)
     atoms.positions += rng.uniform(-0.2, 0.2, atoms.positions.shape)
     if dim == 2:
         atoms.positions[:, 2] = 0.0
-    atoms.calc = MaudCalculator(atoms.calc.springs, a=a, dim=dim)
+    springs = atoms.calc.springs
+    atoms.calc = MaudCalculator(springs, a=a, dim=dim)
+    if weighted:
+        atoms.calc.set(q=rng.uniform(0.2, 3.0, len(springs)),
+                       loads=rng.normal(0.0, 0.5, (len(atoms), dim)))
     if partial:
         held = [c for c in atoms.constraints if isinstance(c, FixAtoms)]
         interior = np.setdiff1d(np.arange(len(atoms)), held[0].index)
@@ -34,30 +39,37 @@ def net(seed, side=7, a=1.0, dim=3, partial=False):
     return atoms
 
 
+@pytest.mark.parametrize('weighted', [False, True])
 @pytest.mark.parametrize('seed', [0, 1, 2])
 @pytest.mark.parametrize('dim, partial', [(3, False), (2, False), (3, True)])
-def test_a_springs_only_scene_takes_one_step(seed, dim, partial):
+def test_a_springs_only_scene_takes_one_step(seed, dim, partial, weighted):
     # a = 1e-4 on a net of spacing 1: the repulsion a^3 Q / L is 1e-12 of the
-    # springs, whose Hessian the model holds exactly: one Newton step
-    atoms = net(seed, a=1e-4, dim=dim, partial=partial)
+    # springs, whose Hessian the model holds exactly: one Newton step (loads
+    # are constant forces: still one)
+    atoms = net(seed, a=1e-4, dim=dim, partial=partial, weighted=weighted)
     start = np.abs(atoms.get_forces()).max()
     with Maud(atoms, model='springs', logfile=None) as opt:
         assert opt.run(fmax=1e-9 * start, steps=5)
     assert opt.nsteps == 1
     held = ~free_dofs(atoms, dim)
-    start = net(seed, a=1e-4, dim=dim, partial=partial).positions[:, :dim]
+    start = net(seed, a=1e-4, dim=dim, partial=partial, weighted=weighted).positions[:, :dim]
     np.testing.assert_array_equal(atoms.positions[:, :dim][held], start[held])
 
 
+@pytest.mark.parametrize('weighted', [False, True])
 @pytest.mark.parametrize('seed', [0, 1])
-def test_the_solver_is_the_springs_hessian_per_coordinate(seed):
-    atoms = net(seed, partial=True)
+def test_the_solver_is_the_springs_hessian_per_coordinate(seed, weighted):
+    atoms = net(seed, partial=True, weighted=weighted)
     solver = SpringsModel().at(atoms)
     free = free_dofs(atoms, 3)
     forces = np.random.default_rng(seed).standard_normal((len(atoms), 3))
     move = solver.solve(forces)
     assert not move[~free].any()
-    laplacian = atoms.calc.potential.spring_laplacian(len(atoms)).toarray()
+    laplacian = np.zeros((len(atoms), len(atoms)))   # weighted by q, written out
+    q = atoms.calc.parameters['q']
+    for (i, j), qs in zip(atoms.calc.springs, np.ones(len(atoms.calc.springs))
+                          if q is None else q, strict=True):
+        laplacian[[i, j, i, j], [i, j, j, i]] += [qs, qs, -qs, -qs]
     for c in range(3):
         keep = free[:, c]
         np.testing.assert_allclose(laplacian[np.ix_(keep, keep)] @ move[keep, c],

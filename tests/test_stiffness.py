@@ -22,9 +22,10 @@ from ase_maud.stiffness import (
 )
 
 
-def random_scene(seed, dim=3, n=None, a=1.0, fixed=True):
+def random_scene(seed, dim=3, n=None, a=1.0, fixed=True, weighted=False):
     """Random points with a random connected spring graph (a random tree plus
-    extra edges), some atoms held by FixAtoms and one by FixCartesian."""
+    extra edges), some atoms held by FixAtoms and one by FixCartesian;
+    ``weighted``: random force densities ``q`` in [0.2, 3] and random loads."""
     rng = np.random.default_rng(seed)
     n = n or int(rng.integers(6, 25))
     positions = np.zeros((n, 3))
@@ -34,6 +35,9 @@ def random_scene(seed, dim=3, n=None, a=1.0, fixed=True):
     springs = sorted(set(tree) | extra)
     atoms = Atoms(positions=positions)
     atoms.calc = MaudCalculator(springs, a=a, Q=float(rng.uniform(0.5, 2)), dim=dim)
+    if weighted:
+        atoms.calc.set(q=rng.uniform(0.2, 3.0, len(springs)),
+                       loads=rng.normal(0.0, 0.5, (n, dim)))
     if fixed:  # three points held: no rigid-body zero modes are left
         held = rng.choice(n, 4, replace=False)
         atoms.set_constraint([FixAtoms(indices=held[:3]),
@@ -58,10 +62,11 @@ def free_hessian(atoms):
     return atoms.calc.get_hessian(atoms)[np.ix_(keep, keep)], keep
 
 
+@pytest.mark.parametrize('weighted', [False, True])
 @pytest.mark.parametrize('seed', range(4))
 @pytest.mark.parametrize('dim', [2, 3])
-def test_exact_step_is_newtons_step(seed, dim):
-    atoms = near_minimum(random_scene(seed, dim), seed)
+def test_exact_step_is_newtons_step(seed, dim, weighted):
+    atoms = near_minimum(random_scene(seed, dim, weighted=weighted), seed)
     hessian, keep = free_hessian(atoms)
     assert np.linalg.eigvalsh(hessian).min() > 0
     forces = atoms.get_forces()
@@ -101,21 +106,23 @@ def test_global_model_is_symmetric_positive_definite(seed, dim):
     assert np.allclose(dense @ move[:, :dim][free], rhs, atol=1e-9 * np.abs(rhs).max())
 
 
+@pytest.mark.parametrize('weighted', [False, True])
 @pytest.mark.parametrize('seed', range(4))
 @pytest.mark.parametrize('dim', [2, 3])
-def test_global_model_is_the_hessian_without_repulsion(seed, dim):
+def test_global_model_is_the_hessian_without_repulsion(seed, dim, weighted):
     # a -> 0: the repulsion a^3 Q / L vanishes and P is the exact Hessian.
-    atoms = random_scene(seed, dim, a=1e-7)
+    atoms = random_scene(seed, dim, a=1e-7, weighted=weighted)
     matrix, free, _ = GlobalModel().assemble(atoms)
     hessian, keep = free_hessian(atoms)
     assert np.allclose(matrix.toarray(), hessian, rtol=0,
                        atol=1e-12 * np.abs(hessian).max())
 
 
+@pytest.mark.parametrize('weighted', [False, True])
 @pytest.mark.parametrize('seed', range(4))
 @pytest.mark.parametrize('dim', [2, 3])
-def test_global_model_spring_part_is_the_hessians(seed, dim):
-    atoms = random_scene(seed, dim, fixed=False)
+def test_global_model_spring_part_is_the_hessians(seed, dim, weighted):
+    atoms = random_scene(seed, dim, fixed=False, weighted=weighted)
     calc = atoms.calc
     springless = MaudCalculator(a=calc.length_scale, Q=calc.parameters['Q'], dim=dim)
     spring_part = calc.get_hessian(atoms) - springless.get_hessian(atoms)

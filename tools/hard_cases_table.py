@@ -35,9 +35,7 @@ def relax(atoms, fmax=1e-8, steps=30000, opt=Maud, **kwargs):
             outcome = 'converged' if dyn.run(fmax=fmax, steps=steps) else 'not converged'
         except MaudError as error:
             outcome = type(error).__name__
-    warned = 'no finite minimum' in log.getvalue()
-    return (outcome + (' (warned)' if warned else ''), dyn.nsteps,
-            time.perf_counter() - start, atoms.get_potential_energy())
+    return outcome, dyn.nsteps, time.perf_counter() - start, atoms.get_potential_energy()
 
 
 def show(case, atoms, hessian=False, **kwargs):

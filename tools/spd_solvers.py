@@ -22,7 +22,6 @@ import pyamg
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from ase_maud import physics
 from ase_maud.scenes import build
 from ase_maud.topology import fixed_atoms
 
@@ -31,7 +30,7 @@ def laplacian(name: str, size: int) -> sp.csc_matrix:
     """``L`` of a scene's springs on its free points (a shift of 1e-6 where
     nothing is fixed)."""
     atoms = build(name, size)
-    matrix = physics.spring_laplacian(atoms.calc.springs, len(atoms))
+    matrix = atoms.calc.potential.spring_laplacian(len(atoms))
     free = ~fixed_atoms(atoms)
     matrix = matrix[free][:, free]
     if free.all():

@@ -71,18 +71,11 @@ def save_png(fig: Figure, path: str | os.PathLike, dpi: int = 72, colours: int =
     image.save(path, optimize=True)
 
 
-def _calculator_value(calc, name: str):
-    """The calculator's attribute ``name``, else its parameter, else None."""
-    value = getattr(calc, name, None)
-    return getattr(calc, 'parameters', {}).get(name) if value is None else value
-
-
 def spring_q(calc) -> np.ndarray:
-    """Each spring's force density ``q`` (a multiplier of ``Q``): the
-    calculator's ``q`` where it has one, else ones."""
-    q = _calculator_value(calc, 'q')
-    count = len(calc.springs)
-    return np.ones(count) if q is None else np.broadcast_to(np.asarray(q, float), (count,))
+    """Each spring's force density ``q`` (a multiplier of ``Q``; its
+    potential's, ones where it has none)."""
+    q = calc.potential.q
+    return np.ones(len(calc.springs)) if q is None else q
 
 
 def spring_values(atoms: Atoms, colour: str) -> np.ndarray | None:
@@ -95,18 +88,18 @@ def spring_values(atoms: Atoms, colour: str) -> np.ndarray | None:
     if colour == 'length':
         return np.linalg.norm(d, axis=1)
     if colour == 'force':
-        Q = calc.potential.Q * spring_q(calc)[:, None]
+        Q = calc.potential.Q * spring_q(calc)
         return np.linalg.norm(spring_force(d, Q), axis=1)
     return None
 
 
 def loaded_points(atoms: Atoms) -> np.ndarray:
-    """Boolean mask of the points with a non-zero load (the calculator's
-    ``loads``, shape (N, 3), where it has loads; else none)."""
-    loads = _calculator_value(atoms.calc, 'loads')
+    """Boolean mask of the points with a non-zero load (the potential's
+    ``loads``, where it has loads; else none)."""
+    loads = getattr(getattr(atoms.calc, 'potential', None), 'loads', None)
     if loads is None:
         return np.zeros(len(atoms), bool)
-    return np.any(np.asarray(loads, float) != 0, axis=1)
+    return np.any(loads != 0, axis=1)
 
 
 def arrow_scale(largest_force: float, extent: float) -> float:

@@ -3,7 +3,6 @@ supports and loads in the legend, residual-force arrows at the stated scale
 and none when converged, the 3D view), not how the pixels look."""
 
 import math
-from types import SimpleNamespace
 
 import matplotlib
 import numpy as np
@@ -86,12 +85,11 @@ def test_spring_force_is_Q_q_L_and_length_is_L(seed):
     q = rng.uniform(0.1, 3.0, len(springs))
     Q = rng.uniform(0.5, 2.0)
     atoms = Atoms(positions=positions)
-    atoms.calc = SimpleNamespace(springs=springs, potential=SimpleNamespace(Q=Q), q=q,
-                                 parameters={})
+    atoms.calc = MaudCalculator(springs=springs, Q=Q, q=q)
     lengths = np.array([math.dist(positions[a], positions[b]) for a, b in springs])
     assert np.allclose(spring_values(atoms, 'length'), lengths, rtol=1e-12)
     assert np.allclose(spring_values(atoms, 'force'), Q * q * lengths, rtol=1e-12)
-    atoms.calc.q = None   # no force densities: q = 1
+    atoms.calc.set(q=None)   # no force densities: q = 1
     assert np.allclose(spring_values(atoms, 'force'), Q * lengths, rtol=1e-12)
     assert spring_values(atoms, 'none') is None
     with pytest.raises(ValueError, match="colour must be one of force, length, none"):
@@ -160,13 +158,7 @@ def test_supports_and_loads_in_the_legend(seed):
     loads = np.zeros((len(atoms), 3))
     loaded = np.random.default_rng(seed).choice(len(atoms), 5, replace=False)
     loads[loaded, 2] = -1.0
-
-    class Loaded(MaudCalculator):
-        """A calculator that reports loads (drawn, not part of its forces)."""
-
-    calc = Loaded(springs=atoms.calc.springs, dim=3)
-    Loaded.loads = loads
-    atoms.calc = calc
+    atoms.calc.set(loads=loads)
     fig, ax = figure(3)
     draw(ax, atoms)
     texts = legend_texts(ax)

@@ -54,7 +54,7 @@ def _ruled(name: str, parse=float):
 
 
 def _net_options(args: argparse.Namespace) -> dict:
-    """The keywords of :func:`ase_maud.io.read_net` from --edges, --fixed,
+    """The keywords of :func:`ase_maud.io.read_net` from --edges, --fix,
     --a, --Q and --dim."""
     return {'edges': args.edges, 'fixed': args.fixed, 'a': args.a, 'Q': args.Q,
             'dim': args.dim}
@@ -81,7 +81,7 @@ def relax(args: argparse.Namespace) -> int:
     """``ase-maud relax``: exit status 0 if converged, else 1."""
     from . import kernels_cached
     from .bench.runner import CallRecorder
-    from .io import net_format, read_net, write_net
+    from .io import mean_spring_length, net_format, read_net, write_net
     from .optimizer import Maud
     from .scenes import build
 
@@ -92,6 +92,9 @@ def relax(args: argparse.Namespace) -> int:
     else:
         atoms = read_net(args.net, **_net_options(args))
         label = Path(args.net).name
+    springs = atoms.calc.parameters.get('springs', ())
+    spacing = (f' ({atoms.calc.parameters["a"] / mean_spring_length(atoms.positions, springs):.3g}'
+               ' x the mean spring length at the start)') if len(springs) else ''
     if not kernels_cached():
         print('compiling the kernels (first run only, ~20 s)...', file=sys.stderr,
               flush=True)
@@ -112,11 +115,29 @@ def relax(args: argparse.Namespace) -> int:
     if args.out:
         like = args.net if args.net and net_format(args.net) == net_format(args.out) else None
         written += ', relaxed net ' + ' '.join(map(str, write_net(args.out, atoms, like=like)))
+    a = atoms.calc.parameters['a']
     print(f'{"converged" if converged else "NOT converged"}: {label} '
           f'{len(atoms)} points, {opt.nsteps} steps, '
           f'{len(recorder.samples)} force calls, energy '
-          f'{atoms.get_potential_energy():.12g}, fmax {fmax:.3g}; {written}')
+          f'{atoms.get_potential_energy():.12g}, fmax {fmax:.3g}, a {a:.4g}{spacing}; '
+          f'{written}')
+    if args.net is not None:
+        _warn_beyond_supports(atoms, a)
     return 0 if converged else 1
+
+
+def _warn_beyond_supports(atoms, a: float) -> None:
+    """A warning on stderr, naming --a, if the free points of the relaxed
+    net reach beyond its supports' bounding box by more than a tenth of its
+    diagonal."""
+    from .topology import support_excursion
+
+    beyond, diagonal = support_excursion(atoms)
+    if beyond > diagonal / 10 > 0:
+        print(f'ase-maud: warning: free points reach {beyond:.3g} beyond the bounding box '
+              f'of the fixed points (diagonal {diagonal:.3g}): the repulsion of a = {a:.4g} '
+              'inflates the net; a smaller --a gives a form closer to the springs\' '
+              'own', file=sys.stderr)
 
 
 def show(args: argparse.Namespace) -> int:
@@ -201,17 +222,20 @@ def _add_file(parser):
 
 
 def _add_net_options(parser):
-    """--edges, --fixed, --a, --Q and --dim of a command that reads a net."""
+    """--edges, --fix, --a, --Q and --dim of a command that reads a net."""
+    from .io import A_PER_MEAN_SPRING
+
     parser.add_argument('--edges', metavar='EDGES_FILE',
                         help='edge list: two 0-based point indices per line (default: '
                         "the file's own springs, or NAME.edges.txt beside NAME.xyz)")
-    parser.add_argument('--fixed', metavar='FIXED_FILE',
-                        help='0-based indices of the points held fixed, one or more per '
-                        "line (default: the file's own: trajectory constraints, COMPAS "
-                        'is_anchor)')
+    parser.add_argument('--fix', '--fixed', dest='fixed', metavar='RULE_OR_FILE',
+                        help="the points held fixed: 'boundary' (a mesh's: on edges of one "
+                        "face), 'leaves' (a network's: on one spring), or a file of 0-based "
+                        "indices, one or more per line (default: the file's own: "
+                        'trajectory constraints, COMPAS is_anchor or is_fixed)')
     parser.add_argument('--a', type=_ruled('a'),
                         help='length a of the repulsion a^3 Q / L (default: stored in a '
-                        'trajectory, else 1)')
+                        f'trajectory, else {A_PER_MEAN_SPRING:g} x the mean spring length)')
     parser.add_argument('--Q', type=_ruled('Q'),
                         help='spring constant Q (default: stored in a trajectory, else 1)')
     parser.add_argument('--dim', type=int, choices=(2, 3),
@@ -430,7 +454,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     if args.command == 'relax' and args.net is None and (
             args.edges or args.fixed or args.dim):
-        parser.error('relax: --edges, --fixed and --dim need NET_FILE')
+        parser.error('relax: --edges, --fix and --dim need NET_FILE')
     args.argv = sys.argv[1:] if argv is None else list(argv)
     if args.threads is not None:
         pin_threads(args.threads, restart=argv is None)

@@ -9,6 +9,7 @@ from ase.constraints import FixAtoms
 
 from ase_maud import Maud, MaudCalculator
 from ase_maud.io import (
+    A_PER_MEAN_SPRING,
     edges_path,
     read_compas,
     read_edges,
@@ -117,7 +118,10 @@ def test_read_gives_the_net_built_in_python(tmp_path, kind):
     assert pairs(atoms.calc.springs) == springs
     assert atoms.calc.dim == 3 and not atoms.pbc.any()
     assert atoms.constraints[0].index.tolist() == fixed.tolist()
-    assert (atoms.calc.parameters['a'], atoms.calc.parameters['Q']) == (1.0, 1.0)
+    lengths = [np.linalg.norm(positions[i] - positions[j]) for i, j in springs]
+    assert atoms.calc.parameters['a'] == pytest.approx(A_PER_MEAN_SPRING * np.mean(lengths),
+                                                       rel=1e-14)
+    assert atoms.calc.parameters['Q'] == 1.0
 
 
 def test_flat_net_is_2d_unless_told(tmp_path):
@@ -134,9 +138,10 @@ def test_obj_faces_and_polylines(tmp_path):
     path.write_text('v 0 0 0\nv 1 0 0 1.0\nv 1 1 0\nv 0 1 0\nvt 0 0\n'
                     'f 1/1 2/1 3/1\nf 1 3 -1\n'     # shares the edge 1-3
                     'v 2 0 0\nv 3 0 0\nl 2 -2 -1\n')  # 2-5, 5-6
-    positions, springs = read_obj(path)
+    positions, springs, faces, anchors = read_obj(path)
     assert positions.shape == (6, 3) and positions[1].tolist() == [1, 0, 0]
     assert springs.tolist() == [[0, 1], [1, 2], [2, 0], [2, 3], [3, 0], [1, 4], [4, 5]]
+    assert faces == [[0, 1, 2], [0, 2, 3]] and anchors == []
 
 
 @pytest.mark.parametrize('kind', FORMATS)
@@ -176,8 +181,7 @@ def test_fresh_files_keep_points_and_springs(tmp_path, kind):
         document = json.loads(out.read_text())
         assert document['dtype'] == 'compas.datastructures/Graph'
         assert again.constraints[0].index.tolist() == fixed.tolist()
-        positions, _, anchors = read_compas(out)
-        assert anchors == fixed.tolist()
+        assert read_compas(out).anchors == fixed.tolist()
 
 
 def test_trajectory_keeps_springs_a_q_dim_and_fixed(tmp_path):
@@ -301,7 +305,8 @@ def test_write_refuses_a_mismatched_original(tmp_path):
     atoms = read_net(path)
     with pytest.raises(ValueError, match='different formats'):
         write_net(tmp_path / 'out.json', atoms, like=path)
-    with pytest.raises(ValueError, match='has 16 vertices, the net 9 points'):
+    with pytest.raises(ValueError, match=r'has 16 points \(16 vertices, coincident ones '
+                       r'merged\), the net 9'):
         write_net(tmp_path / 'out.obj', atoms[:9], like=path)
 
 

@@ -7,19 +7,20 @@ its file name says, keeping the rest of an original file (``like=``).
 
 Formats, chosen by the file name's suffix:
 
-- ``.obj``, Wavefront OBJ: each ``v`` line is a point; the springs are the
-  edges of the faces (``f``), each undirected edge once, plus the segments of
-  the polylines (``l``). Indices may be ``v``, ``v/vt``, ``v//vn``,
-  ``v/vt/vn``, 1-based or negative (relative). Other statements (``vn``,
-  ``vt``, ``g``, ``o``, ``usemtl``, ...) are kept on writing and ignored on
-  reading. Written back with every ``v`` line's coordinates replaced.
+- ``.obj``, Wavefront OBJ: each ``v`` line is a point, coincident ones
+  merged (:func:`merge_coincident`); the springs are the edges of the faces
+  (``f``), each undirected edge once, plus the segments of the polylines
+  (``l``) and of the curves of degree 1 (``cstype bspline`` or ``bezier``,
+  ``deg 1``, ``curv u0 u1 v1 v2 ...``: Rhino's line export). Indices may be
+  ``v``, ``v/vt``, ``v//vn``, ``v/vt/vn``, 1-based or negative (relative).
+  Other statements (``vn``, ``vt``, ``g``, ``o``, ``usemtl``, ``parm``,
+  ``end``, ...) are kept on writing and ignored on reading.
 - ``.json``, COMPAS data: a mesh (``vertex`` and ``face`` dicts; springs are
   the faces' edges) or a network/graph (``node`` and ``edge`` dicts; springs
   are the edges), bare or in COMPAS's envelope (``{"dtype": ..., "value":
   {...}}`` of COMPAS 1.x, ``{"dtype": ..., "data": {...}}`` of 2.x). Points
   are in the order of the file's vertex (node) keys; a vertex attribute
-  ``is_anchor`` or ``is_fixed`` that is true fixes the point. Written back as
-  the original structure with only ``x``, ``y``, ``z`` replaced.
+  ``is_anchor`` or ``is_fixed`` that is true fixes the point.
 - ``.traj``, ASE trajectory: the springs, ``a``, ``Q`` and ``dim`` come back
   from the calculator parameters that ASE's trajectory stores with every
   frame (:meth:`MaudCalculator.todict`), the fixed points from its
@@ -28,6 +29,10 @@ Formats, chosen by the file name's suffix:
   file of two 0-based point indices per line, ``#`` comments allowed. By
   default ``NAME.edges.txt`` beside ``NAME.xyz``; :func:`write_net` writes it
   there.
+
+Written back (``like=``), an OBJ or JSON file keeps its text but for the
+coordinates that moved, each written as the shortest text that reads back as
+its float (``repr``); line endings, comments and every other line as read.
 
 Reader choice: our own OBJ parser. meshio's OBJ reader skips
 ``l`` lines and reports no line numbers; trimesh triangulates quads, adding
@@ -568,8 +573,10 @@ def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None) -> lis
 
     The format is ``path``'s (see the module docstring). ``like``, a file of
     the same format with as many points (the one the net was read from),
-    is kept but for the coordinates: OBJ faces, polylines, groups and
-    comments, COMPAS attributes. Without it: OBJ gets the springs as ``l``
+    is kept as it is but for the coordinates that moved, each written as
+    the shortest text that reads back as its float (an unmoved coordinate
+    keeps its text); line endings, comments, faces, curves, groups, COMPAS
+    attributes and layout stay. Without it: OBJ gets the springs as ``l``
     lines, JSON a COMPAS 2.x graph (fixed points ``is_anchor``). A trajectory
     stores the springs, ``a``, ``Q`` and ``dim`` with the frame. ``.xyz``
     (``.extxyz``) is extended XYZ with every digit of the coordinates

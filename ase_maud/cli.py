@@ -271,14 +271,14 @@ def build_parser() -> argparse.ArgumentParser:
         'scene, draw it, classify its stationary point, or benchmark.',
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog='examples:\n  ase-maud relax\n'
-        '  ase-maud relax net.obj --fixed fixed.txt --out relaxed.obj\n'
+        '  ase-maud relax net.obj --fix boundary --out relaxed.obj\n'
         '  ase-maud show maud.traj --gif\n  ase-maud classify maud.traj\n'
         'Each command has its own --help.')
     commands = parser.add_subparsers(dest='command', metavar='COMMAND')
 
     p = _command(
         commands, 'relax', 'relax a net from a file, or a built-in scene, with Maud',
-        'Relax the net of NET_FILE (OBJ: points and face/polyline edges; COMPAS '
+        'Relax the net of NET_FILE (OBJ: points and face/polyline/curve edges; COMPAS '
         'mesh or network JSON; an ASE trajectory; or XYZ and any file ASE reads, '
         'with an edge list) or, without NET_FILE, a built-in scene, with Maud. '
         'Shows a progress bar with fmax and the energy on a terminal (else '
@@ -286,7 +286,9 @@ def build_parser() -> argparse.ArgumentParser:
         'springs, a, Q and dim: every command here reads it back), the relaxed '
         'net with --out (like NET_FILE if of its format), and a one-line summary.',
         ['ase-maud relax                       # the default scene, maud.traj',
-         'ase-maud relax net.obj --fixed fixed.txt --fmax 1e-6 --traj out.traj '
+         'ase-maud relax net.obj --fix boundary --out relaxed.obj',
+         'ase-maud relax lines.obj --fix leaves  # a Rhino line drawing',
+         'ase-maud relax net.obj --fix fixed.txt --fmax 1e-6 --traj out.traj '
          '--out relaxed.obj',
          'ase-maud relax points.xyz --edges edges.txt --dim 2 --quiet',
          'ase-maud relax --scene ring --size 100 --log ring.log'])
@@ -354,7 +356,7 @@ def build_parser() -> argparse.ArgumentParser:
         '--ftol, the curvature there reported). Prints the lowest eigenvalues. '
         'Exit status 0 if stationary, 1 if not.',
         ['ase-maud classify maud.traj',
-         'ase-maud classify relaxed.obj --fixed fixed.txt -k 10'])
+         'ase-maud classify relaxed.obj --fix boundary --a 0.3 -k 10'])
     _add_file(p)
     p.add_argument('-k', type=_ruled('count', int), default=6,
                    help='eigenvalues to print (and to compute, above 2000 free '

@@ -96,12 +96,20 @@ def write_quad_net(folder, kind, n=5, seed=0, flat=False):
     return path, positions, springs, fixed
 
 
+def rule_a(positions, springs):
+    """The a that a net read from a file gets: the rule's fraction of the
+    mean length of its springs."""
+    return A_PER_MEAN_SPRING * np.mean([np.linalg.norm(positions[i] - positions[j])
+                                        for i, j in springs])
+
+
 def relaxed_in_python(positions, springs, fixed, dim=3, fmax=1e-6):
-    """The net relaxed with Maud from Python: its energy."""
+    """The net relaxed with Maud from Python, with the a of :func:`rule_a`:
+    its energy."""
     from ase import Atoms
 
     atoms = Atoms(positions=positions, pbc=False)
-    atoms.calc = MaudCalculator(springs, dim=dim)
+    atoms.calc = MaudCalculator(springs, dim=dim, a=rule_a(positions, springs))
     atoms.set_constraint(FixAtoms(indices=fixed))
     with Maud(atoms, logfile=None) as opt:
         assert opt.run(fmax=fmax, steps=500)
@@ -120,9 +128,7 @@ def test_read_gives_the_net_built_in_python(tmp_path, kind):
     assert pairs(atoms.calc.springs) == springs
     assert atoms.calc.dim == 3 and not atoms.pbc.any()
     assert atoms.constraints[0].index.tolist() == fixed.tolist()
-    lengths = [np.linalg.norm(positions[i] - positions[j]) for i, j in springs]
-    assert atoms.calc.parameters['a'] == pytest.approx(A_PER_MEAN_SPRING * np.mean(lengths),
-                                                       rel=1e-14)
+    assert atoms.calc.parameters['a'] == pytest.approx(rule_a(positions, springs), rel=1e-14)
     assert atoms.calc.parameters['Q'] == 1.0
 
 

@@ -139,8 +139,8 @@ def test_a_of_a_file_is_a_fraction_of_its_mean_spring(tmp_path, seed):
     the calculator's default 1 included; a given a wins."""
     path, positions, springs, _ = write_quad_net(tmp_path, 'obj', seed=seed)
     mean = np.mean([np.linalg.norm(positions[i] - positions[j]) for i, j in springs])
-    atoms = read_net(path)
-    assert atoms.calc.parameters['a'] == pytest.approx(A_PER_MEAN_SPRING * mean, rel=1e-14)
+    assert read_net(path).calc.parameters['a'] == pytest.approx(A_PER_MEAN_SPRING * mean,
+                                                                rel=1e-14)
     assert read_net(path, a=2.5).calc.parameters['a'] == 2.5
     atoms = read_net(path, a=1.0)
     write_net(tmp_path / 'one.traj', atoms)

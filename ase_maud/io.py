@@ -219,6 +219,9 @@ def _fixed_points(path, fixed, natoms, springs, faces):
                 else "no point is on exactly one spring; 'boundary' fixes a mesh's")
                 + '); name the fixed points')
         return indices.tolist()
+    if isinstance(fixed, str) and not Path(fixed).exists():
+        raise ValueError(f'fixed={fixed!r} is neither a rule ({", ".join(FIX_RULES)}) '
+                         'nor a file')
     if isinstance(fixed, (str, os.PathLike)):
         return read_indices(fixed, natoms)
     return _fixed_indices(fixed, natoms)

@@ -541,3 +541,24 @@ def test_json_write_back_of_a_default_coordinate(tmp_path):
     atoms.positions[2, 2] = 0.25
     write_net(tmp_path / 'out.json', atoms, like=path)
     np.testing.assert_array_equal(read_net(tmp_path / 'out.json').positions, atoms.positions)
+
+
+@pytest.mark.parametrize('kind', ['obj', 'mesh2.json'])
+@pytest.mark.parametrize('seed', range(5))
+def test_moved_coordinates_are_shortest_exact_text(tmp_path, kind, seed):
+    """Coordinates of nets of any size (1e-9 to 1e9) come back exactly, each
+    written as repr: no longer than 17 significant digits and as short as
+    any text that reads back as the float."""
+    path, *_ = write_quad_net(tmp_path, kind, seed=seed)
+    atoms = read_net(path)
+    rng = np.random.default_rng(seed)
+    atoms.positions = rng.normal(size=atoms.positions.shape) * 10.0 ** rng.uniform(-9, 9)
+    out = tmp_path / f'out.{kind}'
+    write_net(out, atoms, like=path)
+    np.testing.assert_array_equal(read_net(out).positions, atoms.positions)
+    text = out.read_text()
+    for x in atoms.positions.ravel():
+        token = repr(float(x))
+        assert token in text and len(token) <= len(f'{x:.17g}') + 2   # '.0' or 'e-05'
+        shorter = [f'{x:.{digits}g}' for digits in range(1, 17)]
+        assert not [t for t in shorter if float(t) == x and len(t) < len(token)]

@@ -129,6 +129,9 @@ def test_read_net_fixes_the_leaves_of_a_network(tmp_path):
         read_net(closed, fixed='boundary')
     with pytest.raises(ValueError, match=r"fixed='leaves' finds no point"):
         read_net(closed, fixed='leaves')
+    with pytest.raises(ValueError, match=r"fixed='bondary' is neither a rule \(boundary, "
+                       r'leaves\) nor a file'):
+        read_net(path, fixed='bondary')
     (tmp_path / 'leaves').write_text('0 3\n')   # a file of that name, given as a Path
     assert read_net(path, fixed=tmp_path / 'leaves').constraints[0].index.tolist() == [0, 3]
 
@@ -177,3 +180,26 @@ def test_relax_fixes_by_rule_like_python(tmp_path, capsys):
         assert opt.run(fmax=1e-8, steps=500)
     np.testing.assert_allclose(read_net(traj).positions, atoms.positions, atol=1e-7)
     assert quad_net(5, 2)[3].tolist() == read_net(traj).constraints[0].index.tolist()
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_compas_anchors_hold_unless_a_rule_is_given(tmp_path, seed):
+    """is_anchor or is_fixed true (on the vertex or by default) fixes a point;
+    a rule replaces them."""
+    import json
+    path, _, _, boundary = write_quad_net(tmp_path, 'mesh2.json', seed=seed)
+    document = json.loads(path.read_text())
+    rng = np.random.default_rng(seed)
+    flags = rng.choice(['is_anchor', 'is_fixed', None], size=25)
+    document['data']['default_vertex_attributes']['is_fixed'] = False
+    for vertex, flag in zip(document['data']['vertex'].values(), flags, strict=True):
+        if flag is not None:
+            vertex[flag] = bool(rng.random() < 0.5)
+    path.write_text(json.dumps(document))
+    held = [n for n, (vertex, flag) in enumerate(zip(document['data']['vertex'].values(),
+                                                    flags, strict=True))
+            if flag is not None and vertex[flag]]
+    atoms = read_net(path)
+    assert (atoms.constraints[0].index.tolist() if held else atoms.constraints) == (
+        held if held else [])
+    assert read_net(path, fixed='boundary').constraints[0].index.tolist() == boundary.tolist()

@@ -395,10 +395,11 @@ def test_rhino_curves_merge_into_one_graph(tmp_path, seed):
                                                for i, j in springs)
     vertices = np.array([line.split()[1:] for line in near.read_text().splitlines()
                          if line.startswith('v ')], dtype=float)
-    firsts = [2 * next(s for s, pair in enumerate(springs) if k in pair)
-              + springs[next(s for s, pair in enumerate(springs) if k in pair)].index(k)
-              for k in order]
-    np.testing.assert_array_equal(atoms.positions, vertices[firsts])
+    first = {}   # the file's first copy of each point: vertex 2 s + end of spring s
+    for s, pair in enumerate(springs):
+        for end, k in enumerate(pair):
+            first.setdefault(k, 2 * s + end)
+    np.testing.assert_array_equal(atoms.positions, vertices[[first[k] for k in order]])
     far = tmp_path / 'far.obj'
     far.write_text(rhino_lines(points, springs, 10 * MERGE_TOLERANCE * diagonal, seed))
     assert len(read_net(far, a=1.0)) == 2 * len(springs)

@@ -441,7 +441,7 @@ def _obj_file(path):
                 raise ValueError(f'{path} line {number}: a {keyword!r} needs '
                                  f'at least {least} vertex indices, got {len(rest)}')
             raw = _numbers(path, number, [t.split('/')[0] for t in rest],
-                            'integer vertex indices (v, v/vt, v//vn or v/vt/vn)')
+                           'integer vertex indices (v, v/vt, v//vn or v/vt/vn)')
             if 0 in raw:
                 raise ValueError(f'{path} line {number}: vertex index 0 (OBJ '
                                  'counts from 1)')
@@ -645,7 +645,7 @@ def _number_text(old: str, value: float) -> str:
 
 
 #: An OBJ ``v`` statement's keyword and x, y, z with the space around them.
-_VERTEX = re.compile(r'(\s*v\s+)(\S+)(\s+)(\S+)(\s+)(\S+)')
+_VERTEX = re.compile(r'(\s*v\s+)([^\s#]+)(\s+)([^\s#]+)(\s+)([^\s#]+)')
 
 
 def _obj_text(atoms, like):

@@ -471,7 +471,8 @@ def crlf_obj(tmp_path, seed):
     lines = ['# exported', 'g net', 'vn 0 0 1']
     for n, p in enumerate(np.round(positions, 3)):
         text = ' '.join(f'{c:.3f}' for c in p)
-        lines.append(f'v\t{text}  # point {n}' if n % 7 == 0 else f'v {text}')
+        lines.append(f'v\t{text}  # point {n}' if n % 7 == 0 else
+                     f'v {text}#' if n % 5 == 0 else f'v {text}')
     lines += ['f ' + ' '.join(f'{i + 1}//1' for i in q) for q in quads]
     path = tmp_path / 'crlf.obj'
     path.write_bytes(('\r\n'.join(lines) + '\r\n').encode())
@@ -497,7 +498,7 @@ def test_obj_write_back_keeps_the_file(tmp_path, seed):
     assert [n for n, (a, b) in enumerate(zip(old, new, strict=True)) if a != b] == \
         [rows[k] for k in np.flatnonzero(moved)]
     for k, n in enumerate(rows):
-        before, after = old[n].decode().split('#')[0].split(), new[n].decode().split()
+        before, after = (line.decode().split('#')[0].split() for line in (old[n], new[n]))
         tokens = after[1:4]
         np.testing.assert_array_equal(np.array(tokens, dtype=float), atoms.positions[k])
         for token, value in zip(tokens, atoms.positions[k], strict=True):

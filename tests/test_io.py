@@ -466,9 +466,10 @@ def test_malformed_curves_name_the_line(tmp_path, text, message):
 
 def crlf_obj(tmp_path, seed):
     """The quad net as a CRLF OBJ with coordinates of 3 decimals (some with
-    trailing zeros), a comment on a vertex line, tabs, groups and normals."""
+    trailing zeros), comments (one not ASCII, some on vertex lines), tabs,
+    groups and normals."""
     positions, quads, *_ = quad_net(5, seed)
-    lines = ['# exported', 'g net', 'vn 0 0 1']
+    lines = ['# exported, Größe in m', 'g net', 'vn 0 0 1']
     for n, p in enumerate(np.round(positions, 3)):
         text = ' '.join(f'{c:.3f}' for c in p)
         lines.append(f'v\t{text}  # point {n}' if n % 7 == 0 else

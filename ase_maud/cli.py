@@ -92,9 +92,9 @@ def relax(args: argparse.Namespace) -> int:
     else:
         atoms = read_net(args.net, **_net_options(args))
         label = Path(args.net).name
-    springs = atoms.calc.parameters.get('springs', ())
-    spacing = (f' ({atoms.calc.parameters["a"] / mean_spring_length(atoms.positions, springs):.3g}'
-               ' x the mean spring length at the start)') if len(springs) else ''
+    a, springs = atoms.calc.parameters['a'], atoms.calc.parameters.get('springs', ())
+    share = (f' ({a / mean_spring_length(atoms.positions, springs):.3g} x the mean spring '
+             'length at the start)') if len(springs) else ''
     if not kernels_cached():
         print('compiling the kernels (first run only, ~20 s)...', file=sys.stderr,
               flush=True)
@@ -115,11 +115,10 @@ def relax(args: argparse.Namespace) -> int:
     if args.out:
         like = args.net if args.net and net_format(args.net) == net_format(args.out) else None
         written += ', relaxed net ' + ' '.join(map(str, write_net(args.out, atoms, like=like)))
-    a = atoms.calc.parameters['a']
     print(f'{"converged" if converged else "NOT converged"}: {label} '
           f'{len(atoms)} points, {opt.nsteps} steps, '
           f'{len(recorder.samples)} force calls, energy '
-          f'{atoms.get_potential_energy():.12g}, fmax {fmax:.3g}, a {a:.4g}{spacing}; '
+          f'{atoms.get_potential_energy():.12g}, fmax {fmax:.3g}, a {a:.4g}{share}; '
           f'{written}')
     if args.net is not None:
         _warn_beyond_supports(atoms, a)

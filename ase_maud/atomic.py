@@ -70,9 +70,9 @@ def replace_with(path: str | os.PathLike, write: Callable[[Path], None],
 
 def replace_text(path: str | os.PathLike, text: str, sync: bool = True,
                  newline: str | None = None) -> None:
-    """Replace ``path`` by ``text`` (:func:`replace_with`); ``newline`` as
+    """Replace ``path`` by ``text`` in UTF-8 (:func:`replace_with`); ``newline`` as
     for :func:`open` (``''`` writes the text's own line endings)."""
     def write(temporary: Path) -> None:
-        with open(temporary, 'w', newline=newline) as fd:
+        with open(temporary, 'w', encoding='utf-8', newline=newline) as fd:
             fd.write(text)
     replace_with(path, write, sync)

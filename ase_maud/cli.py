@@ -66,7 +66,7 @@ def _ruled(name: str, parse=float):
 
 
 def _net_options(args: argparse.Namespace) -> dict:
-    """The keywords of :func:`ase_maud.io.read_net` from --edges, --fixed,
+    """The keywords of :func:`ase_maud.io.read_net` from --edges, --fix,
     --a, --Q and --dim."""
     return {'edges': args.edges, 'fixed': args.fixed, 'a': args.a, 'Q': args.Q,
             'dim': args.dim}
@@ -93,7 +93,7 @@ def relax(args: argparse.Namespace) -> int:
     """``ase-maud relax``: exit status 0 if converged, else 1."""
     from . import kernels_cached
     from .bench.runner import CallRecorder
-    from .io import free_point_loads, net_format, read_net, write_net
+    from .io import free_point_loads, mean_spring_length, net_format, read_net, write_net
     from .optimizer import Maud
     from .scenes import build
 
@@ -106,6 +106,9 @@ def relax(args: argparse.Namespace) -> int:
     else:
         atoms = read_net(args.net, load=args.load, **_net_options(args))
         label = Path(args.net).name
+    a, springs = atoms.calc.parameters['a'], atoms.calc.parameters.get('springs', ())
+    share = (f' ({a / mean_spring_length(atoms.positions, springs):.3g} x the mean spring '
+             'length at the start)') if len(springs) else ''
     if not kernels_cached():
         print('compiling the kernels (first run only, ~20 s)...', file=sys.stderr,
               flush=True)
@@ -129,8 +132,25 @@ def relax(args: argparse.Namespace) -> int:
     print(f'{"converged" if converged else "NOT converged"}: {label} '
           f'{len(atoms)} points, {opt.nsteps} steps, '
           f'{len(recorder.samples)} force calls, energy '
-          f'{atoms.get_potential_energy():.12g}, fmax {fmax:.3g}; {written}')
+          f'{atoms.get_potential_energy():.12g}, fmax {fmax:.3g}, a {a:.4g}{share}; '
+          f'{written}')
+    if args.net is not None:
+        _warn_beyond_supports(atoms, a)
     return 0 if converged else 1
+
+
+def _warn_beyond_supports(atoms, a: float) -> None:
+    """A warning on stderr, naming --a, if the free points of the relaxed
+    net reach beyond its supports' bounding box by more than a tenth of its
+    diagonal."""
+    from .topology import support_excursion
+
+    beyond, diagonal = support_excursion(atoms)
+    if beyond > diagonal / 10 > 0:
+        print(f'ase-maud: warning: free points reach {beyond:.3g} beyond the bounding box '
+              f'of the fixed points (diagonal {diagonal:.3g}): the repulsion of a = {a:.4g} '
+              'inflates the net; a smaller --a gives a form closer to the springs\' '
+              'own', file=sys.stderr)
 
 
 def show(args: argparse.Namespace) -> int:
@@ -276,17 +296,20 @@ def _add_file(parser):
 
 
 def _add_net_options(parser):
-    """--edges, --fixed, --a, --Q and --dim of a command that reads a net."""
+    """--edges, --fix, --a, --Q and --dim of a command that reads a net."""
+    from .io import A_PER_MEAN_SPRING
+
     parser.add_argument('--edges', metavar='EDGES_FILE',
                         help='edge list: two 0-based point indices per line (default: '
                         "the file's own springs, or NAME.edges.txt beside NAME.xyz)")
-    parser.add_argument('--fixed', metavar='FIXED_FILE',
-                        help='0-based indices of the points held fixed, one or more per '
-                        "line (default: the file's own: trajectory constraints, COMPAS "
-                        'is_anchor)')
+    parser.add_argument('--fix', '--fixed', dest='fixed', metavar='RULE_OR_FILE',
+                        help="the points held fixed: 'boundary' (a mesh's: on edges of one "
+                        "face), 'leaves' (a network's: on one spring), or a file of 0-based "
+                        "indices, one or more per line (default: the file's own: "
+                        'trajectory constraints, COMPAS is_anchor or is_fixed)')
     parser.add_argument('--a', type=_ruled('a'),
                         help='length a of the repulsion a^3 Q / L (default: stored in a '
-                        'trajectory, else 1)')
+                        f'trajectory, else {A_PER_MEAN_SPRING:g} x the mean spring length)')
     parser.add_argument('--Q', type=_ruled('Q'),
                         help='spring constant Q (default: stored in a trajectory, else 1)')
     parser.add_argument('--dim', type=int, choices=(2, 3),
@@ -322,14 +345,14 @@ def build_parser() -> argparse.ArgumentParser:
         'scene, draw it, classify its stationary point, or benchmark.',
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog='examples:\n  ase-maud relax\n'
-        '  ase-maud relax net.obj --fixed fixed.txt --out relaxed.obj\n'
+        '  ase-maud relax net.obj --fix boundary --out relaxed.obj\n'
         '  ase-maud show maud.traj --gif\n  ase-maud classify maud.traj\n'
         'Each command has its own --help.')
     commands = parser.add_subparsers(dest='command', metavar='COMMAND')
 
     p = _command(
         commands, 'relax', 'relax a net from a file, or a built-in scene, with Maud',
-        'Relax the net of NET_FILE (OBJ: points and face/polyline edges; COMPAS '
+        'Relax the net of NET_FILE (OBJ: points and face/polyline/curve edges; COMPAS '
         'mesh or network JSON; an ASE trajectory; or XYZ and any file ASE reads, '
         'with an edge list) or, without NET_FILE, a built-in scene, with Maud. '
         'Shows a progress bar with fmax and the energy on a terminal (else '
@@ -337,8 +360,9 @@ def build_parser() -> argparse.ArgumentParser:
         'springs, a, Q and dim: every command here reads it back), the relaxed '
         'net with --out (like NET_FILE if of its format), and a one-line summary.',
         ['ase-maud relax                       # the default scene, maud.traj',
-         'ase-maud relax net.obj --fixed fixed.txt --load 0 0 -0.1 --out hung.json',
-         'ase-maud relax net.obj --fixed fixed.txt --fmax 1e-6 --traj out.traj '
+         'ase-maud relax net.obj --fix boundary --load 0 0 -0.1 --out hung.obj',
+         'ase-maud relax lines.obj --fix leaves  # a Rhino line drawing',
+         'ase-maud relax net.obj --fix fixed.txt --fmax 1e-6 --traj out.traj '
          '--out relaxed.obj',
          'ase-maud relax points.xyz --edges edges.txt --dim 2 --quiet',
          'ase-maud relax --scene ring --size 100 --log ring.log'])
@@ -425,7 +449,7 @@ def build_parser() -> argparse.ArgumentParser:
         'there reported). Prints the lowest eigenvalues. '
         'Exit status 0 if stationary, 1 if not.',
         ['ase-maud classify maud.traj',
-         'ase-maud classify relaxed.obj --fixed fixed.txt -k 10'])
+         'ase-maud classify relaxed.obj --fix boundary --a 0.3 -k 10'])
     _add_file(p)
     p.add_argument('-k', type=_ruled('count', int), default=6,
                    help='eigenvalues to print (and to compute, above 2000 free '
@@ -524,7 +548,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     if args.command == 'relax' and args.net is None and (
             args.edges or args.fixed or args.dim):
-        parser.error('relax: --edges, --fixed and --dim need NET_FILE')
+        parser.error('relax: --edges, --fix and --dim need NET_FILE')
     args.argv = sys.argv[1:] if argv is None else list(argv)
     try:
         check_outputs(args)

@@ -1,7 +1,12 @@
-"""Whether a scene can have a finite minimum at all, from its spring graph
-and its loads.
+"""The spring graph of a net: supports by rule, and whether a scene can
+have a finite minimum at all, from its spring graph and its loads.
 
-A spring component free to translate in 3D beside other components feels
+Supports by rule: :func:`boundary_vertices` (a mesh's boundary: the points
+on edges of exactly one face) and :func:`leaf_vertices` (a network's
+leaves: points on exactly one spring); :func:`support_excursion` says how far
+a form strays beyond its supports.
+
+Finite minima: a spring component free to translate in 3D beside other components feels
 their repulsion as a sum of 1/L terms, a harmonic function of its translation:
 it has no local minimum there (Earnshaw's theorem), so the scene has no finite
 minimum (stationary points such as saddles may remain). This is proved only
@@ -18,7 +23,7 @@ its loads sum to zero in that direction: it drifts for ever
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 from ase import Atoms
@@ -34,6 +39,46 @@ def spring_components(natoms: int, springs: ArrayLike) -> np.ndarray:
     graph = coo_matrix((np.ones(len(springs)), springs.T),
                        shape=(natoms, natoms))
     return connected_components(graph, directed=False)[1]
+
+
+def boundary_vertices(faces: Iterable[Sequence[int]]) -> np.ndarray:
+    """Sorted indices of the points on a mesh's boundary: the ends of the
+    edges that belong to exactly one face.
+
+    ``faces`` are rings of point indices (each ring closed from its last
+    point to its first). An edge is the unordered pair of its ends, so the
+    faces' orientations need not agree; an edge of three or more faces (a
+    non-manifold edge) is not on the boundary. Each point appears once.
+    """
+    count: dict[tuple[int, int], int] = {}
+    for face in faces:
+        ring = [int(i) for i in face]
+        for i, j in zip(ring, ring[1:] + ring[:1], strict=True):
+            edge = (min(i, j), max(i, j))
+            count[edge] = count.get(edge, 0) + 1
+    ends = [i for edge, n in count.items() if n == 1 for i in edge]
+    return np.unique(np.array(ends, dtype=int))
+
+
+def leaf_vertices(natoms: int, springs: ArrayLike) -> np.ndarray:
+    """Sorted indices of a network's leaves: the points on exactly one
+    spring (of ``springs``, (K, 2) pairs each once)."""
+    springs = np.asarray(springs, dtype=int).reshape(-1, 2)
+    return np.flatnonzero(np.bincount(springs.ravel(), minlength=natoms) == 1)
+
+
+def support_excursion(atoms: Atoms) -> tuple[float, float]:
+    """How far (length units) the free points reach outside the bounding box
+    of the fixed ones (:func:`fixed_atoms`), and that box's diagonal; (0, 0)
+    if nothing is fixed. A point inside the box is 0 away; outside, its
+    distance to the box's nearest point."""
+    fixed = fixed_atoms(atoms)
+    if not fixed.any() or fixed.all():
+        return 0.0, 0.0
+    low, high = atoms.positions[fixed].min(axis=0), atoms.positions[fixed].max(axis=0)
+    free = atoms.positions[~fixed]
+    beyond = np.maximum(low - free, 0.0) + np.maximum(free - high, 0.0)
+    return float(np.linalg.norm(beyond, axis=1).max()), float(np.linalg.norm(high - low))
 
 
 #: A net load counts as zero below this fraction of the sum of the loads'

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from ase.io import read
 from ase.optimize import BFGS
-from test_io import relaxed_in_python, write_quad_net
+from test_io import relaxed_in_python, rule_a, write_quad_net
 
 from ase_maud import NoEquilibriumError, cli
 from ase_maud.cli import main
@@ -100,7 +100,8 @@ def test_relax_a_net_file_matches_python(tmp_path, capsys, kind):
     summary = capsys.readouterr().out
     assert summary.startswith(f'converged: net.{kind} 25 points') and 'Maud:' not in summary
     expected = relaxed_in_python(positions, springs, fixed)
-    for relaxed in (read_net(traj), read_net(out, fixed=fixed)):
+    # the relaxed file stores no a: the start's is given again
+    for relaxed in (read_net(traj), read_net(out, fixed=fixed, a=rule_a(positions, springs))):
         assert relaxed.get_potential_energy() == pytest.approx(expected, rel=1e-9)
         assert np.linalg.norm(relaxed.get_forces(), axis=1).max() < 1e-6
 
@@ -193,10 +194,11 @@ def test_relax_progress_bar_and_log_file(tmp_path, capsys):
     assert 'Maud:' in log.read_text()
 
 
-def test_relax_net_options_need_a_file(capsys):
+@pytest.mark.parametrize('option', ['--fixed', '--fix'])
+def test_relax_net_options_need_a_file(capsys, option):
     with pytest.raises(SystemExit):
-        main(['relax', '--fixed', 'fixed.txt'])
-    assert '--fixed and --dim need NET_FILE' in capsys.readouterr().err
+        main(['relax', option, 'fixed.txt'])
+    assert '--fix and --dim need NET_FILE' in capsys.readouterr().err
 
 
 @pytest.mark.parametrize('argv, message', [

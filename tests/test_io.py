@@ -11,7 +11,10 @@ from ase.constraints import FixAtoms
 
 from ase_maud import Maud, MaudCalculator
 from ase_maud.io import (
+    A_PER_MEAN_SPRING,
+    MERGE_TOLERANCE,
     edges_path,
+    merge_coincident,
     read_compas,
     read_edges,
     read_frames,
@@ -95,12 +98,20 @@ def write_quad_net(folder, kind, n=5, seed=0, flat=False):
     return path, positions, springs, fixed
 
 
+def rule_a(positions, springs):
+    """The a that a net read from a file gets: the rule's fraction of the
+    mean length of its springs."""
+    return A_PER_MEAN_SPRING * np.mean([np.linalg.norm(positions[i] - positions[j])
+                                        for i, j in springs])
+
+
 def relaxed_in_python(positions, springs, fixed, dim=3, fmax=1e-6):
-    """The net relaxed with Maud from Python: its energy."""
+    """The net relaxed with Maud from Python, with the a of :func:`rule_a`:
+    its energy."""
     from ase import Atoms
 
     atoms = Atoms(positions=positions, pbc=False)
-    atoms.calc = MaudCalculator(springs, dim=dim)
+    atoms.calc = MaudCalculator(springs, dim=dim, a=rule_a(positions, springs))
     atoms.set_constraint(FixAtoms(indices=fixed))
     with Maud(atoms, logfile=None) as opt:
         assert opt.run(fmax=fmax, steps=500)
@@ -119,7 +130,8 @@ def test_read_gives_the_net_built_in_python(tmp_path, kind):
     assert pairs(atoms.calc.springs) == springs
     assert atoms.calc.dim == 3 and not atoms.pbc.any()
     assert atoms.constraints[0].index.tolist() == fixed.tolist()
-    assert (atoms.calc.parameters['a'], atoms.calc.parameters['Q']) == (1.0, 1.0)
+    assert atoms.calc.parameters['a'] == pytest.approx(rule_a(positions, springs), rel=1e-14)
+    assert atoms.calc.parameters['Q'] == 1.0
 
 
 def test_flat_net_is_2d_unless_told(tmp_path):
@@ -136,9 +148,10 @@ def test_obj_faces_and_polylines(tmp_path):
     path.write_text('v 0 0 0\nv 1 0 0 1.0\nv 1 1 0\nv 0 1 0\nvt 0 0\n'
                     'f 1/1 2/1 3/1\nf 1 3 -1\n'     # shares the edge 1-3
                     'v 2 0 0\nv 3 0 0\nl 2 -2 -1\n')  # 2-5, 5-6
-    positions, springs = read_obj(path)
+    positions, springs, faces, anchors = read_obj(path)
     assert positions.shape == (6, 3) and positions[1].tolist() == [1, 0, 0]
     assert springs.tolist() == [[0, 1], [1, 2], [2, 0], [2, 3], [3, 0], [1, 4], [4, 5]]
+    assert faces == [[0, 1, 2], [0, 2, 3]] and anchors == []
 
 
 @pytest.mark.parametrize('kind', FORMATS)
@@ -178,8 +191,7 @@ def test_fresh_files_keep_points_and_springs(tmp_path, kind):
         document = json.loads(out.read_text())
         assert document['dtype'] == 'compas.datastructures/Graph'
         assert again.constraints[0].index.tolist() == fixed.tolist()
-        positions, _, anchors = read_compas(out)
-        assert anchors == fixed.tolist()
+        assert read_compas(out).anchors == fixed.tolist()
 
 
 def test_trajectory_keeps_springs_a_q_dim_and_fixed(tmp_path):
@@ -303,7 +315,8 @@ def test_write_refuses_a_mismatched_original(tmp_path):
     atoms = read_net(path)
     with pytest.raises(ValueError, match='different formats'):
         write_net(tmp_path / 'out.json', atoms, like=path)
-    with pytest.raises(ValueError, match='has 16 vertices, the net 9 points'):
+    with pytest.raises(ValueError, match=r'has 16 points \(16 vertices, coincident ones '
+                       r'merged\), the net 9'):
         write_net(tmp_path / 'out.obj', atoms[:9], like=path)
 
 
@@ -481,3 +494,223 @@ def test_a_load_on_every_free_point(tmp_path):
         read_net(path, load=[0, 1])
     with pytest.raises(ValueError, match='loads of component 1 must be a finite number'):
         read_net(path, load=[0, np.nan, 1])
+
+
+def rhino_lines(points, springs, jitter, seed):
+    """A Rhino-style OBJ of a line network: every spring a curve of degree 1
+    with its own copies of its two end vertices, each copy moved by up to
+    ``jitter`` per coordinate."""
+    rng = np.random.default_rng(seed)
+    lines, count = ['# Rhino', ''], 0
+    for i, j in springs:
+        for k in (i, j):
+            x, y, z = (points[k] + rng.uniform(-jitter, jitter, 3)).tolist()
+            lines.append(f'v {x!r} {y!r} {z!r}')
+        count += 2
+        lines += ['cstype bspline', 'deg 1', f'curv 0 1 {count - 1} {count}',
+                  'parm u 0 0 1 1', 'end']
+    return '\r\n'.join(lines) + '\r\n'
+
+
+def random_network(seed, n=30):
+    """n points at a random scale (1e-3 to 1e3) and a random connected graph
+    on them: a random tree plus a few chords."""
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(-1, 1, (n, 3)) * 10.0 ** rng.uniform(-3, 3)
+    springs = {(int(rng.integers(k)), k) for k in range(1, n)}
+    while len(springs) < n + 5:
+        i, j = sorted(rng.choice(n, 2, replace=False).tolist())
+        springs.add((i, j))
+    return points, list(springs)
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_rhino_curves_merge_into_one_graph(tmp_path, seed):
+    """Copies closer than the tolerance (relative to the net's size) are one
+    point, at the place of the first copy, in the order of first copies;
+    copies ten times farther apart than the tolerance stay apart."""
+    points, springs = random_network(seed)
+    diagonal = np.linalg.norm(np.ptp(points, axis=0))
+    near = tmp_path / 'near.obj'
+    near.write_text(rhino_lines(points, springs, 0.2 * MERGE_TOLERANCE * diagonal, seed),
+                    newline='')
+    atoms = read_net(near)
+    order = list(dict.fromkeys(k for pair in springs for k in pair))   # first appearance
+    assert len(atoms) == len(order)
+    np.testing.assert_allclose(atoms.positions, points[order], rtol=0,
+                               atol=0.2 * MERGE_TOLERANCE * diagonal)
+    rank = {k: n for n, k in enumerate(order)}
+    assert pairs(atoms.calc.springs) == sorted(tuple(sorted((rank[i], rank[j])))
+                                               for i, j in springs)
+    vertices = np.array([line.split()[1:] for line in near.read_text().splitlines()
+                         if line.startswith('v ')], dtype=float)
+    first = {}   # the file's first copy of each point: vertex 2 s + end of spring s
+    for s, pair in enumerate(springs):
+        for end, k in enumerate(pair):
+            first.setdefault(k, 2 * s + end)
+    np.testing.assert_array_equal(atoms.positions, vertices[[first[k] for k in order]])
+    far = tmp_path / 'far.obj'
+    far.write_text(rhino_lines(points, springs, 10 * MERGE_TOLERANCE * diagonal, seed))
+    assert len(read_net(far, a=1.0)) == 2 * len(springs)
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_merge_coincident_against_all_pairs(seed):
+    """Clusters of copies within the tolerance, chains included, against
+    the connected components of the all-pairs distance graph."""
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(0, 1, (20, 3))
+    diagonal = np.linalg.norm(np.ptp(centres, axis=0))
+    copies = centres[rng.integers(20, size=60)] + rng.uniform(
+        -0.3, 0.3, (60, 3)) * MERGE_TOLERANCE * diagonal
+    points = np.vstack([centres, copies])
+    point_of, merged = merge_coincident(points)
+    distance = np.linalg.norm(points[:, None] - points[None], axis=-1)
+    tolerance = MERGE_TOLERANCE * np.linalg.norm(np.ptp(points, axis=0))
+    same = distance <= tolerance
+    assert (same == (point_of[:, None] == point_of[None])).all()
+    assert len(merged) == 20
+    np.testing.assert_array_equal(merged[point_of[:20]], centres)
+
+
+CURVES = [
+    ('v 0 0 0\nv 1 0 0\nv 2 1 0\ncstype rat bspline\ndeg 1\ncurv 0 2 1 2 \\\n 3\n'
+     'parm u 0 0 1 2 2\nend\np 1\n', [[0, 1], [1, 2]]),
+    ('v 0 0 0\nv 1 0 0\nv 1 0 0\nv 2 0 0\ncstype bezier\ndeg 1\ncurv 0 1 1 2\n'
+     'curv 0 1 -2 -1\nl 1 4\n', [[0, 1], [1, 2], [0, 2]]),
+]
+
+
+@pytest.mark.parametrize('text, springs', CURVES)
+def test_curves_of_degree_one_are_polylines(tmp_path, text, springs):
+    """Rational and Bezier curves of degree 1, a statement continued on the
+    next line, negative indices, and a vertex written twice, merged."""
+    (tmp_path / 'c.obj').write_text(text)
+    assert read_obj(tmp_path / 'c.obj').springs.tolist() == springs
+
+
+BROKEN_CURVES = [
+    ('v 0 0 0\nv 1 0 0\ncurv 0 1 1 2\n', r'line 3: a .curv. needs .cstype. and .deg.'),
+    ('v 0 0 0\nv 1 0 0\ncstype bspline\ndeg 3\ncurv 0 1 1 2\n',
+     r"line 5: a curve of type 'bspline' and degree 3; only polylines"),
+    ('v 0 0 0\nv 1 0 0\ncstype cardinal\ndeg 1\ncurv 0 1 1 2\n',
+     r"line 5: a curve of type 'cardinal'"),
+    ('v 0 0 0\nv 1 0 0\ncstype bspline\ndeg x\n', r'line 4: expected a degree'),
+    ('v 0 0 0\nv 1 0 0\ncstype bspline\ndeg 1\ncurv 0 u 1 2\n',
+     r'line 5: expected .curv u0 u1 v1 v2 ....'),
+    ('v 0 0 0\nv 1 0 0\ncstype bspline\ndeg 1\ncurv 0 1 1\n', r'line 5: a .curv. needs its'),
+    ('v 0 0 0\nv 1 0 0\ncstype bspline\ndeg 1\ncurv 0 1 1 3\n',
+     r'line 5: curve index 3 out of range \(2 vertices\)'),
+    ('v 0 0 0\nv 1 0 0\nv 0 0 1e-12\nl 2 1 3\n',
+     r'line 4: vertex 1 and vertex 3 next to it are one point \(closer than 1e-09'),
+]
+
+
+@pytest.mark.parametrize('text, message', BROKEN_CURVES)
+def test_malformed_curves_name_the_line(tmp_path, text, message):
+    (tmp_path / 'c.obj').write_text(text)
+    with pytest.raises(ValueError, match=r'c\.obj ' + message):
+        read_net(tmp_path / 'c.obj')
+
+
+def crlf_obj(tmp_path, seed):
+    """The quad net as a CRLF OBJ with coordinates of 3 decimals (some with
+    trailing zeros), comments (one not ASCII, some on vertex lines), tabs,
+    groups and normals."""
+    positions, quads, *_ = quad_net(5, seed)
+    lines = ['# exported, Größe in m', 'g net', 'vn 0 0 1']
+    for n, p in enumerate(np.round(positions, 3)):
+        text = ' '.join(f'{c:.3f}' for c in p)
+        lines.append(f'v\t{text}  # point {n}' if n % 7 == 0 else
+                     f'v {text}#' if n % 5 == 0 else f'v {text}')
+    lines += ['f ' + ' '.join(f'{i + 1}//1' for i in q) for q in quads]
+    path = tmp_path / 'crlf.obj'
+    path.write_bytes(('\r\n'.join(lines) + '\r\n').encode())
+    return path
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_obj_write_back_keeps_the_file(tmp_path, seed):
+    """CRLF stays CRLF; every line but the coordinates of moved points is
+    byte for byte the original; a moved coordinate is the shortest text that
+    reads back as the float, an unmoved one keeps its text ('1.500')."""
+    path = crlf_obj(tmp_path, seed)
+    atoms = read_net(path)
+    rng = np.random.default_rng(seed)
+    moved = rng.random(len(atoms)) < 0.5
+    atoms.positions[moved] += rng.normal(size=(moved.sum(), 3))
+    write_net(tmp_path / 'out.obj', atoms, like=path)
+    old = path.read_bytes().split(b'\r\n')
+    new = (tmp_path / 'out.obj').read_bytes().split(b'\r\n')
+    assert len(new) == len(old) and b'\n' not in b''.join(new)
+    rows = [n for n, line in enumerate(old) if line.startswith(b'v') and not
+            line.startswith(b'vn')]
+    assert [n for n, (a, b) in enumerate(zip(old, new, strict=True)) if a != b] == \
+        [rows[k] for k in np.flatnonzero(moved)]
+    for k, n in enumerate(rows):
+        before, after = (line.decode().split('#')[0].split() for line in (old[n], new[n]))
+        tokens = after[1:4]
+        np.testing.assert_array_equal(np.array(tokens, dtype=float), atoms.positions[k])
+        for token, value in zip(tokens, atoms.positions[k], strict=True):
+            assert token == repr(float(value)) or token in before
+        assert new[n].endswith(old[n][len(old[n].split(b'#')[0].rstrip()):]) or moved[k]
+    np.testing.assert_array_equal(read_net(tmp_path / 'out.obj').positions, atoms.positions)
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_json_write_back_keeps_the_layout(tmp_path, seed):
+    """An indented CRLF COMPAS mesh with integer coordinates and a byte-order
+    mark: only the moved numbers change, each to its float's repr."""
+    path, positions, *_ = write_quad_net(tmp_path, 'mesh2.json', seed=seed)
+    document = json.loads(path.read_text())
+    for attributes in document['data']['vertex'].values():
+        attributes['x'] = round(attributes['x'])   # integers, as some files hold
+    text = json.dumps(document, indent=4).replace('\n', '\r\n')
+    path.write_bytes(b'\xef\xbb\xbf' + text.encode())
+    atoms = read_net(path)
+    rng = np.random.default_rng(seed)
+    moved = rng.random(len(atoms)) < 0.5
+    atoms.positions[moved] += rng.normal(size=(moved.sum(), 3))
+    write_net(tmp_path / 'out.json', atoms, like=path)
+    out = (tmp_path / 'out.json').read_bytes()
+    assert out.startswith(b'\xef\xbb\xbf') and out.count(b'\r\n') == text.count('\r\n')
+    expected = json.loads(text)
+    for attributes, x, m in zip(expected['data']['vertex'].values(), atoms.positions, moved,
+                                strict=True):
+        if m:
+            attributes.update(zip('xyz', map(float, x), strict=True))
+    assert out.decode('utf-8-sig') == json.dumps(expected, indent=4).replace('\n', '\r\n')
+    np.testing.assert_array_equal(read_net(tmp_path / 'out.json').positions, atoms.positions)
+
+
+def test_json_write_back_of_a_default_coordinate(tmp_path):
+    """A vertex whose z comes from the default attributes and moves in z: the
+    document is written anew, with the new z."""
+    path = tmp_path / 'm.json'
+    path.write_text('{"dva": {"z": 0.0}, "vertex": {"0": {"x": 0, "y": 0}, "1": {"x": 1, '
+                    '"y": 0}, "2": {"x": 0, "y": 1}}, "face": {"0": [0, 1, 2]}}')
+    atoms = read_net(path)
+    atoms.positions[2, 2] = 0.25
+    write_net(tmp_path / 'out.json', atoms, like=path)
+    np.testing.assert_array_equal(read_net(tmp_path / 'out.json').positions, atoms.positions)
+
+
+@pytest.mark.parametrize('kind', ['obj', 'mesh2.json'])
+@pytest.mark.parametrize('seed', range(5))
+def test_moved_coordinates_are_shortest_exact_text(tmp_path, kind, seed):
+    """Coordinates of nets of any size (1e-9 to 1e9) come back exactly, each
+    written as repr: no longer than 17 significant digits and as short as
+    any text that reads back as the float."""
+    path, *_ = write_quad_net(tmp_path, kind, seed=seed)
+    atoms = read_net(path)
+    rng = np.random.default_rng(seed)
+    atoms.positions = rng.normal(size=atoms.positions.shape) * 10.0 ** rng.uniform(-9, 9)
+    out = tmp_path / f'out.{kind}'
+    write_net(out, atoms, like=path)
+    np.testing.assert_array_equal(read_net(out).positions, atoms.positions)
+    text = out.read_text()
+    for x in atoms.positions.ravel():
+        token = repr(float(x))
+        assert token in text and len(token) <= len(f'{x:.17g}') + 2   # '.0' or 'e-05'
+        shorter = [f'{x:.{digits}g}' for digits in range(1, 17)]
+        assert not [t for t in shorter if float(t) == x and len(t) < len(token)]

@@ -33,8 +33,8 @@ from ase_maud.bench.runner import calls_and_cpu, fresh_copy
 from ase_maud.io import read_net
 from ase_maud.scenes import build
 
-#: The compas samples ase_maud reads today (the Rhino curve files need
-#: curve records, which it does not read yet).
+#: The compas sample meshes (the Rhino curve files are line networks,
+#: which have leaves but no boundary: tools/a_rule.py relaxes those).
 SAMPLES = ['faces.obj', 'faces_big.obj', 'hypar.obj', 'quadmesh.obj', 'quadmesh_planar.obj',
            'tubemesh.obj', 'tubemesh.json', 'mesh.obj', 'mesh_100_faces.json',
            'mesh_110_faces.json']

@@ -1,0 +1,205 @@
+"""Supports by rule (a mesh's boundary, a network's leaves), how far a form
+strays beyond its supports, and the a of a net read from a file."""
+
+import numpy as np
+import pytest
+from ase import Atoms
+from ase.constraints import FixAtoms
+from test_io import quad_net, write_quad_net
+
+from ase_maud import Maud
+from ase_maud.cli import main
+from ase_maud.io import A_PER_MEAN_SPRING, read_net, write_net
+from ase_maud.topology import boundary_vertices, leaf_vertices, support_excursion
+
+HAND_CHECKED = [
+    ([[0, 1, 2], [0, 2, 3]], [0, 1, 2, 3]),                          # two triangles
+    ([[0, 1, 2], [2, 1, 0]], []),                                    # both sides: closed
+    ([[0, 1, 2], [0, 3, 1], [1, 3, 2], [0, 2, 3]], []),              # a tetrahedron
+    ([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1]], [1, 2, 3, 4]),    # a fan about 0
+    ([[0, 1, 2], [0, 1, 3], [0, 1, 4]], [0, 1, 2, 3, 4]),            # edge 0-1 of 3 faces
+    ([[0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [4, 5, 9, 8], [6, 7, 11, 10],
+      [8, 9, 13, 12], [9, 10, 14, 13], [10, 11, 15, 14]],             # 3 x 3 quads, one
+     [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15]),        # missing: a hole
+    ([[0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [4, 5, 9, 8], [5, 6, 10, 9],
+      [6, 7, 11, 10], [8, 9, 13, 12], [9, 10, 14, 13], [10, 11, 15, 14]],
+     [0, 1, 2, 3, 4, 7, 8, 11, 12, 13, 14, 15]),                     # 3 x 3 quads
+]
+
+
+@pytest.mark.parametrize('faces, boundary', HAND_CHECKED)
+def test_boundary_of_hand_checked_meshes(faces, boundary):
+    assert boundary_vertices(faces).tolist() == boundary
+
+
+def random_grid(seed):
+    """An n x m grid of quads, some faces missing, every face with a random
+    orientation and starting corner, in random order; and its boundary by
+    counting, for each edge, the faces present beside it."""
+    rng = np.random.default_rng(seed)
+    n, m = rng.integers(2, 9, size=2)
+    index = np.arange((n + 1) * (m + 1)).reshape(n + 1, m + 1)
+    present = rng.random((n, m)) > 0.15
+    faces = []
+    for i, j in zip(*np.nonzero(present), strict=True):
+        ring = [index[i, j], index[i + 1, j], index[i + 1, j + 1], index[i, j + 1]]
+        ring = np.roll(ring[::rng.choice([-1, 1])], rng.integers(4)).tolist()
+        faces.append(ring)
+    faces = [faces[k] for k in rng.permutation(len(faces))]
+    padded = np.pad(present, 1)   # face (i, j) at padded (i + 1, j + 1)
+    boundary = set()
+    for i in range(n + 1):
+        for j in range(m + 1):
+            if j < m:   # the edge (i, j)-(i, j+1), between faces (i-1, j) and (i, j)
+                if padded[i, j + 1] != padded[i + 1, j + 1]:
+                    boundary |= {index[i, j], index[i, j + 1]}
+            if i < n:   # the edge (i, j)-(i+1, j), between faces (i, j-1) and (i, j)
+                if padded[i + 1, j] != padded[i + 1, j + 1]:
+                    boundary |= {index[i, j], index[i + 1, j]}
+    return faces, sorted(int(k) for k in boundary)
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_boundary_of_random_grids(seed):
+    faces, boundary = random_grid(seed)
+    assert boundary_vertices(faces).tolist() == boundary
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_leaves_of_random_trees(seed):
+    """Point k > 0 hangs from a random parent before it: the leaves are the
+    points no one hangs from, and 0 if one point hangs from it."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 40))
+    parents = [int(rng.integers(k)) for k in range(1, n)]
+    springs = np.array([(p, k) for k, p in enumerate(parents, 1)])
+    springs = springs[rng.permutation(len(springs))]
+    leaves = {k for k in range(1, n) if k not in parents} | (
+        {0} if parents.count(0) == 1 else set())
+    assert leaf_vertices(n, springs).tolist() == sorted(leaves)
+
+
+def test_leaves_of_hand_checked_networks():
+    assert leaf_vertices(6, [[0, 1], [0, 2], [0, 3], [3, 4]]).tolist() == [1, 2, 4]
+    assert leaf_vertices(4, [[0, 1], [1, 2], [2, 0]]).tolist() == []   # 3: no spring
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_support_excursion_against_clipping(seed):
+    """The distance of each free point to the nearest point of the fixed
+    points' box is its distance to its own coordinates clipped to the box."""
+    rng = np.random.default_rng(seed)
+    atoms = Atoms(positions=rng.normal(size=(30, 3)) * [1, 2, 0.5])
+    fixed = rng.choice(30, 8, replace=False)
+    atoms.set_constraint(FixAtoms(indices=fixed))
+    low, high = atoms.positions[fixed].min(axis=0), atoms.positions[fixed].max(axis=0)
+    free = np.delete(atoms.positions, fixed, axis=0)
+    distance = np.linalg.norm(free - np.clip(free, low, high), axis=1).max()
+    assert support_excursion(atoms) == pytest.approx(
+        (distance, np.linalg.norm(high - low)), rel=1e-14)
+    atoms.set_constraint()
+    assert support_excursion(atoms) == (0.0, 0.0)
+
+
+def test_support_excursion_by_hand():
+    atoms = Atoms(positions=[[0, 0, 0], [1, 1, 1], [0.5, 0.5, 0.5], [2, 0.5, -1]])
+    atoms.set_constraint(FixAtoms(indices=[0, 1]))
+    assert support_excursion(atoms) == pytest.approx((2 ** 0.5, 3 ** 0.5), rel=1e-15)
+
+
+@pytest.mark.parametrize('kind', ['obj', 'mesh2.json', 'mesh1.json'])
+@pytest.mark.parametrize('seed', range(2))
+def test_read_net_fixes_the_boundary_of_a_mesh(tmp_path, kind, seed):
+    path, _, _, boundary = write_quad_net(tmp_path, kind, n=int(3 + seed * 3), seed=seed)
+    atoms = read_net(path, fixed='boundary')
+    assert atoms.constraints[0].index.tolist() == boundary.tolist()
+
+
+def test_read_net_fixes_the_leaves_of_a_network(tmp_path):
+    path = tmp_path / 'star.obj'
+    path.write_text('v 0 0 0\nv 1 0 0\nv 0 1 0\nv -1 0 1\nv -2 0 1\nl 2 1 3\nl 1 4 5\n')
+    atoms = read_net(path, fixed='leaves')
+    assert atoms.constraints[0].index.tolist() == [1, 2, 4]
+    with pytest.raises(ValueError, match=r"star\.obj: fixed='boundary' needs a mesh's faces"):
+        read_net(path, fixed='boundary')
+    closed = tmp_path / 'tetra.obj'
+    closed.write_text('v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 4 2\nf 2 4 3\n'
+                      'f 1 3 4\n')
+    with pytest.raises(ValueError, match=r"fixed='boundary' finds no point \(every edge"):
+        read_net(closed, fixed='boundary')
+    with pytest.raises(ValueError, match=r"fixed='leaves' finds no point"):
+        read_net(closed, fixed='leaves')
+    with pytest.raises(ValueError, match=r"fixed='bondary' is neither a rule \(boundary, "
+                       r'leaves\) nor a file'):
+        read_net(path, fixed='bondary')
+    (tmp_path / 'leaves').write_text('0 3\n')   # a file of that name, given as a Path
+    assert read_net(path, fixed=tmp_path / 'leaves').constraints[0].index.tolist() == [0, 3]
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_a_of_a_file_is_a_fraction_of_its_mean_spring(tmp_path, seed):
+    """Files without a stored a get the rule's; a trajectory keeps its own,
+    the calculator's default 1 included; a given a wins."""
+    path, positions, springs, _ = write_quad_net(tmp_path, 'obj', seed=seed)
+    mean = np.mean([np.linalg.norm(positions[i] - positions[j]) for i, j in springs])
+    assert read_net(path).calc.parameters['a'] == pytest.approx(A_PER_MEAN_SPRING * mean,
+                                                                rel=1e-14)
+    assert read_net(path, a=2.5).calc.parameters['a'] == 2.5
+    atoms = read_net(path, a=1.0)
+    write_net(tmp_path / 'one.traj', atoms)
+    assert read_net(tmp_path / 'one.traj').calc.parameters['a'] == 1.0
+
+
+def test_relax_warns_when_a_balloons_the_net(tmp_path, capsys):
+    """A quad net relaxed with a far above its spring length leaves its
+    supports' box and is warned about, naming --a; with the rule's a it is
+    not."""
+    path, *_ = write_quad_net(tmp_path, 'obj', n=6, seed=0)
+    traj = str(tmp_path / 'r.traj')
+    assert main(['relax', str(path), '--fix', 'boundary', '--quiet', '--traj', traj]) == 0
+    out, err = capsys.readouterr()
+    assert f'({A_PER_MEAN_SPRING:g} x the mean spring length at the start)' in out
+    assert 'warning' not in err
+    main(['relax', str(path), '--fix', 'boundary', '--a', '4', '--quiet', '--traj', traj])
+    out, err = capsys.readouterr()
+    relaxed = read_net(traj)
+    beyond, diagonal = support_excursion(relaxed)
+    assert beyond > diagonal / 10
+    assert 'ase-maud: warning: free points reach' in err and '--a' in err
+
+
+def test_relax_fixes_by_rule_like_python(tmp_path, capsys):
+    """--fix boundary from the command line gives the net relaxed in Python
+    with the boundary's indices fixed."""
+    path, positions, springs, boundary = write_quad_net(tmp_path, 'obj', seed=2)
+    traj = str(tmp_path / 'r.traj')
+    assert main(['relax', str(path), '--fix', 'boundary', '--fmax', '1e-8', '--quiet',
+                 '--traj', traj]) == 0
+    atoms = read_net(path, fixed=boundary.tolist())
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-8, steps=500)
+    np.testing.assert_allclose(read_net(traj).positions, atoms.positions, atol=1e-7)
+    assert quad_net(5, 2)[3].tolist() == read_net(traj).constraints[0].index.tolist()
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_compas_anchors_hold_unless_a_rule_is_given(tmp_path, seed):
+    """is_anchor or is_fixed true (on the vertex or by default) fixes a point;
+    a rule replaces them."""
+    import json
+    path, _, _, boundary = write_quad_net(tmp_path, 'mesh2.json', seed=seed)
+    document = json.loads(path.read_text())
+    rng = np.random.default_rng(seed)
+    flags = rng.choice(['is_anchor', 'is_fixed', None], size=25)
+    document['data']['default_vertex_attributes']['is_fixed'] = False
+    for vertex, flag in zip(document['data']['vertex'].values(), flags, strict=True):
+        if flag is not None:
+            vertex[flag] = bool(rng.random() < 0.5)
+    path.write_text(json.dumps(document))
+    held = [n for n, (vertex, flag) in enumerate(zip(document['data']['vertex'].values(),
+                                                    flags, strict=True))
+            if flag is not None and vertex[flag]]
+    atoms = read_net(path)
+    assert (atoms.constraints[0].index.tolist() if held else atoms.constraints) == (
+        held if held else [])
+    assert read_net(path, fixed='boundary').constraints[0].index.tolist() == boundary.tolist()

@@ -93,9 +93,10 @@ def relax(args: argparse.Namespace) -> int:
     """``ase-maud relax``: exit status 0 if converged, else 1."""
     from . import kernels_cached
     from .bench.runner import CallRecorder
-    from .io import free_point_loads, mean_spring_length, net_format, read_net, write_net
+    from .io import mean_spring_length, net_format, read_net, write_net
     from .optimizer import Maud
     from .scenes import build
+    from .topology import free_point_loads
 
     if args.net is None:
         atoms = build(args.scene, args.size, seed=args.seed,

@@ -72,8 +72,15 @@ from scipy.spatial import cKDTree
 
 from .atomic import replace_text, replace_with
 from .calculator import MaudCalculator
-from .checks import as_whole, check, check_each, check_writable
-from .topology import boundary_vertices, fixed_atoms, leaf_vertices, spring_components
+from .checks import as_whole, check, check_writable
+from .scenes import keep_on_plane
+from .topology import (
+    boundary_vertices,
+    fixed_atoms,
+    free_point_loads,
+    leaf_vertices,
+    spring_components,
+)
 
 PathLike = str | os.PathLike
 #: The name under which ASE's trajectory stores a MaudCalculator.
@@ -213,16 +220,6 @@ def read_frames(path: PathLike, edges: PathLike | None = None,
     return _read(path, edges, fixed, a, Q, dim, slice(None), load)
 
 
-def free_point_loads(atoms: Atoms, load: Sequence[float]) -> np.ndarray:
-    """Loads (N, 3): ``load`` (3 numbers, force units) on every point that
-    no constraint holds in all three directions, 0 on the others."""
-    load = check_each('loads', load, 'component')
-    if load.shape != (3,):
-        raise ValueError(f'a load on every free point needs 3 numbers (x y z), '
-                         f'got shape {load.shape}')
-    return np.where(fixed_atoms(atoms)[:, None], 0.0, load)
-
-
 def _read(path, edges, fixed, a, Q, dim, index, load=None):
     """Frames of ``path`` with their calculators, as :func:`read_net` says."""
     kind = net_format(path)
@@ -265,6 +262,8 @@ def _read(path, edges, fixed, a, Q, dim, index, load=None):
         loads = own.get('loads')
         flat = np.all(z == z[:1]) and (loads is None or not np.any(np.asarray(loads)[:, 2:]))
         atoms.calc = MaudCalculator(**{'dim': 2 if flat else 3, **own})
+        if atoms.calc.dim == 2:
+            keep_on_plane(atoms)   # ASE's own drivers move z otherwise
     return frames
 
 

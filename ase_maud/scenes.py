@@ -28,7 +28,7 @@ from scipy.spatial import Delaunay, cKDTree
 
 from .calculator import MaudCalculator
 from .checks import as_whole
-from .io import free_point_loads
+from .topology import free_point_loads
 
 #: Closest start of two points, in units of ``a``.
 MIN_DISTANCE = 0.2

@@ -32,6 +32,8 @@ from numpy.typing import ArrayLike
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from .checks import check_each
+
 
 def spring_components(natoms: int, springs: ArrayLike) -> np.ndarray:
     """Label of the spring-graph component of every atom, shape (natoms,)."""
@@ -101,6 +103,16 @@ def held_directions(atoms: Atoms) -> np.ndarray:
 def fixed_atoms(atoms: Atoms) -> np.ndarray:
     """Boolean mask of atoms held in all three directions by a constraint."""
     return held_directions(atoms).all(axis=1)
+
+
+def free_point_loads(atoms: Atoms, load: Sequence[float]) -> np.ndarray:
+    """Loads (N, 3): ``load`` (3 numbers, force units) on every point that
+    no constraint holds in all three directions, 0 on the others."""
+    load = check_each('loads', load, 'component')
+    if load.shape != (3,):
+        raise ValueError(f'a load on every free point needs 3 numbers (x y z), '
+                         f'got shape {load.shape}')
+    return np.where(fixed_atoms(atoms)[:, None], 0.0, load)
 
 
 def net_load(atoms: Atoms, loads: np.ndarray | None, dim: int = 3) -> np.ndarray | None:

@@ -141,6 +141,22 @@ def test_flat_net_is_2d_unless_told(tmp_path):
     assert read_net(path, dim=3).calc.dim == 3
 
 
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_a_flat_net_stays_on_its_plane_under_ase_optimizers(tmp_path, seed):
+    # ASE's BFGS moves z by itself; read_net holds it for a 2D net
+    from ase.optimize import BFGS
+    path, _, _, fixed = write_quad_net(tmp_path, 'obj', flat=True, seed=seed)
+    atoms, reference = read_net(path, fixed=fixed), read_net(path, fixed=fixed)
+    z = atoms.positions[0, 2]
+    with BFGS(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-7, steps=3000)
+    assert (atoms.positions[:, 2] == z).all()
+    with Maud(reference, logfile=None) as opt:
+        assert opt.run(fmax=1e-7)
+    assert atoms.get_potential_energy() == pytest.approx(
+        reference.get_potential_energy(), rel=1e-9)
+
+
 def test_obj_faces_and_polylines(tmp_path):
     """Each face edge once (shared edges too), polyline segments, v/vt/vn and
     negative indices, and coordinates beyond x y z ignored."""

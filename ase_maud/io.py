@@ -87,6 +87,9 @@ PathLike = str | os.PathLike
 CALC_NAME = 'maudcalculator'
 #: Vertex (node) attributes of COMPAS data that fix a point when true.
 ANCHOR_ATTRIBUTES = ('is_anchor', 'is_fixed')
+#: The longest line a text file (OBJ, edge list, indices) may have, in
+#: characters: what is read of one line at a time (memory stays bounded).
+MAX_LINE = 1_000_000
 #: Vertex (node) attributes of COMPAS data that hold a load (compas_fd's).
 LOAD_ATTRIBUTES = ('px', 'py', 'pz')
 #: OBJ vertices closer than this times the diagonal of their bounding box
@@ -222,6 +225,8 @@ def read_frames(path: PathLike, edges: PathLike | None = None,
 
 def _read(path, edges, fixed, a, Q, dim, index, load=None):
     """Frames of ``path`` with their calculators, as :func:`read_net` says."""
+    if Path(path).is_dir():
+        raise ValueError(f'{path} is a directory, not a net file')
     kind = net_format(path)
     faces = []
     if kind in ('obj', 'json'):
@@ -328,7 +333,12 @@ def _lines(path: PathLike) -> Iterator[tuple[int, list[str]]]:
     number = 0
     try:
         with open(path, encoding='utf-8-sig') as f:
-            for number, line in enumerate(f, 1):
+            while (line := f.readline(MAX_LINE + 1)):
+                number += 1
+                if len(line) > MAX_LINE:
+                    raise ValueError(f'{path} line {number}: longer than {MAX_LINE} '
+                                     'characters (not a text file of points, lines or '
+                                     'indices?)')
                 tokens = line.split('#', 1)[0].split()
                 if tokens:
                     yield number, tokens
@@ -560,6 +570,16 @@ def _compas_data(path: PathLike, number=None) -> tuple[Any, dict[str, Any]]:
                          f'({error.msg})') from None
     except UnicodeDecodeError:
         raise ValueError(f'{path}: not UTF-8 text') from None
+    except RecursionError:
+        raise ValueError(f'{path}: nested too deeply for a JSON reader (not a COMPAS '
+                         'file)') from None
+    except MemoryError:
+        raise ValueError(f'{path}: too large to read into memory '
+                         f'({os.path.getsize(path)} bytes)') from None
+    except ValueError as error:   # an integer of more than 4300 digits, say
+        if str(error).startswith(str(path)):
+            raise
+        raise ValueError(f'{path}: {error}') from None
     data = document
     if isinstance(data, dict) and 'dtype' in data:
         data = data.get('data', data.get('value'))
@@ -568,7 +588,34 @@ def _compas_data(path: PathLike, number=None) -> tuple[Any, dict[str, Any]]:
         raise ValueError(f'{path}: expected COMPAS mesh data ("vertex" and '
                          '"face") or network data ("node" and "edge"), bare or '
                          'in {"dtype": ..., "data"/"value": ...}')
+    _check_structure(path, data)
     return document, data
+
+
+#: The JSON type of each part of COMPAS data, and of each of its values.
+COMPAS_PARTS = {'vertex': (dict, object), 'node': (dict, object), 'face': (dict, list),
+                'edge': (dict, (dict, type(None))), 'edgedata': (dict, dict),
+                'default_vertex_attributes': (dict, object), 'dva': (dict, object),
+                'default_node_attributes': (dict, object), 'dna': (dict, object),
+                'default_edge_attributes': (dict, object), 'dea': (dict, object)}
+
+
+def _check_structure(path: PathLike, data: dict[str, Any]) -> None:
+    """ValueError naming the part of COMPAS ``data`` that is not the JSON
+    type :data:`COMPAS_PARTS` says (a list where an object belongs, say)."""
+    names = {dict: 'an object', list: 'a list', object: 'a value',
+             (dict, type(None)): 'an object'}
+    for part, (kind, item) in COMPAS_PARTS.items():
+        value = data.get(part)
+        if value is None:
+            continue
+        if not isinstance(value, kind):
+            raise ValueError(f'{path}: "{part}" must be {names[kind]}, got '
+                             f'{type(value).__name__}')
+        for key, entry in value.items():
+            if not isinstance(entry, item):
+                raise ValueError(f'{path}: "{part}" entry {key!r} must be {names[item]}, '
+                                 f'got {entry!r}'[:300])
 
 
 def _compas_points(path, data):

@@ -261,6 +261,16 @@ BROKEN = [
      r"net\.json: vertex 0 has is_anchor = 'false'; expected true or false"),
     ('net.json', '{"node": {"0": [0, 0, 0]}, "edge": {}}',
      r'net\.json: vertex 0 is \[0, 0, 0\], not an object'),
+    ('net.json', '{"node": {"0": {"x": 0, "y": 0, "z": 0}}, "edge": [1, 2]}',
+     r'net\.json: "edge" must be an object, got list'),
+    ('net.json', '{"vertex": {"0": {"x": 0, "y": 0, "z": 0}}, "face": {"0": 7}}',
+     r'net\.json: "face" entry \'0\' must be a list, got 7'),
+    ('net.json', '{"node": {"0": {"x": 1' + '0' * 5000 + ', "y": 0, "z": 0}}, "edge": {}}',
+     r'net\.json: Exceeds the limit \(4300 digits\)'),
+    ('net.json', '[' * 100000 + ']' * 100000, r'net\.json: nested too deeply'),
+    ('net.obj', 'v 0 0 0\nv 1 0 0\nl 1 ' + '9' * 5000 + '\n',
+     r'net\.obj line 3: expected integer vertex indices'),
+    ('net.obj', 'v 0 0 ' + '1' * 1_100_000, r'net\.obj line 1: longer than 1000000 characters'),
 ]
 
 
@@ -269,6 +279,13 @@ def test_malformed_net_files_name_the_line(tmp_path, name, text, message):
     (tmp_path / name).write_text(text)
     with pytest.raises(ValueError, match=message):
         read_net(tmp_path / name)
+
+
+def test_a_directory_is_not_a_net(tmp_path):
+    (tmp_path / 'net.obj').mkdir()
+    for path in (tmp_path / 'net.obj', tmp_path):
+        with pytest.raises(ValueError, match=f'{path} is a directory, not a net file'):
+            read_net(path)
 
 
 @pytest.mark.parametrize('seed', [0, 1])

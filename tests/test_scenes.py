@@ -123,7 +123,7 @@ def test_fire_reaches_a_minimum(name, size):
 @pytest.mark.parametrize('name, size', COLLECTIVE + LARGE)
 def test_large_suite_scenes_are_large_and_valid(name, size):
     atoms = build(name, size)
-    assert len(atoms) == {'hanging_net': size**2, 'wheel': size + 1,
+    assert len(atoms) == {'hanging_net': size**2, 'weighted_net': size**2, 'wheel': size + 1,
                           'hub_net': 1 + size * (size + 2)}.get(name, size)
     assert len(atoms) >= 40
     forces = atoms.get_forces()

@@ -24,6 +24,7 @@ names the atoms (or ``a`` and ``Q``), never a NaN.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 from typing import Any
 
@@ -153,6 +154,7 @@ class MaudCalculator(Calculator):
                  Q: float = 1.0, dim: int = 3, q: ArrayLike | None = None,
                  loads: ArrayLike | None = None, backend: str = 'auto',
                  **kwargs: Any) -> None:
+        self._lock = threading.RLock()
         self.potential: MaudPotential = MaudPotential(np.zeros((0, 2), int))
         self.last_backend: str | None = None
         self.last_tolerance: float | None = None
@@ -160,13 +162,35 @@ class MaudCalculator(Calculator):
         super().__init__(springs=springs, a=a, Q=Q, dim=dim, q=q, loads=loads,
                          backend=backend, **kwargs)
 
+    def get_property(self, name: str, atoms: Atoms | None = None,
+                     allow_calculation: bool = True) -> Any:
+        """ASE's, one thread at a time: threads that share this calculator
+        (each with its own atoms) each get the results of their atoms, not
+        those another thread's call left."""
+        with self._lock:
+            return super().get_property(name, atoms, allow_calculation)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        del state['_lock']   # a lock is not copied or pickled: each copy has its own
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.RLock()
+
     def set(self, **kwargs: Any) -> dict[str, Any]:
         """Set parameters; invalid values raise ValueError and are not kept.
 
         Any change discards the results, except a change of ``tol`` or
         ``crossover`` alone that the results held already meet
-        (:attr:`last_tolerance` ``<=`` the new ``tol``).
+        (:attr:`last_tolerance` ``<=`` the new ``tol``). One thread at a
+        time, as :meth:`get_property`.
         """
+        with self._lock:
+            return self._set(**kwargs)
+
+    def _set(self, **kwargs: Any) -> dict[str, Any]:
         unknown = sorted(set(kwargs) - set(self.default_parameters))
         if unknown:
             raise ValueError(f'MaudCalculator takes no parameter {unknown[0]!r}; '

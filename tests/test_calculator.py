@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from scipy.spatial.distance import pdist, squareform
 
 from ase_maud.calculator import MaudCalculator
+from ase_maud.scenes import build
 
 SHAPES = ['chain', 'ring', 'star', 'tree', 'all_pairs']
 #: Central-difference step, in units of the point spacing (1 here). It leaves
@@ -583,3 +584,34 @@ def test_pairs_closer_than_float64_allows_name_two_atoms(gap):
     atoms.calc = MaudCalculator()
     with pytest.raises(ValueError, match=r'atoms 1 and 4 are 1e-\d+ a apart'):
         atoms.get_forces()
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_threads_sharing_one_calculator_get_their_own_results(seed):
+    import threading
+    base = build('hanging_net', 10, seed=seed)
+    shared = MaudCalculator(**base.calc.parameters)
+    rng = np.random.default_rng(seed)
+    scenes, expected = [], []
+    for _ in range(12):
+        atoms = base.copy()
+        atoms.positions += rng.normal(scale=0.3, size=atoms.positions.shape)
+        alone = atoms.copy()
+        alone.calc = MaudCalculator(**base.calc.parameters)
+        expected.append((alone.get_potential_energy(), alone.get_forces()))
+        atoms.calc = shared
+        scenes.append(atoms)
+    wrong = []
+
+    def work(k):
+        for _ in range(100):
+            energy, forces = scenes[k].get_potential_energy(), scenes[k].get_forces()
+            if energy != expected[k][0] or not np.array_equal(forces, expected[k][1]):
+                wrong.append(k)
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(len(scenes))]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert wrong == []

@@ -332,15 +332,24 @@ def _add_threads(parser, default, default_text):
                         f'(default: {default_text})')
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser with its errors in one line, as the command's own
+    (``ase-maud relax: error: argument --fmax: ...; see ase-maud relax
+    --help``), status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f'{self.prog}: error: {message}; see {self.prog} --help\n')
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The argparse parser of ``ase-maud`` and its three commands."""
+    """The argparse parser of ``ase-maud`` and its commands."""
     from . import backends as registry
     from .bench.optimizers import OPTIMIZERS
     from .checks import RULES
     from .scenes import SCENES, SUITES
     from .stiffness import MODELS
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog='ase-maud', description='The Maud algorithm for points that '
         'repel and are tied by springs: relax a net from a file or a built-in '
         'scene, draw it, classify its stationary point, or benchmark.',

@@ -351,3 +351,18 @@ def test_classify_says_not_stationary(tmp_path, capsys):
     path, *_ = write_quad_net(tmp_path, 'obj', n=4)
     assert main(['classify', str(path), '--fixed', str(tmp_path / 'fixed.txt')]) == 1
     assert capsys.readouterr().out.startswith('not stationary (fmax ')
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['bench', '--fmax', '-1'], 'ase-maud bench: error: argument --fmax: fmax must be'),
+    (['backends', '--natoms', '-5'], 'ase-maud backends: error: argument --natoms: count'),
+    (['classify', 'x.traj', '-k', '-3'], 'ase-maud classify: error: argument -k: count'),
+    (['relax', '--load', '0', 'x', '0'], 'ase-maud relax: error: argument --load'),
+    (['nope'], "ase-maud: error: argument COMMAND: invalid choice: 'nope'"),
+])
+def test_argument_errors_are_one_line_with_status_2(capsys, argv, message):
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    error = capsys.readouterr().err
+    assert stop.value.code == 2 and error.startswith(message) and error.count('\n') == 1
+    assert error.rstrip().endswith('--help')

@@ -12,27 +12,43 @@ The SIGKILL class is tests/test_restart_kill.py (5 kills at seeded moments).
 
 from __future__ import annotations
 
+import contextlib
 import inspect
+import io
+import json
+import os
 import sys
 import tempfile
+import threading
+import time
 import warnings
 from collections import Counter
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
+from ase.build import bulk
 from ase.calculators.emt import EMT
 from ase.cluster import Icosahedron
+from ase.constraints import FixAtoms, FixBondLength, FixedLine, FixedPlane, Hookean
+from ase.filters import Filter, FrechetCellFilter, StrainFilter, UnitCellFilter
 from ase.io import read
 from ase.md.verlet import VelocityVerlet
 from ase.optimize import BFGS
 from ase.optimize.basin import BasinHopping
 
 from ase_maud import Maud, MaudCalculator, MaudError
+from ase_maud.atomic import LEFTOVER_SECONDS
 from ase_maud.checks import RULES
+from ase_maud.cli import main as main_cli
+from ase_maud.io import read_net, write_net
 from ase_maud.scenes import build
+from ase_maud.topology import fixed_atoms
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'tests'))
 from doubles import PoisonedCalculator  # noqa: E402  (the tests' own double)
+from test_io import BROKEN  # noqa: E402  (the tests' malformed files)
+from test_robustness import DAMAGES  # noqa: E402  (the tests' damaged restart values)
 
 #: Maud's numeric keywords (RULES holds the rule of each).
 KEYWORDS = [name for name in inspect.signature(Maud).parameters
@@ -204,6 +220,355 @@ def unclear_errors():
     return calls
 
 
+# -- the user's files, re-runs, restarts and odd inputs ---------------------------
+
+def bfgs_energy(atoms):
+    """The energy BFGS reaches from ``atoms``' positions (an independent answer)."""
+    reference = atoms.copy()
+    reference.calc = MaudCalculator(**atoms.calc.parameters)
+    with BFGS(reference, logfile=None) as opt:
+        opt.run(fmax=1e-9, steps=5000)
+    return reference.get_potential_energy()
+
+
+def same_minimum(atoms, rtol=1e-8):
+    """``atoms`` at BFGS's minimum from where they are, or at a lower one
+    whose Hessian (on the free coordinates) is positive."""
+    energy, expected = atoms.get_potential_energy(), bfgs_energy(atoms)
+    if abs(energy - expected) <= rtol * abs(expected):
+        return True
+    free = np.flatnonzero(~fixed_atoms(atoms))
+    dofs = (3 * free[:, None] + np.arange(atoms.calc.dim)).ravel()
+    hessian = atoms.calc.get_property('hessian', atoms)
+    return energy < expected and np.linalg.eigvalsh(hessian[np.ix_(dofs, dofs)]).min() > 0
+
+
+def users_files(directory: Path):
+    """Write-back over the file read, and a write whose replace fails (a full
+    disk): the user's file is whole and as it was (or as written)."""
+    def over_itself(kind, seed):
+        path = directory / f'own{seed}.{kind}'
+        write_net(path, build('hanging_net', 6, seed=seed))
+        atoms = read_net(path)
+        atoms.positions += np.random.default_rng(seed).normal(scale=0.1, size=(36, 3))
+        write_net(path, atoms, like=path)
+        return np.allclose(read_net(path).positions, atoms.positions, rtol=0, atol=1e-12)
+
+    def full_disk(kind, seed):
+        path = directory / f'disk{seed}.{kind}'
+        write_net(path, build('hanging_net', 6, seed=seed))
+        before = path.read_bytes()
+        atoms = read_net(path)
+        atoms.positions += 1.0
+        with mock.patch('ase_maud.atomic.os.replace', side_effect=OSError(28, 'full')):
+            try:
+                write_net(path, atoms, like=path)
+            except OSError:
+                pass
+        return path.read_bytes() == before
+    kinds = ('obj', 'json', 'traj')
+    return ([(lambda k=k, s=s: over_itself(k, s)) for k in kinds for s in range(3)]
+            + [(lambda k=k, s=s: full_disk(k, s)) for k in kinds for s in range(3)])
+
+
+def second_runs():
+    """A second run of one optimiser after the atoms moved, after ``calc.set``
+    between runs, and after ``calc.set`` by an observer in mid-run."""
+    def moved(seed):
+        atoms = build('random_graph', 12, seed=seed)
+        with Maud(atoms, logfile=None) as opt:
+            opt.run(fmax=1e-6)
+            atoms.rattle(np.random.default_rng(seed).uniform(0.05, 0.5), seed=seed)
+            return opt.run(fmax=1e-6) and same_minimum(atoms)
+
+    def changed(seed):
+        atoms = build('hanging_net', 5, seed=seed)
+        with Maud(atoms, logfile=None) as opt:
+            opt.run(fmax=1e-6)
+            atoms.calc.set(a=[2.0, 5.0, 10.0][seed % 3])
+            return opt.run(fmax=1e-6) and same_minimum(atoms)
+
+    def observer(seed):
+        atoms = build('hanging_net', 5, seed=seed)
+        with Maud(atoms, logfile=None) as opt:
+            opt.attach(lambda: opt.nsteps == 3 and atoms.calc.set(Q=3.0))
+            converged = opt.run(fmax=1e-6)
+        fresh = atoms.copy()
+        fresh.calc = MaudCalculator(**atoms.calc.parameters)
+        return converged and np.linalg.norm(fresh.get_forces(), axis=1).max() < 1e-6
+    return [(lambda s=s, c=c: c(s)) for c in (moved, changed, observer) for s in range(4)]
+
+
+def other_scenes(directory: Path):
+    """A restart file or trajectory of another scene with as many points."""
+    def case(seed, what):
+        folder = directory / f'other{seed}{what}'
+        folder.mkdir()
+        files = {'restart': folder / 'maud.json', 'trajectory': folder / 'maud.traj'}
+        with Maud(build('ring', 25, seed=seed), logfile=None, **files) as opt:
+            opt.run(fmax=1e-6, steps=3)
+        net = build('hanging_net', 5, seed=seed)
+        if what == 'restart':
+            Maud(net, logfile=None, restart=files['restart'])
+        else:
+            Maud.resume(net, logfile=None, **files)
+        return False   # accepted: the defect
+    return [(lambda s=s, w=w: case(s, w)) for s in range(3) for w in ('restart', 'trajectory')]
+
+
+def damaged_restarts(directory: Path):
+    """Hand-damaged restart values (the tests' table): refused by name, the
+    atoms untouched."""
+    def case(damage, seed):
+        edit, _ = DAMAGES[damage]
+        restart = directory / f'damaged{seed}{abs(hash(damage))}.json'
+        with Maud(build('hanging_net', 8, seed=seed), logfile=None, restart=restart,
+                  model='springs') as opt:
+            opt.run(fmax=1e-9, steps=4)
+        document = json.loads(restart.read_text())
+        edit(document)
+        restart.write_text(json.dumps(document))
+        atoms = build('hanging_net', 8, seed=seed)
+        start = atoms.positions.copy()
+        try:
+            Maud(atoms, logfile=None, restart=restart)
+        finally:
+            assert np.array_equal(atoms.positions, start)
+        return False
+    return [(lambda d=d, s=s: case(d, s)) for d in sorted(DAMAGES) for s in range(2)]
+
+
+def cut_trajectories(directory: Path):
+    """A trajectory cut short by a seeded number of bytes: resumed from its
+    last intact frame to the minimum (or refused by name if cut into its
+    header)."""
+    def case(seed):
+        folder = directory / f'cut{seed}'
+        folder.mkdir()
+        files = {'restart': folder / 'maud.json', 'trajectory': folder / 'maud.traj'}
+        with Maud(build('hanging_net', 8, seed=seed), logfile=None, **files) as opt:
+            opt.run(fmax=1e-9, steps=6)
+        data = files['trajectory'].read_bytes()
+        cut = int(np.random.default_rng(seed).integers(1, len(data) // 2))
+        files['trajectory'].write_bytes(data[:-cut])
+        with Maud.resume(build('hanging_net', 8, seed=seed), logfile=None, **files) as opt:
+            converged = opt.run(fmax=1e-6)
+        return converged and same_minimum(opt.optimizable.atoms, rtol=1e-7)
+    return [(lambda s=s: case(s)) for s in range(8)]
+
+
+def second_writers(directory: Path):
+    """A second run on the restart file or trajectory of a running one."""
+    def case(seed, which):
+        folder = directory / f'writer{seed}{which}'
+        folder.mkdir()
+        files = {'restart': folder / 'maud.json', 'trajectory': folder / 'maud.traj'}
+        running = Maud(build('hanging_net', 8, seed=seed), logfile=None, **files)
+        steps = running.irun(fmax=1e-9, steps=30)
+        next(steps), next(steps)
+        try:
+            Maud(build('hanging_net', 8, seed=seed), logfile=None, **{which: files[which]})
+        finally:
+            steps.close()
+            running.close()
+        return False
+    return [(lambda s=s, w=w: case(s, w)) for s in range(3) for w in ('restart', 'trajectory')]
+
+
+def runs_that_cannot_end():
+    """A ring flattened to 1e8 x 1e-8 (a creep), a free net under a load (a
+    drift): stopped with a MaudError."""
+    def creep(seed):
+        atoms = build('ring', 20, seed=seed)
+        atoms.positions *= [1e8, 1e-8, 1.0]
+        with Maud(atoms, logfile=None, patience=300) as opt:
+            return opt.run(fmax=1e-3, steps=5000) and same_minimum(atoms)
+
+    def drift(seed):
+        atoms = build('hanging_net', 5, seed=seed)
+        atoms.set_constraint()
+        atoms.calc.set(loads=np.tile([0.0, 0.0, -0.5 - seed], (len(atoms), 1)))
+        with Maud(atoms, logfile=None) as opt:
+            return opt.run(fmax=1e-3, steps=20000) and False
+    return [(lambda s=s: creep(s)) for s in range(3)] + [(lambda s=s: drift(s))
+                                                          for s in range(3)]
+
+
+def hostile_files(directory: Path):
+    """The tests' malformed net files (non-UTF-8, duplicate keys, non-finite
+    coordinates, huge integers, deep nesting, overlong lines, ...), a
+    directory, and spring indices out of range: a ValueError naming them."""
+    def case(name, text):
+        path = directory / f'hostile{abs(hash(text))}{Path(name).suffix}'
+        path.write_text(text)
+        read_net(path)
+        return False
+
+    def springs(value):
+        MaudCalculator(springs=[[0, 1], [1, value]])
+        return False
+    return ([(lambda n=n, t=t: case(n, t)) for n, t, _ in BROKEN]
+            + [lambda: read_net(directory) and False]
+            + [(lambda v=v: springs(v)) for v in (1 + 2j, 1e20, -1, 2.5, 'x', np.nan)])
+
+
+def command_line(directory: Path):
+    """Bad arguments of the command: exit status 2 with one line."""
+    argvs = [['bench', '--fmax', '-1'], ['bench', '--fmax', '0'],
+             ['bench', '--energy-rtol', 'nan'], ['backends', '--natoms', '-5'],
+             ['classify', 'x.traj', '-k', '-3'], ['relax', '--out', str(directory)],
+             ['relax', 'absent.obj'], ['relax', '--fix', 'nothing-such'],
+             ['relax', '--scene', 'ring', '--load', '0', 'x', '0']]
+
+    def case(argv):
+        error = io.StringIO()
+        with contextlib.redirect_stderr(error), contextlib.redirect_stdout(io.StringIO()):
+            try:
+                status = main_cli(argv)
+            except SystemExit as stop:   # argparse's own errors
+                status = stop.code
+        if status == 2 and error.getvalue().count('\n') == 1:
+            raise ValueError(error.getvalue().strip())
+        return False
+    return [(lambda a=a: case(a)) for a in argvs]
+
+
+def misspelt_keywords():
+    """Calculator keywords that do not exist, in the constructor and set()."""
+    def case(name, where):
+        if where == 'constructor':
+            MaudCalculator(springs=[[0, 1]], **{name: 3})
+        else:
+            MaudCalculator(springs=[[0, 1]]).set(**{name: 3})
+        return False
+    return [(lambda n=n, w=w: case(n, w)) for n in ('qq', 'spring', 'A', 'load')
+            for w in ('constructor', 'set')]
+
+
+def leftovers(directory: Path):
+    """Temporary files of writers killed before their replace: removed by the
+    next run if older than a minute, a live one kept."""
+    def case(seed):
+        folder = directory / f'left{seed}'
+        folder.mkdir()
+        restart = folder / 'maud.json'
+        with Maud(build('hanging_net', 5, seed=seed), logfile=None, restart=restart) as opt:
+            opt.run(fmax=1e-9, steps=2)
+        old, live = folder / '.maud.k1ll3d.tmp.json', folder / '.maud.l1ve.tmp.json'
+        old.write_text('{"half')
+        live.write_text('{"half')
+        past = time.time() - 2 * LEFTOVER_SECONDS
+        os.utime(old, (past, past))
+        with Maud(build('hanging_net', 5, seed=seed), logfile=None, restart=restart) as opt:
+            opt.run(fmax=1e-9, steps=2)
+        return not old.exists() and live.exists()
+    return [(lambda s=s: case(s)) for s in range(3)]
+
+
+def ase_filters():
+    """ASE's Filter (a subset) with every stiffness model, and its cell
+    filters on a periodic crystal (EMT), against BFGS on the same filter."""
+    def subset(model, seed):
+        atoms = build('hanging_net', 6, seed=seed)
+        supports = set(atoms.constraints[0].index.tolist())
+        atoms.set_constraint()
+        free = [i for i in range(len(atoms)) if i not in supports]
+        with Maud(Filter(atoms, indices=free), logfile=None, model=model) as opt:
+            converged = opt.run(fmax=1e-7, steps=3000)
+        held = atoms.copy()
+        held.calc = MaudCalculator(**atoms.calc.parameters)
+        held.set_constraint(FixAtoms(indices=sorted(supports)))
+        return converged and same_minimum(held)
+
+    def cell(kind, seed):
+        crystal = bulk('Cu', cubic=True) * (2, 2, 2)
+        crystal.rattle(0.05, seed=seed)
+        crystal.set_cell(crystal.cell * 1.03, scale_atoms=True)
+        reference = crystal.copy()
+        crystal.calc, reference.calc = EMT(), EMT()
+        BFGS(kind(reference), logfile=None).run(fmax=1e-5, steps=2000)
+        with Maud(kind(crystal), logfile=None) as opt:
+            converged = opt.run(fmax=1e-5, steps=2000)
+        return converged and abs(crystal.get_potential_energy()
+                                 - reference.get_potential_energy()) < 1e-6
+    models = ('auto', 'exact', 'springs', 'nodal', 'global', 'secant')
+    return ([(lambda m=m, s=s: subset(m, s)) for m in models for s in range(2)]
+            + [(lambda k=k, s=s: cell(k, s)) for k in (UnitCellFilter, FrechetCellFilter,
+                                                       StrainFilter) for s in range(2)])
+
+
+def constraints():
+    """ASE constraints beyond FixAtoms/FixCartesian on a Maud net: the run
+    ends where BFGS ends under the same constraints."""
+    def case(make, seed):
+        atoms = build('hanging_net', 5, seed=seed)
+        atoms.set_constraint([*atoms.constraints, make(atoms)])
+        reference = atoms.copy()
+        reference.calc = MaudCalculator(**atoms.calc.parameters)
+        reference.set_constraint([c.copy() for c in atoms.constraints])
+        BFGS(reference, logfile=None).run(fmax=1e-8, steps=5000)
+        with Maud(atoms, logfile=None) as opt:
+            converged = opt.run(fmax=1e-7, steps=5000)
+        return converged and abs(atoms.get_potential_energy()
+                                 - reference.get_potential_energy()) < 1e-7 * abs(
+                                     reference.get_potential_energy())
+    makes = [lambda a: FixedPlane(12, [0, 0, 1]), lambda a: FixedLine(12, [1, 0, 0]),
+             lambda a: Hookean(6, 18, 1.0, 1.0), lambda a: FixBondLength(6, 7)]
+    return [(lambda m=m, s=s: case(m, s)) for m in makes for s in range(2)]
+
+
+def threads_sharing_a_calculator():
+    """Threads, each with its own atoms, sharing one MaudCalculator: each
+    gets its own atoms' energy and forces."""
+    def case(seed):
+        base = build('hanging_net', 10, seed=seed)
+        shared = MaudCalculator(**base.calc.parameters)
+        rng = np.random.default_rng(seed)
+        scenes, expected = [], []
+        for _ in range(8):
+            atoms = base.copy()
+            atoms.positions += rng.normal(scale=0.3, size=atoms.positions.shape)
+            alone = atoms.copy()
+            alone.calc = MaudCalculator(**base.calc.parameters)
+            expected.append(alone.get_forces())
+            atoms.calc = shared
+            scenes.append(atoms)
+        wrong = []
+
+        def work(k):
+            for _ in range(50):
+                if not np.array_equal(scenes[k].get_forces(), expected[k]):
+                    wrong.append(k)
+        threads = [threading.Thread(target=work, args=(k,)) for k in range(len(scenes))]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+        return not wrong
+    return [(lambda s=s: case(s)) for s in range(4)]
+
+
+def long_runs(directory: Path):
+    """Runs of 20000 steps or more (fmax below the forces' rounding): they end
+    (converged or stagnant), and the restart file stays the size of its
+    slots, not of the run."""
+    def case(name, size, seed):
+        restart = directory / f'long{name}{seed}.json'
+        atoms = build(name, size, seed=seed)
+        rows = 3 * len(atoms)
+        try:
+            with Maud(atoms, logfile=None, restart=restart, patience=20000) as opt:
+                opt.run(fmax=1e-16, steps=20000)
+        except MaudError:
+            pass
+        arrays = restart.with_name(restart.name + '.arrays').stat().st_size
+        memory = opt.maud.rule.memory
+        return arrays <= (6 + 2 * (memory + 1)) * rows * 8 and np.isfinite(
+            atoms.positions).all() and opt.nsteps <= 20000
+    return [(lambda n=n, z=z, s=s: case(n, z, s))
+            for n, z in (('chain', 30), ('hanging_net', 12)) for s in range(2)]
+
+
 def main() -> None:
     with tempfile.TemporaryDirectory() as name:
         directory = Path(name)
@@ -215,7 +580,25 @@ def main() -> None:
                    ('overflow at extreme scales (H2)', extreme_scales()),
                    ('FMM near pairs (H2)', fmm_near_pairs()),
                    ('2D scenes under ASE drivers', planar_drivers()),
-                   ('unclear errors (builders, calculator)', unclear_errors())]
+                   ('unclear errors (builders, calculator)', unclear_errors()),
+                   ("the user's files: write-back over the input, a full disk",
+                    users_files(directory)),
+                   ('second runs: atoms moved, calc.set between runs and by an observer',
+                    second_runs()),
+                   ('restart files and trajectories of another scene',
+                    other_scenes(directory)),
+                   ('hand-damaged restart files', damaged_restarts(directory)),
+                   ('trajectories cut short', cut_trajectories(directory)),
+                   ('a second writer on a running run\'s files', second_writers(directory)),
+                   ('runs that cannot end: a creep, a drift', runs_that_cannot_end()),
+                   ('malformed net files, spring indices', hostile_files(directory)),
+                   ('command-line arguments', command_line(directory)),
+                   ('misspelt calculator keywords', misspelt_keywords()),
+                   ('temporary files of killed writers', leftovers(directory)),
+                   ('ASE filters: a subset x models, cell filters', ase_filters()),
+                   ('other ASE constraints', constraints()),
+                   ('threads sharing one calculator', threads_sharing_a_calculator()),
+                   ('runs of 20000 steps', long_runs(directory))]
         print('| class | inputs | correct answer | ValueError | MaudError | other |')
         print('| --- | --- | --- | --- | --- | --- |')
         others = []

@@ -45,7 +45,7 @@ from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 from . import accuracy
 from .checks import check, check_all, check_writable
 from .lock import FileInUseError, RunLock
-from .method import MaudMethod, StepRule, merit_tolerance, step_rule
+from .method import STEP_DEFAULTS, MaudMethod, StepRule, merit_tolerance, step_rule
 from .monitor import (
     DivergenceError,
     MaudError,
@@ -55,7 +55,7 @@ from .monitor import (
 )
 from .neighbours import NearestDistances
 from .restart import RestartFile, difference, signature
-from .stiffness import StiffnessModel, choose_model
+from .stiffness import PROJECTIONS, StiffnessModel, choose_model
 from .subset import SubsetView
 from .trajectory import last_frame, repair
 
@@ -160,6 +160,11 @@ class Maud(Optimizer):
         self._points = scene is not None
         if scene is None:   # no nearest-neighbour bound: ASE's usual maxstep
             rule = replace(rule, maxstep_nn=None, maxstep=rule.maxstep or CELL_MAXSTEP)
+        elif rule.maxstep_nn is None and not all(isinstance(c, PROJECTIONS)
+                                                 for c in scene.constraints):
+            # ASE adjusts every move for these (SHAKE for a bond length), which
+            # fails on a move long against the distances between points
+            rule = replace(rule, maxstep_nn=STEP_DEFAULTS['common']['maxstep_nn'])
         self.maud = MaudMethod(model, rule, nearest)
         self.divergence_factor, self.patience = run['divergence_factor'], run['patience']
         super().__init__(atoms, restart, logfile, trajectory,

@@ -1,4 +1,4 @@
-"""ASE's filters under Maud: a Filter (a subset of the atoms) with every
+"""ASE's filters and constraints under Maud: a Filter (a subset of the atoms) with every
 stiffness model, and the cell filters of a periodic crystal, each checked
 against BFGS on the same filter from the same start."""
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from ase.build import bulk
 from ase.calculators.emt import EMT
-from ase.constraints import FixAtoms
+from ase.constraints import FixAtoms, FixBondLength, FixBondLengths, Hookean
 from ase.filters import Filter, FrechetCellFilter, StrainFilter, UnitCellFilter
 from ase.optimize import BFGS
 
@@ -79,3 +79,31 @@ def test_cell_filters_reach_the_energy_bfgs_reaches(cell_filter, seed):
         assert opt.run(fmax=1e-5, steps=2000)
     assert crystal.get_potential_energy() == pytest.approx(
         reference.get_potential_energy(), abs=1e-7)
+
+
+@pytest.mark.parametrize('make', [lambda: FixBondLength(6, 7), lambda: Hookean(6, 18, 1.0, 1.0)],
+                         ids=['FixBondLength', 'Hookean'])
+@pytest.mark.parametrize('seed', [0, 1, 2, 3])
+def test_constraints_that_ase_adjusts_end_where_bfgs_does_or_lower(make, seed):
+    # ASE adjusts every move for these (SHAKE for a bond length): long
+    # moves made its iteration fail ("Did not converge")
+    atoms = build('hanging_net', 5, seed=seed)
+    atoms.set_constraint([*atoms.constraints, make()])
+    reference = atoms.copy()
+    reference.calc = type(atoms.calc)(**atoms.calc.parameters)
+    reference.set_constraint([c.copy() for c in atoms.constraints])
+    BFGS(reference, logfile=None).run(fmax=1e-8, steps=5000)
+    length = atoms.get_distance(6, 7)
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-7, steps=5000)
+    energy = atoms.get_potential_energy()
+    if energy != pytest.approx(reference.get_potential_energy(), rel=1e-9):
+        # another minimum: BFGS from a point beside it comes back to it
+        beside = atoms.copy()
+        beside.calc = type(atoms.calc)(**atoms.calc.parameters)
+        beside.set_constraint([c.copy() for c in atoms.constraints])
+        beside.rattle(1e-3, seed=seed)
+        BFGS(beside, logfile=None).run(fmax=1e-8, steps=5000)
+        assert beside.get_potential_energy() == pytest.approx(energy, rel=1e-9)
+    if isinstance(atoms.constraints[-1], FixBondLengths):
+        assert atoms.get_distance(6, 7) == pytest.approx(length, rel=1e-9)

@@ -19,7 +19,6 @@ import json
 import os
 import sys
 import tempfile
-import threading
 import time
 import warnings
 from collections import Counter
@@ -27,7 +26,6 @@ from pathlib import Path
 from unittest import mock
 
 import numpy as np
-from ase.build import bulk
 from ase.calculators.emt import EMT
 from ase.cluster import Icosahedron
 from ase.constraints import FixAtoms, FixBondLength, FixedLine, FixedPlane, Hookean
@@ -47,6 +45,8 @@ from ase_maud.topology import fixed_atoms
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'tests'))
 from doubles import PoisonedCalculator  # noqa: E402  (the tests' own double)
+from test_calculator import wrong_results_of_threads  # noqa: E402
+from test_filters import relaxed_in_a_cell_filter  # noqa: E402
 from test_io import BROKEN  # noqa: E402  (the tests' malformed files)
 from test_robustness import DAMAGES  # noqa: E402  (the tests' damaged restart values)
 
@@ -481,16 +481,8 @@ def ase_filters():
         return converged and same_minimum(held)
 
     def cell(kind, seed):
-        crystal = bulk('Cu', cubic=True) * (2, 2, 2)
-        crystal.rattle(0.05, seed=seed)
-        crystal.set_cell(crystal.cell * 1.03, scale_atoms=True)
-        reference = crystal.copy()
-        crystal.calc, reference.calc = EMT(), EMT()
-        BFGS(kind(reference), logfile=None).run(fmax=1e-5, steps=2000)
-        with Maud(kind(crystal), logfile=None) as opt:
-            converged = opt.run(fmax=1e-5, steps=2000)
-        return converged and abs(crystal.get_potential_energy()
-                                 - reference.get_potential_energy()) < 1e-6
+        converged, energy, expected = relaxed_in_a_cell_filter(kind, seed)
+        return converged and abs(energy - expected) < 1e-6
     models = ('auto', 'exact', 'springs', 'nodal', 'global', 'secant')
     return ([(lambda m=m, s=s: subset(m, s)) for m in models for s in range(2)]
             + [(lambda k=k, s=s: cell(k, s)) for k in (UnitCellFilter, FrechetCellFilter,
@@ -525,33 +517,9 @@ def constraints():
 
 def threads_sharing_a_calculator():
     """Threads, each with its own atoms, sharing one MaudCalculator: each
-    gets its own atoms' energy and forces."""
-    def case(seed):
-        base = build('hanging_net', 10, seed=seed)
-        shared = MaudCalculator(**base.calc.parameters)
-        rng = np.random.default_rng(seed)
-        scenes, expected = [], []
-        for _ in range(8):
-            atoms = base.copy()
-            atoms.positions += rng.normal(scale=0.3, size=atoms.positions.shape)
-            alone = atoms.copy()
-            alone.calc = MaudCalculator(**base.calc.parameters)
-            expected.append(alone.get_forces())
-            atoms.calc = shared
-            scenes.append(atoms)
-        wrong = []
-
-        def work(k):
-            for _ in range(50):
-                if not np.array_equal(scenes[k].get_forces(), expected[k]):
-                    wrong.append(k)
-        threads = [threading.Thread(target=work, args=(k,)) for k in range(len(scenes))]
-        for thread in threads:
-            thread.start()
-        for thread in threads:
-            thread.join()
-        return not wrong
-    return [(lambda s=s: case(s)) for s in range(4)]
+    gets its own atoms' energy and forces (the tests' measure)."""
+    return [(lambda s=s: wrong_results_of_threads(s, threads=8, calls=50) == 0)
+            for s in range(4)]
 
 
 def long_runs(directory: Path):

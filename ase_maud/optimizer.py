@@ -156,16 +156,8 @@ class Maud(Optimizer):
             model = choose_model(scene, model, target, nearest=nearest, method=method,
                                  floor=floor, kappa0=kappa0)
         self.model = model
-        rule = step_rule(model.name, model.target, image_size, **steps)
         self._points = scene is not None
-        if scene is None:   # no nearest-neighbour bound: ASE's usual maxstep
-            rule = replace(rule, maxstep_nn=None, maxstep=rule.maxstep or CELL_MAXSTEP)
-        elif rule.maxstep_nn is None and not all(isinstance(c, PROJECTIONS)
-                                                 for c in scene.constraints):
-            # ASE adjusts every move for these (SHAKE for a bond length), which
-            # fails on a move long against the distances between points
-            rule = replace(rule, maxstep_nn=STEP_DEFAULTS['common']['maxstep_nn'])
-        self.maud = MaudMethod(model, rule, nearest)
+        self.maud = MaudMethod(model, _step_rule(model, scene, image_size, steps), nearest)
         self.divergence_factor, self.patience = run['divergence_factor'], run['patience']
         super().__init__(atoms, restart, logfile, trajectory,
                          append_trajectory=append_trajectory, **kwargs)
@@ -514,6 +506,23 @@ def _other_scene(frame: Atoms, atoms: Atoms) -> str | None:
     held = signature(frame, MaudCalculator(**stored).potential
                      if stored and potential is not None else None)
     return difference(held, signature(atoms, potential))
+
+
+def _step_rule(model: StiffnessModel, scene: Atoms | None, image_size: int | None,
+               steps: dict[str, Any]) -> StepRule:
+    """The step rule of ``model`` (:func:`~ase_maud.method.step_rule`, with
+    the user's ``steps``) for what the model sees: a cell filter's coordinates
+    (``scene`` None) get ASE's usual ``maxstep`` instead of the nearest-neighbour
+    bound; atoms under constraints ASE adjusts every move for (SHAKE for a bond
+    length, which fails on a move long against the distances between points)
+    keep the nearest-neighbour bound in every model."""
+    rule = step_rule(model.name, model.target, image_size, **steps)
+    if scene is None:
+        return replace(rule, maxstep_nn=None, maxstep=rule.maxstep or CELL_MAXSTEP)
+    if rule.maxstep_nn is None and not all(isinstance(c, PROJECTIONS)
+                                           for c in getattr(scene, 'constraints', ())):
+        return replace(rule, maxstep_nn=STEP_DEFAULTS['common']['maxstep_nn'])
+    return rule
 
 
 def _check_files(restart: Any, logfile: Any, trajectory: Any,

@@ -33,7 +33,10 @@ it for a step it may take back. Four models, from the cheapest:
 replaced by their absolute values and floored at ``floor`` times the largest
 (per block for the nodal and global models, over the whole matrix for the
 exact one), so no direction is uphill. ``target='stationary'`` keeps the signs
-(saddles and maxima are then fixed points of the step). Degrees of freedom
+(saddles and maxima are then fixed points of the step). ``target='saddle'``
+(exact model only) gives the Hessian's eigenpairs on the internal moves
+(:func:`internal_basis`: rigid-body motions projected out), signed and
+unfloored, for the step rule's eigenvector following. Degrees of freedom
 held by :class:`~ase.constraints.FixAtoms` and
 :class:`~ase.constraints.FixCartesian` are removed from ``K`` and never move;
 other constraints are left to ASE (the optimizer applies them to every move).
@@ -94,7 +97,7 @@ class Solver(ABC):
 class StiffnessModel(ABC):
     """What the Maud step divides the forces by; see the module docstring.
 
-    ``target`` ('minimum' or 'stationary') and ``floor`` (relative
+    ``target`` ('minimum', 'stationary' or 'saddle') and ``floor`` (relative
     eigenvalue floor; None: the model's :attr:`default_floor`) are checked
     here. ``prop`` names the calculator property whose request computes, in
     the same calculator call as the energy and forces, what :meth:`at`
@@ -149,6 +152,32 @@ def free_dofs(atoms: Atoms, dim: int) -> np.ndarray:
         if isinstance(constraint, (FixAtoms, FixCartesian)):
             constraint.adjust_forces(atoms, free)
     return free[:, :dim] != 0
+
+
+def rigid_body_modes(positions: np.ndarray, free: np.ndarray, dim: int,
+                     rcond: float = 1e-8) -> np.ndarray:
+    """Orthonormal rigid-body modes on the free degrees of freedom.
+
+    The translations and rotations about the centroid that leave every fixed
+    degree of freedom at rest, restricted to the free ones: an array of
+    shape (free.sum(), m), m <= 6 (3D) or 3 (2D). A rotation that moves the
+    points less than ``rcond`` times the most moving one does not count: a
+    collinear scene (to that precision) loses the rotation about its line.
+    """
+    x = positions[:, :dim] - positions[:, :dim].mean(axis=0)
+    if dim == 3:
+        rotations = np.array([np.cross(e, x).ravel() for e in np.eye(3)])
+    else:
+        rotations = np.column_stack([-x[:, 1], x[:, 0]]).reshape(1, -1)
+    sizes = np.linalg.norm(rotations, axis=1)
+    rotations = rotations[sizes > rcond * sizes.max()]
+    rotations /= max(sizes.max(), np.finfo(float).tiny)
+    translations = np.kron(np.ones(len(x)), np.eye(dim)) / np.sqrt(len(x))
+    modes = np.vstack([translations, rotations]).T
+    flat = free.ravel()
+    if (~flat).any():
+        modes = modes @ scipy.linalg.null_space(modes[~flat], rcond=rcond)
+    return scipy.linalg.orth(modes[flat], rcond=rcond)
 
 
 #: The constraints that project each atom's move onto a line, a plane or
@@ -347,6 +376,10 @@ class ExactModel(StiffnessModel):
         basis = self.basis(atoms, dim)
         matrix = hessian if basis is None else basis.T @ hessian @ basis
         free = np.ones((len(atoms), dim), dtype=bool)
+        if self.target == 'saddle':
+            internal = internal_basis(atoms.positions, dim, basis)
+            return _EigenSolver(internal.T @ hessian @ internal, internal, free,
+                                np.asarray).decomposed()
         eigen = _EigenSolver(matrix, basis, free, self._absolute)
         if self.target == 'minimum':
             shift = self.floor * np.abs(matrix).sum(axis=1).max(initial=0.0)
@@ -367,6 +400,24 @@ class ExactModel(StiffnessModel):
             basis = allowed_basis(atoms, dim) if atoms.constraints else None
             self._basis = key, basis
         return self._basis[1]
+
+
+def internal_basis(positions: np.ndarray, dim: int,
+                   basis: np.ndarray | None) -> np.ndarray:
+    """Orthonormal columns (dim N, m) spanning the moves ``basis`` allows
+    (:func:`allowed_basis`; None: every move) that are orthogonal to the
+    rigid-body motions it allows (:func:`rigid_body_modes`: the translations
+    and rotations of a free scene, none once three non-collinear points are
+    held): the internal moves, on which the Hessian has no zero modes of
+    symmetry."""
+    rigid = rigid_body_modes(positions, np.ones((len(positions), dim), bool), dim)
+    if basis is None:
+        return scipy.linalg.null_space(rigid.T)
+    outside = rigid - basis @ (basis.T @ rigid)
+    kept = rigid @ scipy.linalg.null_space(outside, rcond=1e-8)
+    if kept.shape[1] == 0:
+        return basis
+    return basis @ scipy.linalg.null_space(scipy.linalg.orth(basis.T @ kept).T)
 
 
 class _EigenSolver(_DofSolver):
@@ -394,6 +445,15 @@ class _EigenSolver(_DofSolver):
     @property
     def values(self) -> np.ndarray:
         return self.decomposed()._pairs[0]
+
+    def modes(self) -> tuple[np.ndarray, np.ndarray]:
+        """The eigenvalues (ascending for ``'saddle'``, whose are left
+        signed and unfloored; force per length) and the eigenvectors as moves,
+        shape (m, N, 3), orthonormal."""
+        values, vectors = self.decomposed()._pairs
+        out = np.zeros((len(values), len(self.free), 3))
+        out[:, :, :self.dim] = vectors.T.reshape(len(values), -1, self.dim)
+        return values, out
 
     def _solve(self, rhs):
         values, vectors = self.decomposed()._pairs
@@ -690,7 +750,9 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
                  **options: Any) -> StiffnessModel:
     """The stiffness model ``name`` for ``atoms``' calculator.
 
-    ``'auto'``: ``exact`` while the free degrees of freedom are at most
+    ``target='saddle'`` takes ``exact`` (ValueError if ``name`` is another
+    model or the scene is too large for it). ``'auto'``: ``exact`` while the
+    free degrees of freedom are at most
     :data:`EXACT_MAX_DOFS`, the calculator has a ``hessian`` and every
     constraint is one of :data:`PROJECTIONS` (a Hookean tether, say, adds
     stiffness the Hessian does not hold); else ``springs`` if it has a
@@ -703,6 +765,9 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
     """
     calc = getattr(atoms, 'calc', None)
     offers = set(getattr(calc, 'implemented_properties', ()))
+    if target == 'saddle':
+        _saddle_model(atoms, name, offers)
+        name = 'exact'
     if name == 'auto':
         dim = 2 if getattr(calc, 'dim', 3) == 2 else 3
         if ('hessian' in offers and free_dofs(atoms, dim).sum() <= EXACT_MAX_DOFS
@@ -729,6 +794,25 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
         options['nearest'] = nearest
         taken.add('nearest')
     return cls(target=target, **{k: v for k, v in options.items() if k in taken})
+
+
+def _saddle_model(atoms: Atoms | None, name: Any, offers: set[str]) -> None:
+    """ValueError unless ``target='saddle'`` can have the exact model
+    (``name`` 'auto' or 'exact', a calculator with the Hessian, at most
+    :data:`EXACT_MAX_DOFS` free degrees of freedom, one scene): the climb
+    follows the Hessian's eigenvectors."""
+    if name not in ('auto', 'exact'):
+        raise ValueError(f"target='saddle' needs model='exact' (or 'auto'), got "
+                         f'model={name!r}')
+    if atoms is None or 'hessian' not in offers:
+        raise ValueError("target='saddle' needs one scene whose calculator gives "
+                         "the Hessian (such as MaudCalculator), for model='exact'")
+    dim = 2 if getattr(atoms.calc, 'dim', 3) == 2 else 3
+    dofs = int(free_dofs(atoms, dim).sum())
+    if dofs > EXACT_MAX_DOFS:
+        raise ValueError(f"target='saddle' needs model='exact', which takes at most "
+                         f'{EXACT_MAX_DOFS} free degrees of freedom; this scene has '
+                         f'{dofs}')
 
 
 #: Options beyond ``target`` and ``floor`` that a model takes.

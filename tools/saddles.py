@@ -52,6 +52,7 @@ import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian
 from ase.optimize.optimize import Optimizer
+from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
 
 from ase_maud import Maud
@@ -84,7 +85,7 @@ def _sella(hessian: bool) -> Callable[[Atoms], Optimizer]:
         from sella import Sella
         fixed = any(isinstance(c, FixAtoms) for c in atoms.constraints)
         extra = {'hessian_function': analytic_hessian} if hessian else {}
-        return Sella(atoms, order=1, internal=False, logfile=None,
+        return Sella(atoms, order=ORDER[0], internal=False, logfile=None,
                      proj_rot=not fixed, **extra)
     return make
 
@@ -93,22 +94,60 @@ def _maud(model: str) -> Callable[[Atoms], Optimizer]:
     return lambda atoms: Maud(atoms, target='stationary', model=model, logfile=None)
 
 
+def _maud_saddle(atoms: Atoms) -> Optimizer:
+    return Maud(atoms, target='saddle', order=ORDER[0], logfile=None)
+
+
+#: The index sought (``--order``); Sella's and Maud-saddle's ``order``.
+ORDER = [1]
+
 #: The compared saddle searches, by name.
 OPTIMIZERS: dict[str, Callable[[Atoms], Optimizer]] = {
-    'Maud-exact': _maud('exact'), 'Maud-nodal': _maud('nodal'),
-    'Sella': _sella(hessian=False), 'Sella-H': _sella(hessian=True)}
+    'Maud-saddle': _maud_saddle, 'Maud-exact': _maud('exact'),
+    'Maud-nodal': _maud('nodal'), 'Sella': _sella(hessian=False),
+    'Sella-H': _sella(hessian=True)}
 
 
-def make_start(scene: str, size: int, seed: int, amp: float) -> Atoms:
-    """The start ``scene:size:amp`` (see the module docstring); ``seed`` seeds the scene."""
+def _chords(size: int, seed: int) -> Atoms:
+    """``ring`` with a chord from each point to the one a third of the way round."""
+    atoms = build('ring', size, seed=seed)
+    n = len(atoms)
+    chords = np.column_stack([np.arange(n), (np.arange(n) + n // 3) % n])
+    atoms.calc = type(atoms.calc)(**{**atoms.calc.parameters, 'springs': np.vstack(
+        [atoms.calc.parameters['springs'], chords])})
+    return atoms
+
+
+def _corners(size: int, seed: int) -> Atoms:
+    """``net3d`` with its four corners fixed."""
+    atoms = build('net3d', size, seed=seed)
+    side = int(round(np.sqrt(len(atoms))))
+    atoms.set_constraint(FixAtoms([0, side - 1, side * (side - 1), side * side - 1]))
+    return atoms
+
+
+#: Scenes of the benchmark's own (beside :func:`ase_maud.scenes.build`'s).
+OWN_SCENES = {'chords': _chords, 'corners': _corners}
+
+#: Displacements of a minimum by a fraction :data:`SHIFT` of the mean
+#: nearest-neighbour distance (module docstring).
+SHIFT = 0.1
+DISPLACEMENTS = ('up', 'down', 'random')
+
+
+def make_start(scene: str, size: int, seed: int, amp: float | str) -> Atoms:
+    """The start ``scene:size:amp`` (see the module docstring); ``seed`` seeds the scene
+    and the random displacement."""
     if scene == 'six':
         atoms = runpy.run_path(str(EXAMPLE))['guess']()
+    elif scene in OWN_SCENES:
+        atoms = OWN_SCENES[scene](size, seed)
     else:
         atoms = build(scene, size, seed=seed)
     if atoms.calc.parameters['dim'] == 2:
         atoms.set_constraint([*atoms.constraints,
                               FixCartesian(range(len(atoms)), mask=(False, False, True))])
-    if amp == 0:
+    if amp in (0, '0'):
         return atoms
     Maud(atoms, logfile=None).run(fmax=1e-9, steps=5000)
     point = classify(atoms)
@@ -116,8 +155,14 @@ def make_start(scene: str, size: int, seed: int, amp: float) -> Atoms:
         raise ValueError(f'{scene} {size} seed {seed} relaxed to a {point.verdict}, '
                          'not a minimum: no lowest mode to leave it along')
     mode = point.modes[0]
+    if amp in DISPLACEMENTS:
+        if amp == 'random':
+            weights = np.random.default_rng(seed).normal(size=len(point.modes))
+            mode = np.einsum('k,kij->ij', weights, point.modes)
+        spacing = np.mean(cKDTree(atoms.positions).query(atoms.positions, k=2)[0][:, 1])
+        amp = SHIFT * spacing * (-1 if amp == 'down' else 1)
     start = fresh_copy(atoms)
-    start.positions += amp * mode / np.linalg.norm(mode, axis=1).max()
+    start.positions += float(amp) * mode / np.linalg.norm(mode, axis=1).max()
     return start
 
 
@@ -159,7 +204,7 @@ def compare(start: str, seed: int, optimisers: list[str], fmax: float, steps: in
             energy_rtol: float, distance_atol: float) -> list[dict]:
     """The rows of one start: every optimiser, and whether it ended where Sella did."""
     scene, size, amp = start.split(':')
-    atoms = make_start(scene, int(size), seed, float(amp))
+    atoms = make_start(scene, int(size), seed, amp if amp in DISPLACEMENTS else float(amp))
     ends, rows = {}, []
     for name in optimisers:
         ends[name], row, _ = search(atoms, name, fmax, steps)

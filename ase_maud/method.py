@@ -110,6 +110,10 @@ STEP_DEFAULTS: dict[str, dict[str, Any]] = {
 #: for the saddle step's trust fraction to grow, and beyond which it halves.
 TRUST_GOOD, TRUST_BAD = 0.25, 0.75
 
+#: A saddle search at less than this fraction of its trust length from the
+#: minimum along a followed mode climbs that mode the way it is followed.
+CLIMB_SIDE = 1e-3
+
 #: Shifts per grid of the trust-region search (:meth:`MaudMethod._trust_region`).
 TRUST_GRID = 24
 
@@ -332,17 +336,21 @@ class MaudMethod:
         """The P-RFO move of eigenvector following (module docstring), the
         whole of it scaled to within ``gamma`` times each point's bound."""
         values, modes = state.solver.modes()
-        gradient = -np.einsum('kij,ij->k', modes, state.last.forces)
         up = self._followed(state, values, modes)
+        modes = modes.copy()
+        modes[up] = state.modes   # signed as followed
+        gradient = -np.einsum('kij,ij->k', modes, state.last.forces)
         down = np.setdiff1d(np.arange(len(values)), up)
         steps = np.zeros_like(gradient)
-        # at a minimum of a followed mode (g = 0) start along the mode as followed
-        scale = np.finfo(float).eps * max(np.abs(gradient).max(initial=0.0), 1e-300)
-        climb = np.where(np.abs(gradient[up]) > scale, gradient[up], scale)
-        steps[up] = _rfo_step(values[up], climb, uphill=True)
+        limit = state.gamma * self._limits(state.last.x)
+        # within CLIMB_SIDE of the trust length of a followed mode's minimum,
+        # either side is uphill: climb along the mode as followed (``mode``)
+        b, climb = values[up], gradient[up]
+        side = (b > 0) & (np.abs(climb) < CLIMB_SIDE * b * limit.min())
+        climb = np.where(side, np.maximum(np.abs(climb), np.finfo(float).eps * b), climb)
+        steps[up] = _rfo_step(b, climb, uphill=True)
         steps[down] = _rfo_step(values[down], gradient[down], uphill=False)
-        move = np.einsum('k,kij->ij', steps, modes)
-        return _bound(move, state.gamma * self._limits(state.last.x), whole=True)
+        return _bound(np.einsum('k,kij->ij', steps, modes), limit, whole=True)
 
     def _followed(self, state: MaudState, values: np.ndarray,
                   modes: np.ndarray) -> np.ndarray:

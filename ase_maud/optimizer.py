@@ -425,6 +425,21 @@ class Maud(Optimizer):
             self._verify()
         return converged
 
+    def gradient_converged(self, gradient: np.ndarray) -> bool:
+        """ASE's test (``fmax``); for ``target='saddle'`` also the index of
+        the exact model's Hessian there (negative curvatures beyond
+        :data:`ase_maud.analysis.RTOL` of the largest): a stationary point of
+        another index (the minimum a search starts from) is left, not
+        reported."""
+        if not super().gradient_converged(gradient):
+            return False
+        if self.target != 'saddle':
+            return True
+        from .analysis import RTOL
+        values = self._solver_at(self.optimizable.get_x().reshape(-1, 3)).modes()[0]
+        negative = int(np.sum(values < -RTOL * np.abs(values).max(initial=0.0)))
+        return negative == self.rule.order
+
     def _verify(self) -> None:
         """For ``target='saddle'``: classify the converged point from the
         analytic Hessian (:attr:`found`); a WrongIndexError if its index is

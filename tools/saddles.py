@@ -1,4 +1,4 @@
-"""Index-1 saddle searches: Maud's signed steps against Sella, in calculator calls and CPU seconds.
+"""Saddle searches: Maud's eigenvector following and signed steps against Sella, in calls and CPU.
 
 Starts (seeded), named ``scene:size:amp``:
 
@@ -8,15 +8,24 @@ Starts (seeded), named ``scene:size:amp``:
   every pair sprung), next to a collective saddle: every nodal block is positive definite there;
 - ``scene:N:amp``: the scene relaxed with Maud to fmax 1e-9 (a minimum, checked with
   :func:`ase_maud.analysis.classify`), then moved along its lowest Hessian mode so that the
-  point that moves most moves ``amp`` a. 2D scenes also get ``FixCartesian`` on z (Maud never
-  moves z in 2D; Sella would otherwise see z as a free, flat direction).
+  point that moves most moves ``amp`` a; ``amp`` ``up`` or ``down``: moves ``SHIFT`` = 0.1 of
+  the mean nearest-neighbour distance, along the lowest mode either way, ``random``: along a
+  seeded random combination of the modes. 2D scenes also get ``FixCartesian`` on z (Maud never
+  moves z in 2D; Sella would otherwise see z as a free, flat direction). Scenes are those of
+  :func:`ase_maud.scenes.build` and two of the tool's own: ``chords`` (``ring`` with a chord
+  from each point to the one a third of the way round) and ``corners`` (``net3d`` with its
+  four corners fixed).
 
-From each start, to ``--fmax`` (units of ``Q a``), at most ``--steps`` steps:
+From each start, to ``--fmax`` (units of ``Q a``), at most ``--steps`` steps, seeking an
+index-``--order`` point (default 1):
+
+- ``Maud-saddle``: ``Maud(target='saddle', order=order)``, eigenvector following on the
+  exact model;
 
 - ``Maud-exact``: ``Maud(target='stationary', model='exact')``, signed Newton on the analytic
   Hessian with its trust-region damping;
 - ``Maud-nodal``: ``Maud(target='stationary', model='nodal')``, the specification's step;
-- ``Sella``: ``Sella(order=1, internal=False)``, its Hessian estimated by its own iterative
+- ``Sella``: ``Sella(order=order, internal=False)``, its Hessian estimated by its own iterative
   diagonalisation through force calls; on scenes with ``FixAtoms`` it gets ``proj_rot=False``
   (Sella projects out rotations whenever ``pbc`` is off, and on a scene with fixed points it
   then reports convergence with forces along the rotations left: fmax 0.1 on ``chain``);
@@ -28,7 +37,7 @@ finite-difference force calls included; a call that also computes the Hessian co
 (its cost is in the CPU seconds). CPU seconds are ``time.process_time`` over the optimiser's
 construction and run (every thread; run with one). Each optimiser is run once on a small cage
 before the table, so imports and first compilations are not counted. Each end point is
-classified (dense Hessian): index, energy, fmax; ``same as Sella`` when its energy is within
+classified (dense Hessian, a fresh calculator): index, energy, fmax; ``same as Sella`` when its energy is within
 ``--energy-rtol`` (relative) of Sella's end point and its sorted pair distances within
 ``--distance-atol`` (units of a). A run that raised (Maud's StagnationError, say) is a result:
 its error is in the row and its end point is classified where it stopped. Run::
@@ -181,7 +190,7 @@ def search(start: Atoms, optimiser: str, fmax: float, steps: int
     cpu = time.process_time() - cpu
     with warnings.catch_warnings():
         warnings.simplefilter('ignore')  # a run that stopped early is not stationary
-        point = classify(atoms)
+        point = classify(fresh_copy(atoms))
     row = {'optimiser': optimiser, 'converged': converged, 'calls': len(recorder.samples),
            'cpu_s': cpu, 'energy': atoms.get_potential_energy(), 'index': point.index,
            'verdict': point.verdict, 'fmax': point.fmax, 'error': error}
@@ -239,16 +248,18 @@ def markdown(rows: list[dict], fmax: float) -> str:
 
 
 def summary(rows: list[dict], fmax: float) -> str:
-    """Per optimiser: the starts from which it ended, converged, on an index-1 saddle,
-    how many of those are Sella's end point, and the median calls and CPU seconds."""
-    lines = []
+    """Per optimiser: the starts from which it ended, converged, on a point of the index
+    sought (``ORDER``, no zero curvature), how many of those are Sella's end point, and
+    the median calls and CPU seconds."""
+    lines, order = [], ORDER[0]
     for name in dict.fromkeys(r['optimiser'] for r in rows):
         mine = [r for r in rows if r['optimiser'] == name]
-        hits = [r for r in mine if r['index'] == 1 and r['fmax'] <= fmax]
+        hits = [r for r in mine if r['index'] == order and r['fmax'] <= fmax
+                and r['verdict'] != 'degenerate']
         median = (f", median {np.median([r['calls'] for r in hits]):.0f} calls, "
                   f"{np.median([r['cpu_s'] for r in hits]):.2f} CPU s" if hits else '')
         same = sum(r['same_as_Sella'] is True for r in hits)
-        lines.append(f'- {name}: an index-1 saddle (fmax <= {fmax:g}) from {len(hits)} of '
+        lines.append(f'- {name}: an index-{order} point (fmax <= {fmax:g}) from {len(hits)} of '
                      f"{len(mine)} starts ({same} Sella's){median}")
     return '\n'.join(lines) + '\n'
 
@@ -260,12 +271,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seeds', type=int, nargs='+', default=[0])
     parser.add_argument('--optimizers', nargs='+', choices=OPTIMIZERS,
                         default=list(OPTIMIZERS))
+    parser.add_argument('--order', type=int, default=1,
+                        help="the index sought (Maud-saddle's and Sella's order)")
     parser.add_argument('--fmax', type=float, default=1e-6)
     parser.add_argument('--steps', type=int, default=1000)
     parser.add_argument('--energy-rtol', type=float, default=1e-8)
     parser.add_argument('--distance-atol', type=float, default=1e-4)
     parser.add_argument('--out', type=Path, default=Path('saddles'))
     args = parser.parse_args(argv)
+    ORDER[0] = args.order
     for name in args.optimizers:  # warm up: imports, first compilations
         search(make_start('cage', 4, 0, 0.0), name, 1e-3, 50)
     rows = []

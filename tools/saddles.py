@@ -37,10 +37,11 @@ finite-difference force calls included; a call that also computes the Hessian co
 (its cost is in the CPU seconds). CPU seconds are ``time.process_time`` over the optimiser's
 construction and run (every thread; run with one). Each optimiser is run once on a small cage
 before the table, so imports and first compilations are not counted. Each end point is
-classified (dense Hessian, a fresh calculator): index, energy, fmax; ``same as Sella`` when its energy is within
-``--energy-rtol`` (relative) of Sella's end point and its sorted pair distances within
-``--distance-atol`` (units of a). A run that raised (Maud's StagnationError, say) is a result:
-its error is in the row and its end point is classified where it stopped. Run::
+classified (dense Hessian, a fresh calculator): index, energy, fmax; ``same as Sella`` when
+its energy is within ``--energy-rtol`` (relative) of Sella's end point and its sorted pair
+distances within ``--distance-atol`` (units of a). A run that raised (Maud's
+StagnationError, say) is a result: its error is in the row and its end point is classified
+where it stopped. Run::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
         python tools/saddles.py --out saddles

@@ -6,10 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ase.mep import NEB
 from ase.optimize.optimize import Optimizer
 
 from ase_maud import Maud, MaudError, WrongIndexError
-from ase_maud.analysis import classify
+from ase_maud.analysis import classify, displace_along_mode
 from ase_maud.bench.runner import fresh_copy
 from ase_maud.scenes import build
 from ase_maud.stiffness import ExactModel
@@ -212,3 +213,25 @@ def test_order_beyond_the_modes_is_named():
     atoms = build('all_pairs2d', 4)
     with pytest.raises(ValueError, match='order=6 exceeds the 5 internal modes'):
         Maud(atoms, target='saddle', order=6, logfile=None).run(fmax=FMAX, steps=2)
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_climbing_image_neb_between_the_joined_minima_meets_the_saddle(seed):
+    """The minima an index-1 saddle found by ``target='saddle'`` joins (relaxed
+    from either side of its unstable mode), joined again by ASE's NEB with a
+    climbing image (relaxed by Maud): the highest image is the saddle, in
+    energy to 1e-9 relative."""
+    atoms = fresh_copy(saddles.make_start('all_pairs2d', 9, seed, 'up'))
+    Maud(atoms, target='saddle', logfile=None).run(fmax=1e-8, steps=300)
+    point = classify(atoms, ftol=1e-7)
+    ends = displace_along_mode(atoms, point)
+    for end in ends:
+        Maud(end, logfile=None).run(fmax=1e-8, steps=2000)
+        assert classify(end).verdict == 'minimum'
+    images = [ends[0], *(fresh_copy(ends[0]) for _ in range(5)), ends[1]]
+    neb = NEB(images, climb=True, method='improvedtangent')
+    neb.interpolate()
+    with Maud(neb, logfile=None) as opt:
+        assert opt.run(fmax=1e-4, steps=2000)
+    highest = max(image.get_potential_energy() for image in images)
+    assert highest == pytest.approx(atoms.get_potential_energy(), rel=1e-9)

@@ -797,10 +797,12 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
 
 
 def _saddle_model(atoms: Atoms | None, name: Any, offers: set[str]) -> None:
-    """ValueError unless ``target='saddle'`` can have the exact model
-    (``name`` 'auto' or 'exact', a calculator with the Hessian, at most
-    :data:`EXACT_MAX_DOFS` free degrees of freedom, one scene): the climb
-    follows the Hessian's eigenvectors."""
+    """ValueError unless ``target='saddle'`` can have the exact model: the
+    climb follows every eigenvector of the Hessian. ``name`` must be 'auto'
+    or 'exact', the calculator give the Hessian, and with 'auto' the scene
+    have at most :data:`EXACT_MAX_DOFS` free degrees of freedom (above them
+    ``model='exact'`` accepts the dense eigen-decomposition's cost, O((dim
+    N)^3) per step); a band of images has no saddle search."""
     if name not in ('auto', 'exact'):
         raise ValueError(f"target='saddle' needs model='exact' (or 'auto'), got "
                          f'model={name!r}')
@@ -809,10 +811,12 @@ def _saddle_model(atoms: Atoms | None, name: Any, offers: set[str]) -> None:
                          "the Hessian (such as MaudCalculator), for model='exact'")
     dim = 2 if getattr(atoms.calc, 'dim', 3) == 2 else 3
     dofs = int(free_dofs(atoms, dim).sum())
-    if dofs > EXACT_MAX_DOFS:
-        raise ValueError(f"target='saddle' needs model='exact', which takes at most "
-                         f'{EXACT_MAX_DOFS} free degrees of freedom; this scene has '
-                         f'{dofs}')
+    if name == 'auto' and dofs > EXACT_MAX_DOFS:
+        raise ValueError(f"target='saddle' needs model='exact', which model='auto' takes "
+                         f'up to {EXACT_MAX_DOFS} free degrees of freedom; this scene has '
+                         f"{dofs}: pass model='exact' to accept its dense eigen-"
+                         'decomposition, O((dim N)^3) per step (large scenes have no '
+                         'saddle search of their own yet)')
 
 
 #: Options beyond ``target`` and ``floor`` that a model takes.

@@ -308,6 +308,7 @@ def test_saddle_target_needs_the_exact_model():
     with pytest.raises(ValueError, match="target='saddle' needs model='exact'"):
         Maud(atoms, target='saddle', model='nodal', logfile=None)
     big = build('all_pairs', 60)
-    with pytest.raises(ValueError, match='at most 150 free degrees of freedom; this '
-                       'scene has 180'):
+    with pytest.raises(ValueError, match="up to 150 free degrees of freedom; this scene "
+                       "has 180: pass model='exact'"):
         Maud(big, target='saddle', logfile=None)
+    assert Maud(big, target='saddle', model='exact', logfile=None).model.name == 'exact'

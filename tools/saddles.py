@@ -19,8 +19,9 @@ Starts (seeded), named ``scene:size:amp``:
 From each start, to ``--fmax`` (units of ``Q a``), at most ``--steps`` steps, seeking an
 index-``--order`` point (default 1):
 
-- ``Maud-saddle``: ``Maud(target='saddle', order=order)``, eigenvector following on the
-  exact model;
+- ``Maud-saddle``: ``Maud(target='saddle', order=order, model='exact')``, eigenvector
+  following on the exact model (named, so that it runs above ``model='auto'``'s 150 free
+  degrees of freedom too);
 
 - ``Maud-exact``: ``Maud(target='stationary', model='exact')``, signed Newton on the analytic
   Hessian with its trust-region damping;
@@ -105,7 +106,7 @@ def _maud(model: str) -> Callable[[Atoms], Optimizer]:
 
 
 def _maud_saddle(atoms: Atoms) -> Optimizer:
-    return Maud(atoms, target='saddle', order=ORDER[0], logfile=None)
+    return Maud(atoms, target='saddle', order=ORDER[0], model='exact', logfile=None)
 
 
 #: The index sought (``--order``); Sella's and Maud-saddle's ``order``.

@@ -64,11 +64,11 @@ from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian
 from ase.optimize.optimize import Optimizer
 from scipy.spatial import cKDTree
-from scipy.spatial.distance import pdist
 
 from ase_maud import Maud
 from ase_maud.analysis import StationaryPoint, classify
 from ase_maud.bench.runner import CallRecorder, fresh_copy
+from ase_maud.landscape import same_point
 from ase_maud.scenes import build
 
 EXAMPLE = Path(__file__).resolve().parent.parent / 'examples' / 'saddle_and_minima.py'
@@ -197,18 +197,6 @@ def search(start: Atoms, optimiser: str, fmax: float, steps: int
            'cpu_s': cpu, 'energy': atoms.get_potential_energy(), 'index': point.index,
            'verdict': point.verdict, 'fmax': point.fmax, 'error': error}
     return atoms, row, point
-
-
-def same_point(a: Atoms, b: Atoms, energy_rtol: float = 1e-8,
-               distance_atol: float = 1e-4) -> bool:
-    """Whether ``a`` and ``b`` are the same configuration up to rigid motion and
-    relabelling: energies within ``energy_rtol`` (relative) and sorted pair distances
-    within ``distance_atol`` (length units)."""
-    ea, eb = a.get_potential_energy(), b.get_potential_energy()
-    if abs(ea - eb) > energy_rtol * max(abs(ea), abs(eb)):
-        return False
-    return bool(np.abs(np.sort(pdist(a.positions)) - np.sort(pdist(b.positions))).max()
-                <= distance_atol)
 
 
 def compare(start: str, seed: int, optimisers: list[str], fmax: float, steps: int,

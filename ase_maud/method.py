@@ -68,6 +68,15 @@ trust fraction, up to ``gamma_max``) grows by half when the quadratic model
 predicted the energy change well (their ratio within ``TRUST_GOOD`` of 1)
 and halves when it did not (beyond ``TRUST_BAD``).
 
+With the lowest eigenpairs only (the springs model of a large scene, from
+Hessian-vector products), the same holds along the followed modes, and the
+rest of the move is the minimiser's: the L-BFGS direction over ``P^-1`` of
+the forces without their components along the followed modes (and the
+secant pairs without theirs), its components along them removed; the trust
+ratio compares the energy change with that model's prediction (the
+followed modes' curvatures, and ``B d = f`` of the L-BFGS model ``B`` for
+the rest).
+
 The state of a run is a :class:`MaudState` (what a restart file holds); the
 settings are a frozen :class:`StepRule`, made by :func:`step_rule` from the
 defaults of :data:`STEP_DEFAULTS`, the model's row, and the user's keywords.
@@ -160,8 +169,10 @@ def step_rule(model: str, target: str = 'minimum', image_size: int | None = None
                 **STEP_DEFAULTS.get(model, STEP_DEFAULTS['nodal'])}
     settings.update({name: value for name, value in keywords.items()
                      if value is not None})
-    if target != 'minimum':
+    if target == 'stationary' or (target == 'saddle' and model == 'exact'):
         settings['memory'] = 0
+    if target == 'saddle' and settings['maxstep_nn'] is None:
+        settings['maxstep_nn'] = STEP_DEFAULTS['common']['maxstep_nn']
     return StepRule(image_size=image_size, **settings)
 
 
@@ -195,7 +206,8 @@ class MaudState:
     where the last step began; ``pairs``: the L-BFGS memory ``(s, y)``;
     ``model``: what the stiffness model has learnt (:meth:`StiffnessModel.state`);
     ``modes``: the modes a saddle search follows uphill, (order, N, 3), or
-    None before its first step (a restart file does not keep them: a resumed
+    None before its first step, and ``predicted`` the energy change its last
+    move's model predicted (lowest modes only) (a restart file does not keep them: a resumed
     search follows the lowest modes where it resumes).
     ``solver``, the model at ``last.x``, is not saved: after a restart it is
     computed again if a step goes back there.
@@ -209,12 +221,13 @@ class MaudState:
     model: dict[str, Any] = field(default_factory=dict)
     solver: Solver | None = None
     modes: np.ndarray | None = None
+    predicted: float | None = None
 
     def todict(self) -> dict[str, Any]:
         return {'gamma': self.gamma, 'k': self.k, 'v': self.v,
                 'last': None if self.last is None else self.last.todict(),
                 'pairs': [list(pair) for pair in self.pairs], 'model': self.model,
-                'modes': self.modes}
+                'modes': self.modes, 'predicted': self.predicted}
 
     @classmethod
     def fromdict(cls, d: dict[str, Any]) -> MaudState:
@@ -224,7 +237,8 @@ class MaudState:
                    pairs=[(np.asarray(s, float), np.asarray(y, float))
                           for s, y in d['pairs']],
                    model=dict(d['model']),
-                   modes=None if d.get('modes') is None else np.asarray(d['modes'], float))
+                   modes=None if d.get('modes') is None else np.asarray(d['modes'], float),
+                   predicted=d.get('predicted'))
 
 
 #: ``solver_at(x)``: the stiffness model's solver at positions ``x`` (the
@@ -302,13 +316,14 @@ class MaudMethod:
             return
         s, y = x - state.last.x, state.last.forces - forces
         state.model = self.model.observe(s, y, state.model)
-        if self.model.target == 'saddle':
+        if self.model.target == 'saddle':   # gamma is the trust fraction
             self._trust(state, s, y)
-            return
+            s, y = _off(s, state.modes), _off(y, state.modes)   # the minimiser's part
+        else:
+            state.gamma = min(state.gamma * self.rule.gamma_growth, self.rule.gamma_max)
         if self.rule.memory and np.vdot(s, y) > MIN_PAIR_COSINE * np.vdot(
                 s, s) ** 0.5 * np.vdot(y, y) ** 0.5:
             state.pairs = [*state.pairs, (s, y)][-self.rule.memory:]
-        state.gamma = min(state.gamma * self.rule.gamma_growth, self.rule.gamma_max)
 
     def _move(self, state: MaudState) -> np.ndarray:
         """The bounded move from ``state.last`` (with ``state.solver``)."""
@@ -334,23 +349,42 @@ class MaudMethod:
 
     def _saddle_move(self, state: MaudState) -> np.ndarray:
         """The P-RFO move of eigenvector following (module docstring), the
-        whole of it scaled to within ``gamma`` times each point's bound."""
-        values, modes = state.solver.modes()
+        whole of it scaled to within ``gamma`` times each point's bound; with
+        the lowest modes only (a large scene), minimum-mode following: the
+        followed modes as P-RFO, the rest the minimiser's L-BFGS step on the
+        forces without their components along them."""
+        solver, forces = state.solver, state.last.forces
+        if hasattr(solver, 'modes'):
+            values, modes = solver.modes()
+        else:
+            values, modes = solver.lowest(self.rule.order + 1, state.modes)
         up = self._followed(state, values, modes)
         modes = modes.copy()
         modes[up] = state.modes   # signed as followed
-        gradient = -np.einsum('kij,ij->k', modes, state.last.forces)
-        down = np.setdiff1d(np.arange(len(values)), up)
-        steps = np.zeros_like(gradient)
+        gradient = -np.einsum('kij,ij->k', modes, forces)
         limit = state.gamma * self._limits(state.last.x)
         # within CLIMB_SIDE of the trust length of a followed mode's minimum,
         # either side is uphill: climb along the mode as followed (``mode``)
         b, climb = values[up], gradient[up]
         side = (b > 0) & (np.abs(climb) < CLIMB_SIDE * b * limit.min())
         climb = np.where(side, np.maximum(np.abs(climb), np.finfo(float).eps * b), climb)
-        steps[up] = _rfo_step(b, climb, uphill=True)
-        steps[down] = _rfo_step(values[down], gradient[down], uphill=False)
-        return _bound(np.einsum('k,kij->ij', steps, modes), limit, whole=True)
+        move = np.einsum('k,kij->ij', _rfo_step(b, climb, uphill=True), state.modes)
+        if hasattr(solver, 'modes'):
+            down = np.setdiff1d(np.arange(len(values)), up)
+            move += np.einsum('k,kij->ij', _rfo_step(values[down], gradient[down],
+                                                     uphill=False), modes[down])
+            return _bound(move, limit, whole=True)
+        rest = _off(forces, state.modes)
+        descent = _off(self._direction(state, rest), state.modes)
+        along = np.einsum('kij,ij->k', state.modes, move)
+        bounded = _bound(move + descent, limit, whole=True)
+        t = np.linalg.norm(bounded) / max(np.linalg.norm(move + descent), 1e-300)
+        # the quadratic model's energy change: the followed modes' curvatures,
+        # and the L-BFGS model B (B descent = rest) for the rest
+        state.predicted = float(np.dot(gradient[up], t * along)
+                                + 0.5 * np.dot(b, (t * along)**2)
+                                - (t - 0.5 * t * t) * np.vdot(rest, descent))
+        return bounded
 
     def _followed(self, state: MaudState, values: np.ndarray,
                   modes: np.ndarray) -> np.ndarray:
@@ -406,10 +440,15 @@ class MaudMethod:
         Hessian at its start predicted (module docstring)."""
         if state.solver is None:   # resumed from a restart file
             return
-        values, modes = state.solver.modes()
         forces = state.last.forces
-        along = np.einsum('kij,ij->k', modes, s)
-        predicted = -np.vdot(forces, s) + 0.5 * np.dot(values, along**2)
+        if hasattr(state.solver, 'modes'):
+            values, modes = state.solver.modes()
+            along = np.einsum('kij,ij->k', modes, s)
+            predicted = -np.vdot(forces, s) + 0.5 * np.dot(values, along**2)
+        elif state.predicted is None:
+            return
+        else:   # the lowest modes only: what the move's model predicted
+            predicted = state.predicted
         actual = -np.vdot(forces - 0.5 * y, s)
         if abs(predicted) <= merit_tolerance(np.vdot(forces, forces) ** 0.5
                                              * np.linalg.norm(s)):
@@ -420,10 +459,12 @@ class MaudMethod:
         elif abs(ratio - 1) > TRUST_BAD:
             state.gamma *= 0.5
 
-    def _direction(self, state: MaudState) -> np.ndarray:
-        """``K^-1 f``, or its L-BFGS correction over the stored pairs; if that
-        is not downhill, ``K^-1 f`` and the memory is cleared."""
-        solve, forces = state.solver.solve, state.last.forces
+    def _direction(self, state: MaudState, forces: np.ndarray | None = None) -> np.ndarray:
+        """``K^-1 f`` (``f`` the forces at ``state.last``, or ``forces``), or
+        its L-BFGS correction over the stored pairs; if that is not downhill,
+        ``K^-1 f`` and the memory is cleared."""
+        solve = state.solver.solve
+        forces = state.last.forces if forces is None else forces
         if not state.pairs:
             return solve(forces)
         q = forces.copy()
@@ -435,7 +476,7 @@ class MaudMethod:
         z = solve(q)
         for (s, y), alpha in zip(state.pairs, reversed(alphas), strict=True):
             z += s * (alpha - np.vdot(y, z) / np.vdot(s, y))
-        if self.model.target == 'minimum' and not np.vdot(z, forces) > 0:
+        if self.model.target != 'stationary' and not np.vdot(z, forces) > 0:
             state.pairs = []
             return solve(forces)
         return z
@@ -499,6 +540,12 @@ class MaudMethod:
             first = int(np.argmax(ratio <= 1)) if (ratio <= 1).any() else len(mus) - 1
             low, high, best = mus[max(first - 1, 0)], mus[first], moves[first]
         return best
+
+
+def _off(move: np.ndarray, modes: np.ndarray) -> np.ndarray:
+    """``move`` (N, 3) without its components along the orthonormal ``modes``
+    (k, N, 3)."""
+    return move - np.einsum('k,kij->ij', np.einsum('kij,ij->k', modes, move), modes)
 
 
 def _rfo_step(values: np.ndarray, gradient: np.ndarray, uphill: bool) -> np.ndarray:

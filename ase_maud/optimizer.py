@@ -18,7 +18,8 @@ every energy and force is finite. The step is
 - ``target='minimum'`` makes every model positive definite (absolute
   eigenvalues, floored), so no step is meant uphill; ``'stationary'`` keeps the
   signs: saddles and maxima are fixed points too; ``'saddle'`` climbs along
-  ``order`` modes by eigenvector following (exact model) and, once converged,
+  ``order`` modes by eigenvector following (the exact model; minimum-mode
+  following on the springs model above its size) and, once converged,
   checks the index of the point found (:class:`WrongIndexError` if it is
   another).
 - Nothing silently wrong (docs/hard_cases.md): a bad keyword or run argument
@@ -87,7 +88,7 @@ class Maud(Optimizer):
     target : 'minimum', 'stationary', 'saddle' or None
         Move only downhill, seek any stationary point, or climb to a
         stationary point with exactly ``order`` negative curvatures
-        (eigenvector following on the exact model; docs/optimizer.md). None (default):
+        (eigenvector following; docs/optimizer.md). None (default):
         'minimum', except for a band of images (ASE's ``NEB``), whose forces
         are not the gradient of an energy: 'stationary' (said in the log).
         With a StiffnessModel given, the model's own.
@@ -427,7 +428,7 @@ class Maud(Optimizer):
 
     def gradient_converged(self, gradient: np.ndarray) -> bool:
         """ASE's test (``fmax``); for ``target='saddle'`` also the index of
-        the exact model's Hessian there (negative curvatures beyond
+        the model's Hessian there (its lowest eigenvalues: negative beyond
         :data:`ase_maud.analysis.RTOL` of the largest): a stationary point of
         another index (the minimum a search starts from) is left, not
         reported."""
@@ -436,7 +437,9 @@ class Maud(Optimizer):
         if self.target != 'saddle':
             return True
         from .analysis import RTOL
-        values = self._solver_at(self.optimizable.get_x().reshape(-1, 3)).modes()[0]
+        solver = self._solver_at(self.optimizable.get_x().reshape(-1, 3))
+        values = (solver.modes()[0] if hasattr(solver, 'modes')   # the exact model
+                  else solver.lowest(self.rule.order + 1, self.state.modes)[0])
         negative = int(np.sum(values < -RTOL * np.abs(values).max(initial=0.0)))
         return negative == self.rule.order
 

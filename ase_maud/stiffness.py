@@ -34,9 +34,10 @@ replaced by their absolute values and floored at ``floor`` times the largest
 (per block for the nodal and global models, over the whole matrix for the
 exact one), so no direction is uphill. ``target='stationary'`` keeps the signs
 (saddles and maxima are then fixed points of the step). ``target='saddle'``
-(exact model only) gives the Hessian's eigenpairs on the internal moves
-(:func:`internal_basis`: rigid-body motions projected out), signed and
-unfloored, for the step rule's eigenvector following. Degrees of freedom
+gives the Hessian's eigenpairs on the internal moves (rigid-body motions
+projected out), signed and unfloored, for the step rule's eigenvector
+following: all of them (the exact model, :func:`internal_basis`), or the
+lowest few from Hessian-vector products (the springs model). Degrees of freedom
 held by :class:`~ase.constraints.FixAtoms` and
 :class:`~ase.constraints.FixCartesian` are removed from ``K`` and never move;
 other constraints are left to ASE (the optimizer applies them to every move).
@@ -50,6 +51,7 @@ step rule's defaults for each model are in :data:`ase_maud.method.STEP_DEFAULTS`
 
 from __future__ import annotations
 
+import warnings
 from abc import ABC, abstractmethod
 from typing import Any
 
@@ -689,6 +691,10 @@ class SpringsModel(StiffnessModel):
         kept = self._kept
         if kept is None or kept[0] is not potential or not np.array_equal(kept[1], free):
             self._kept = potential, free, self._solver(atoms, potential, free)
+        if self.target == 'saddle':
+            frozen = atoms.copy()   # the positions of this step, the same calculator
+            frozen.calc = atoms.calc
+            return _LowestModes(self._kept[2], frozen, free)
         return self._kept[2]
 
     def _solver(self, atoms: Atoms, potential: Any, free: np.ndarray) -> Solver:
@@ -717,6 +723,63 @@ def _floating(springs: np.ndarray, held: np.ndarray) -> np.ndarray:
     anchored = np.zeros(labels.max(initial=-1) + 1, dtype=bool)
     anchored[labels[held]] = True
     return ~anchored[labels]
+
+
+#: Relative residual (of the largest diagonal entry of ``P``) to which the
+#: lowest modes of a large saddle search are computed (LOBPCG).
+MODES_RTOL = 1e-4
+#: ... in at most this many LOBPCG iterations per step.
+MODES_MAXITER = 50
+
+
+class _LowestModes(Solver):
+    """``P^-1`` of the springs model and the Hessian's lowest eigenpairs on
+    the internal moves (:meth:`lowest`), by LOBPCG on Hessian-vector
+    products (:func:`ase_maud.analysis.hessian_operator`, rigid-body motions
+    projected out) preconditioned by ``P^-1``: what a large saddle search
+    follows (:mod:`ase_maud.method`)."""
+
+    def __init__(self, inner: Solver, atoms: Atoms, free: np.ndarray):
+        self.inner, self.atoms, self.free = inner, atoms, free
+
+    def solve(self, forces):
+        return self.inner.solve(forces)
+
+    def lowest(self, count: int, guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The ``count`` lowest eigenvalues (ascending) and their modes
+        (count, N, 3), started from the moves ``guess`` (k, N, 3) if given."""
+        from scipy.sparse.linalg import lobpcg
+
+        from .analysis import hessian_operator
+        atoms, free = self.atoms, self.free
+        dim, flat = free.shape[1], free.ravel()
+        rigid = rigid_body_modes(atoms.positions, free, dim)
+        operator = hessian_operator(atoms, free, rigid)
+
+        def spread(v):   # free components (n, k) -> moves (k, N, 3)
+            out = np.zeros((v.shape[1], len(free), 3))
+            out[:, :, :dim][:, free] = v.T
+            return out
+
+        def precondition(v):
+            v = v.reshape(len(v), -1)
+            moves = [self.solve(move) for move in spread(v)]
+            return np.column_stack([m[:, :dim][free] for m in moves])
+
+        start = np.random.default_rng(0).standard_normal((int(flat.sum()), count))
+        if guess is not None:
+            start[:, :len(guess)] = guess[:, :, :dim][:, free].T
+        diagonal = precondition(np.eye(len(start), 1)).max()   # a scale of 1 / P
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', UserWarning)   # LOBPCG's "not reaching tol"
+            values, vectors = lobpcg(
+                operator, start, M=LinearOperator(operator.shape, matvec=precondition,
+                                                  matmat=precondition, dtype=float),
+                Y=rigid if rigid.size else None, tol=MODES_RTOL / abs(diagonal),
+                maxiter=MODES_MAXITER, largest=False)
+        order = np.argsort(values)
+        vectors = vectors[:, order] / np.linalg.norm(vectors[:, order], axis=0)
+        return values[order], spread(vectors)
 
 
 class _CoordinateSolver(Solver):
@@ -750,9 +813,9 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
                  **options: Any) -> StiffnessModel:
     """The stiffness model ``name`` for ``atoms``' calculator.
 
-    ``target='saddle'`` takes ``exact`` (ValueError if ``name`` is another
-    model or the scene is too large for it). ``'auto'``: ``exact`` while the
-    free degrees of freedom are at most
+    ``target='saddle'`` takes ``exact``, or ``springs`` above
+    :data:`EXACT_MAX_DOFS` (ValueError if ``name`` is another model).
+    ``'auto'``: ``exact`` while the free degrees of freedom are at most
     :data:`EXACT_MAX_DOFS`, the calculator has a ``hessian`` and every
     constraint is one of :data:`PROJECTIONS` (a Hookean tether, say, adds
     stiffness the Hessian does not hold); else ``springs`` if it has a
@@ -766,8 +829,7 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
     calc = getattr(atoms, 'calc', None)
     offers = set(getattr(calc, 'implemented_properties', ()))
     if target == 'saddle':
-        _saddle_model(atoms, name, offers)
-        name = 'exact'
+        name = _saddle_model(atoms, name, offers)
     if name == 'auto':
         dim = 2 if getattr(calc, 'dim', 3) == 2 else 3
         if ('hessian' in offers and free_dofs(atoms, dim).sum() <= EXACT_MAX_DOFS
@@ -796,27 +858,24 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
     return cls(target=target, **{k: v for k, v in options.items() if k in taken})
 
 
-def _saddle_model(atoms: Atoms | None, name: Any, offers: set[str]) -> None:
-    """ValueError unless ``target='saddle'`` can have the exact model: the
-    climb follows every eigenvector of the Hessian. ``name`` must be 'auto'
-    or 'exact', the calculator give the Hessian, and with 'auto' the scene
-    have at most :data:`EXACT_MAX_DOFS` free degrees of freedom (above them
-    ``model='exact'`` accepts the dense eigen-decomposition's cost, O((dim
-    N)^3) per step); a band of images has no saddle search."""
-    if name not in ('auto', 'exact'):
-        raise ValueError(f"target='saddle' needs model='exact' (or 'auto'), got "
-                         f'model={name!r}')
-    if atoms is None or 'hessian' not in offers:
-        raise ValueError("target='saddle' needs one scene whose calculator gives "
-                         "the Hessian (such as MaudCalculator), for model='exact'")
-    dim = 2 if getattr(atoms.calc, 'dim', 3) == 2 else 3
-    dofs = int(free_dofs(atoms, dim).sum())
-    if name == 'auto' and dofs > EXACT_MAX_DOFS:
-        raise ValueError(f"target='saddle' needs model='exact', which model='auto' takes "
-                         f'up to {EXACT_MAX_DOFS} free degrees of freedom; this scene has '
-                         f"{dofs}: pass model='exact' to accept its dense eigen-"
-                         'decomposition, O((dim N)^3) per step (large scenes have no '
-                         'saddle search of their own yet)')
+def _saddle_model(atoms: Atoms | None, name: Any, offers: set[str]) -> str:
+    """The model of ``target='saddle'``: ``exact`` (all the Hessian's
+    eigenpairs) up to :data:`EXACT_MAX_DOFS` free degrees of freedom,
+    ``springs`` (the lowest eigenpairs from Hessian-vector products) above,
+    or ``name`` if it is one of these; a ValueError for another model, a
+    calculator that has neither the Hessian nor a potential, or a band of
+    images."""
+    if name not in ('auto', 'exact', 'springs'):
+        raise ValueError(f"target='saddle' needs model='exact' or 'springs' (or 'auto'), "
+                         f'got model={name!r}')
+    calc = getattr(atoms, 'calc', None)
+    if atoms is None or not ('hessian' in offers and hasattr(calc, 'potential')):
+        raise ValueError("target='saddle' needs one scene whose calculator gives the "
+                         'Hessian and its products (such as MaudCalculator)')
+    if name != 'auto':
+        return name
+    dim = 2 if getattr(calc, 'dim', 3) == 2 else 3
+    return 'exact' if free_dofs(atoms, dim).sum() <= EXACT_MAX_DOFS else 'springs'
 
 
 #: Options beyond ``target`` and ``floor`` that a model takes.

@@ -235,3 +235,18 @@ def test_climbing_image_neb_between_the_joined_minima_meets_the_saddle(seed):
         assert opt.run(fmax=1e-4, steps=2000)
     highest = max(image.get_potential_energy() for image in images)
     assert highest == pytest.approx(atoms.get_potential_energy(), rel=1e-9)
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize('seed', range(3))
+def test_large_scene_saddle_search_follows_the_lowest_mode(seed):
+    """Above the exact model's size (here 160 free DOFs) ``target='saddle'``
+    takes the springs model: the lowest modes from Hessian-vector products,
+    the rest of the step as the minimiser's; it reaches a point of index 1,
+    verified from the dense analytic Hessian."""
+    start = saddles.make_start('all_pairs2d', 80, seed, 'up')
+    atoms = fresh_copy(start)
+    opt = Maud(atoms, target='saddle', logfile=None)
+    assert opt.model.name == 'springs'
+    assert opt.run(fmax=FMAX, steps=1000)
+    assert _verified_index(atoms) == (1, True)

@@ -19,9 +19,9 @@ Starts (seeded), named ``scene:size:amp``:
 From each start, to ``--fmax`` (units of ``Q a``), at most ``--steps`` steps, seeking an
 index-``--order`` point (default 1):
 
-- ``Maud-saddle``: ``Maud(target='saddle', order=order, model='exact')``, eigenvector
-  following on the exact model (named, so that it runs above ``model='auto'``'s 150 free
-  degrees of freedom too);
+- ``Maud-saddle``: ``Maud(target='saddle', order=order)``, eigenvector following on the
+  exact model up to 150 free degrees of freedom, minimum-mode following on the springs
+  model above; ``Maud-saddle-exact``: the same with ``model='exact'`` at any size;
 
 - ``Maud-exact``: ``Maud(target='stationary', model='exact')``, signed Newton on the analytic
   Hessian with its trust-region damping;
@@ -105,8 +105,9 @@ def _maud(model: str) -> Callable[[Atoms], Optimizer]:
     return lambda atoms: Maud(atoms, target='stationary', model=model, logfile=None)
 
 
-def _maud_saddle(atoms: Atoms) -> Optimizer:
-    return Maud(atoms, target='saddle', order=ORDER[0], model='exact', logfile=None)
+def _maud_saddle(model: str) -> Callable[[Atoms], Optimizer]:
+    return lambda atoms: Maud(atoms, target='saddle', order=ORDER[0], model=model,
+                              logfile=None)
 
 
 #: The index sought (``--order``); Sella's and Maud-saddle's ``order``.
@@ -114,7 +115,8 @@ ORDER = [1]
 
 #: The compared saddle searches, by name.
 OPTIMIZERS: dict[str, Callable[[Atoms], Optimizer]] = {
-    'Maud-saddle': _maud_saddle, 'Maud-exact': _maud('exact'),
+    'Maud-saddle': _maud_saddle('auto'), 'Maud-saddle-exact': _maud_saddle('exact'),
+    'Maud-exact': _maud('exact'),
     'Maud-nodal': _maud('nodal'), 'Sella': _sella(hessian=False),
     'Sella-H': _sella(hessian=True)}
 

@@ -317,6 +317,8 @@ class MaudMethod:
         s, y = x - state.last.x, state.last.forces - forces
         state.model = self.model.observe(s, y, state.model)
         if self.model.target == 'saddle':   # gamma is the trust fraction
+            if state.modes is None:   # resumed from a restart file: modes not kept
+                return
             self._trust(state, s, y)
             s, y = _off(s, state.modes), _off(y, state.modes)   # the minimiser's part
         else:

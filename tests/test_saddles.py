@@ -250,3 +250,21 @@ def test_large_scene_saddle_search_follows_the_lowest_mode(seed):
     assert opt.model.name == 'springs'
     assert opt.run(fmax=FMAX, steps=1000)
     assert _verified_index(atoms) == (1, True)
+
+
+@pytest.mark.parametrize('seed', range(2))
+def test_saddle_search_resumes_from_its_restart_file(tmp_path, seed):
+    """A search stopped after a few steps and resumed from its restart file
+    (which does not keep the followed modes) still ends on a verified
+    index-1 saddle."""
+    start = saddles.make_start('all_pairs2d', 9, seed, 'up')
+    atoms = fresh_copy(start)
+    restart, trajectory = tmp_path / 'maud.json', tmp_path / 'maud.traj'
+    with Maud(atoms, target='saddle', restart=restart, trajectory=trajectory,
+              logfile=None) as opt:
+        assert not opt.run(fmax=FMAX, steps=3)
+    again = fresh_copy(start)
+    with Maud.resume(again, restart=restart, trajectory=trajectory, target='saddle',
+                     logfile=None) as opt:
+        assert opt.run(fmax=FMAX, steps=300)
+    assert _verified_index(again) == (1, True)

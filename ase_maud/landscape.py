@@ -59,6 +59,16 @@ class Landscape:
     joins: list[tuple[int, int]] = field(default_factory=list)
     failed: int = 0
 
+    def todict(self) -> dict:
+        """The graph as plain data (JSON): energies and positions of the
+        minima and saddles, ``joins``, ``barriers`` and ``failed``."""
+        def points(atoms_list):
+            return [{'energy': a.get_potential_energy(), 'positions': a.positions.tolist()}
+                    for a in atoms_list]
+        return {'minima': points(self.minima), 'saddles': points(self.saddles),
+                'joins': [list(pair) for pair in self.joins],
+                'barriers': [list(pair) for pair in self.barriers()], 'failed': self.failed}
+
     def barriers(self) -> list[tuple[float, float]]:
         """For each saddle, its energy above each of the two minima it joins
         (energy units), in the order of :attr:`joins`."""

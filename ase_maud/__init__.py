@@ -67,13 +67,15 @@ from .monitor import (  # noqa: E402
     MaudError,
     NoEquilibriumError,
     StagnationError,
+    WrongIndexError,
 )
 from .optimizer import Maud  # noqa: E402
 from .potential import MaudPotential  # noqa: E402
 from .precon import MaudPrecon  # noqa: E402
 
 __all__ = ['MaudCalculator', 'Maud', 'MaudPotential', 'MaudPrecon', 'MaudError',
-           'DivergenceError', 'NoEquilibriumError', 'StagnationError', 'FileInUseError',
+           'DivergenceError', 'NoEquilibriumError', 'StagnationError', 'WrongIndexError',
+           'FileInUseError',
            'kernels_cached',
            'numba_cache_dir']
 __version__ = '0.1.0'

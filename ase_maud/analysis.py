@@ -51,7 +51,7 @@ from scipy.sparse.linalg import LinearOperator, eigsh, lobpcg, splu
 from scipy.spatial import cKDTree
 
 from . import physics
-from .stiffness import free_dofs
+from .stiffness import free_dofs, rigid_body_modes
 
 #: Eigenvalues with ``|lambda| <= RTOL * max|lambda|`` count as zero.
 RTOL = 1e-8
@@ -115,32 +115,6 @@ def free_mask(atoms: Atoms, dim: int) -> np.ndarray:
             raise ValueError(f'cannot classify with the constraint '
                              f'{constraint!r}: only FixAtoms and FixCartesian')
     return free_dofs(atoms, dim)
-
-
-def rigid_body_modes(positions: np.ndarray, free: np.ndarray, dim: int,
-                     rcond: float = 1e-8) -> np.ndarray:
-    """Orthonormal rigid-body modes on the free degrees of freedom.
-
-    The translations and rotations about the centroid that leave every fixed
-    degree of freedom at rest, restricted to the free ones: an array of
-    shape (free.sum(), m), m <= 6 (3D) or 3 (2D). A rotation that moves the
-    points less than ``rcond`` times the most moving one does not count: a
-    collinear scene (to that precision) loses the rotation about its line.
-    """
-    x = positions[:, :dim] - positions[:, :dim].mean(axis=0)
-    if dim == 3:
-        rotations = np.array([np.cross(e, x).ravel() for e in np.eye(3)])
-    else:
-        rotations = np.column_stack([-x[:, 1], x[:, 0]]).reshape(1, -1)
-    sizes = np.linalg.norm(rotations, axis=1)
-    rotations = rotations[sizes > rcond * sizes.max()]
-    rotations /= max(sizes.max(), np.finfo(float).tiny)
-    translations = np.kron(np.ones(len(x)), np.eye(dim)) / np.sqrt(len(x))
-    modes = np.vstack([translations, rotations]).T
-    flat = free.ravel()
-    if (~flat).any():
-        modes = modes @ scipy.linalg.null_space(modes[~flat], rcond=rcond)
-    return scipy.linalg.orth(modes[flat], rcond=rcond)
 
 
 def hessian_operator(atoms: Atoms, free: np.ndarray | None = None,

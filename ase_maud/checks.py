@@ -85,9 +85,11 @@ RULES: dict[str, Rule] = {
     'fmax': Rule('a positive finite number (force units)', lambda v: v > 0),
     'steps': Rule('a whole number >= 0', lambda v: v >= 0, whole=True),
     # the stiffness models
-    'target': _choice('minimum', 'stationary', none=True,
+    'target': _choice('minimum', 'stationary', 'saddle', none=True,
                       words=", or None (the default: 'minimum', 'stationary' "
                       'for a band of images)'),
+    'order': Rule('a whole number >= 0 (negative curvatures of the saddle sought; '
+                  '0: a minimum)', lambda v: v >= 0, whole=True),
     'method': _choice('tensor', 'scalar'),
     'floor': Rule("a number in (0, 1), or None (the model's)",
                   lambda v: 0 < v < 1, none=True),

@@ -8,6 +8,9 @@
   the relaxation animated (GIF) (:mod:`ase_maud.pictures`).
 - ``ase-maud classify FILE``: minimum, saddle of index k or not stationary,
   with the lowest Hessian eigenvalues (:mod:`ase_maud.analysis`).
+- ``ase-maud saddles FILE``: the saddles around the net's minimum and the
+  minima they join (:mod:`ase_maud.landscape`): printed, a disconnectivity
+  graph and its JSON.
 - ``ase-maud bench``: every chosen optimiser from the same starts, force
   calls and wall time against the error; CSV, markdown and PNG in ``--out``.
 - ``ase-maud backends``: time per call against accuracy of the registered
@@ -223,6 +226,40 @@ def classify(args: argparse.Namespace) -> int:
     return 0 if point.stationary else 1
 
 
+def saddles(args: argparse.Namespace) -> int:
+    """``ase-maud saddles``: the net relaxed to a minimum, its landscape
+    (:func:`ase_maud.landscape.landscape`) printed, drawn (--out) and written
+    as JSON beside the picture; exit status 0 (1 if a climb or descent
+    failed)."""
+    import json
+
+    from .io import read_net
+    from .landscape import landscape
+    from .optimizer import Maud
+    from .pictures import save_disconnectivity
+
+    atoms = read_net(args.file, index=args.frame, **_net_options(args))
+    Maud(atoms, logfile=None).run(fmax=args.fmax, steps=args.steps)
+    found = landscape(atoms, modes=args.modes, fmax=args.fmax, steps=args.steps)
+    energies = [m.get_potential_energy() for m in found.minima]
+    barriers = [s.get_potential_energy() for s in found.saddles]
+    for s, ((i, j), (up_i, up_j)) in enumerate(zip(found.joins, found.barriers(),
+                                                     strict=True)):
+        print(f'saddle {s}: energy {barriers[s]:.10g}, joins minimum {i} '
+              f'(barrier {up_i:.6g}) and minimum {j} (barrier {up_j:.6g})')
+    print(f'{len(energies)} minima (lowest {min(energies):.10g}), {len(barriers)} saddles, '
+          f'{found.failed} failed climbs or descents; {args.out} and '
+          f'{_graph_json(args)}')
+    save_disconnectivity(energies, barriers, found.joins, args.out)
+    Path(_graph_json(args)).write_text(json.dumps(found.todict()))
+    return 1 if found.failed else 0
+
+
+def _graph_json(args: argparse.Namespace) -> str:
+    """The JSON of ``ase-maud saddles``: --out with .json."""
+    return str(Path(args.out).with_suffix('.json'))
+
+
 def bench(args: argparse.Namespace) -> int:
     """``ase-maud bench``: exit status 0, or 130 if interrupted."""
     from .bench.suite import benchmark
@@ -276,6 +313,9 @@ def check_outputs(args: argparse.Namespace) -> None:
             raise ValueError(f'--output {str(path)!r}: ' + (
                 'an animation (--gif) is written as .gif' if args.gif else
                 f'a picture is written as one of .{", .".join(known)}'))
+    elif args.command == 'saddles':
+        check_writable('--out', args.out)
+        check_writable('--out', _graph_json(args))
     elif args.command in ('bench', 'backends'):
         check_writable('--out', args.out, directory=True)
 
@@ -468,6 +508,31 @@ def build_parser() -> argparse.ArgumentParser:
     _add_net_options(p)
     _add_threads(p, None, 'leave the environment alone')
     p.set_defaults(func=classify)
+
+    p = _command(
+        commands, 'saddles', 'the saddles around a minimum and the minima they join',
+        'Relax the net of FILE to a minimum (Maud, to --fmax), then climb from it along '
+        'each of its --modes lowest Hessian modes, both ways, to index-1 saddles '
+        "(Maud(target='saddle')), relax each saddle's two sides to the minima it joins, "
+        'and keep the distinct minima and saddles (ase_maud.landscape). Prints each '
+        'saddle with its barriers, draws the disconnectivity graph (--out) and writes '
+        'the graph as JSON beside it (--out with .json). Exit status 0, or 1 if a '
+        'climb or descent failed.',
+        ['ase-maud saddles cluster.traj --modes 3 --out graph.png',
+         'ase-maud saddles points.xyz --edges edges.txt --dim 2'])
+    _add_file(p)
+    p.add_argument('--modes', type=_ruled('count', int), default=2,
+                   help='lowest modes climbed, each both ways (default: %(default)s)')
+    p.add_argument('--fmax', type=_ruled('fmax'), default=1e-6,
+                   help='fmax of every relaxation and climb (default: %(default)s)')
+    p.add_argument('--steps', type=_ruled('steps', int), default=1000,
+                   help='step budget of each (default: %(default)s)')
+    p.add_argument('--out', default='graph.png',
+                   help='the disconnectivity graph (default: %(default)s); its JSON '
+                   'beside it, .json')
+    _add_net_options(p)
+    _add_threads(p, None, 'leave the environment alone')
+    p.set_defaults(func=saddles)
 
     p = _command(
         commands, 'bench', 'force calls and wall time against error, per optimiser',

@@ -48,6 +48,35 @@ stiffness solver ``K^-1`` (:mod:`ase_maud.stiffness`)::
   size (the largest distance from the centroid), a bound that needs no
   neighbour search.
 
+``target='saddle'`` (the exact model, whose solver gives the Hessian's
+eigenpairs on the internal moves) takes the partitioned rational-function
+step of eigenvector following instead (Baker's P-RFO): in the eigenbasis,
+uphill along the ``order`` followed modes and downhill along the rest,
+
+    s_i = -g_i / (b_i - lambda_up)    (followed: lambda_up the largest
+                                       eigenvalue of [[diag b, g], [g^T, 0]])
+    s_i = -g_i / (b_i - lambda_down)  (the rest: its smallest)
+
+with ``b_i`` the eigenvalues and ``g_i`` the gradient's components. The
+followed modes are those of the start (the lowest ``order``, or the one
+``mode`` names or points along, with the next lowest), then at each step
+the eigenvectors that overlap most with the last ones: the climb follows
+one mode as it softens and turns negative, rather than switching to
+whichever is lowest. No step is taken back; the whole move is scaled so
+that no point moves further than ``gamma`` times its bound, and gamma (a
+trust fraction, up to ``gamma_max``) grows by half when the quadratic model
+predicted the energy change well (their ratio within ``TRUST_GOOD`` of 1)
+and halves when it did not (beyond ``TRUST_BAD``).
+
+With the lowest eigenpairs only (the springs model of a large scene, from
+Hessian-vector products), the same holds along the followed modes, and the
+rest of the move is the minimiser's: the L-BFGS direction over ``P^-1`` of
+the forces without their components along the followed modes (and the
+secant pairs without theirs), its components along them removed; the trust
+ratio compares the energy change with that model's prediction (the
+followed modes' curvatures, and ``B d = f`` of the L-BFGS model ``B`` for
+the rest).
+
 The state of a run is a :class:`MaudState` (what a restart file holds); the
 settings are a frozen :class:`StepRule`, made by :func:`step_rule` from the
 defaults of :data:`STEP_DEFAULTS`, the model's row, and the user's keywords.
@@ -86,6 +115,14 @@ STEP_DEFAULTS: dict[str, dict[str, Any]] = {
                 'interpolate': True},
 }
 
+#: How far from 1 the ratio of the energy change to its prediction may be
+#: for the saddle step's trust fraction to grow, and beyond which it halves.
+TRUST_GOOD, TRUST_BAD = 0.25, 0.75
+
+#: A saddle search at less than this fraction of its trust length from the
+#: minimum along a followed mode climbs that mode the way it is followed.
+CLIMB_SIDE = 1e-3
+
 #: Shifts per grid of the trust-region search (:meth:`MaudMethod._trust_region`).
 TRUST_GRID = 24
 
@@ -118,20 +155,24 @@ class StepRule:
     #: the nearest other point is sought within the same image only (the same
     #: atom in the next image is not a neighbour). None: one scene.
     image_size: int | None = None
+    #: ``target='saddle'``: the negative curvatures sought (modes followed uphill).
+    order: int = 0
 
 
 def step_rule(model: str, target: str = 'minimum', image_size: int | None = None,
               **keywords: Any) -> StepRule:
     """The step rule for a model named ``model``: :data:`STEP_DEFAULTS`'
     common row, then the model's, then the ``keywords`` that are not None
-    (the user's; already checked). For ``target='stationary'`` the memory is
-    0 (L-BFGS assumes a positive-definite model)."""
+    (the user's; already checked). For ``target='stationary'`` and
+    ``'saddle'`` the memory is 0 (L-BFGS assumes a positive-definite model)."""
     settings = {**STEP_DEFAULTS['common'],
                 **STEP_DEFAULTS.get(model, STEP_DEFAULTS['nodal'])}
     settings.update({name: value for name, value in keywords.items()
                      if value is not None})
-    if target == 'stationary':
+    if target == 'stationary' or (target == 'saddle' and model == 'exact'):
         settings['memory'] = 0
+    if target == 'saddle' and settings['maxstep_nn'] is None:
+        settings['maxstep_nn'] = STEP_DEFAULTS['common']['maxstep_nn']
     return StepRule(image_size=image_size, **settings)
 
 
@@ -163,7 +204,11 @@ class MaudState:
     ``gamma``: the step factor now; ``k``: steps since the last momentum
     restart; ``v``: the last move (after constraints), or None; ``last``:
     where the last step began; ``pairs``: the L-BFGS memory ``(s, y)``;
-    ``model``: what the stiffness model has learnt (:meth:`StiffnessModel.state`).
+    ``model``: what the stiffness model has learnt (:meth:`StiffnessModel.state`);
+    ``modes``: the modes a saddle search follows uphill, (order, N, 3), or
+    None before its first step, and ``predicted`` the energy change its last
+    move's model predicted (lowest modes only) (a restart file does not keep them: a resumed
+    search follows the lowest modes where it resumes).
     ``solver``, the model at ``last.x``, is not saved: after a restart it is
     computed again if a step goes back there.
     """
@@ -175,11 +220,14 @@ class MaudState:
     pairs: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
     model: dict[str, Any] = field(default_factory=dict)
     solver: Solver | None = None
+    modes: np.ndarray | None = None
+    predicted: float | None = None
 
     def todict(self) -> dict[str, Any]:
         return {'gamma': self.gamma, 'k': self.k, 'v': self.v,
                 'last': None if self.last is None else self.last.todict(),
-                'pairs': [list(pair) for pair in self.pairs], 'model': self.model}
+                'pairs': [list(pair) for pair in self.pairs], 'model': self.model,
+                'modes': self.modes, 'predicted': self.predicted}
 
     @classmethod
     def fromdict(cls, d: dict[str, Any]) -> MaudState:
@@ -188,7 +236,9 @@ class MaudState:
                    last=None if d['last'] is None else Point.fromdict(d['last']),
                    pairs=[(np.asarray(s, float), np.asarray(y, float))
                           for s, y in d['pairs']],
-                   model=dict(d['model']))
+                   model=dict(d['model']),
+                   modes=None if d.get('modes') is None else np.asarray(d['modes'], float),
+                   predicted=d.get('predicted'))
 
 
 #: ``solver_at(x)``: the stiffness model's solver at positions ``x`` (the
@@ -209,6 +259,10 @@ class MaudMethod:
     model: StiffnessModel
     rule: StepRule
     nearest: NearestDistances
+    #: Which way a saddle search starts to climb: an index of the Hessian's
+    #: modes at the start (ascending), a move (N, 3) (the mode that overlaps
+    #: it most), or None (the lowest ``order`` modes).
+    mode: int | np.ndarray | None = None
 
     def start(self) -> MaudState:
         """The state before the first step."""
@@ -238,7 +292,7 @@ class MaudMethod:
                forces: np.ndarray, noise: float) -> bool:
         """Whether the step from ``state.last`` to ``x`` raised the merit."""
         last = state.last
-        if last is None:
+        if last is None or self.model.target == 'saddle':
             return False
         change = merit - last.merit
         tol = merit_tolerance(last.merit, max(noise, last.noise))
@@ -262,14 +316,22 @@ class MaudMethod:
             return
         s, y = x - state.last.x, state.last.forces - forces
         state.model = self.model.observe(s, y, state.model)
+        if self.model.target == 'saddle':   # gamma is the trust fraction
+            if state.modes is None:   # resumed from a restart file: modes not kept
+                return
+            self._trust(state, s, y)
+            s, y = _off(s, state.modes), _off(y, state.modes)   # the minimiser's part
+        else:
+            state.gamma = min(state.gamma * self.rule.gamma_growth, self.rule.gamma_max)
         if self.rule.memory and np.vdot(s, y) > MIN_PAIR_COSINE * np.vdot(
                 s, s) ** 0.5 * np.vdot(y, y) ** 0.5:
             state.pairs = [*state.pairs, (s, y)][-self.rule.memory:]
-        state.gamma = min(state.gamma * self.rule.gamma_growth, self.rule.gamma_max)
 
     def _move(self, state: MaudState) -> np.ndarray:
         """The bounded move from ``state.last`` (with ``state.solver``)."""
         here, rule = state.last, self.rule
+        if self.model.target == 'saddle':
+            return self._saddle_move(state)
         direction = self._direction(state)
         limit = self._limits(here.x)
         if rule.trust_region and hasattr(state.solver, 'dot'):
@@ -287,10 +349,124 @@ class MaudMethod:
         state.k += 1
         return _bound(direction, limit, whole=rule.bound == 'whole')
 
-    def _direction(self, state: MaudState) -> np.ndarray:
-        """``K^-1 f``, or its L-BFGS correction over the stored pairs; if that
-        is not downhill, ``K^-1 f`` and the memory is cleared."""
-        solve, forces = state.solver.solve, state.last.forces
+    def _saddle_move(self, state: MaudState) -> np.ndarray:
+        """The P-RFO move of eigenvector following (module docstring), the
+        whole of it scaled to within ``gamma`` times each point's bound; with
+        the lowest modes only (a large scene), minimum-mode following: the
+        followed modes as P-RFO, the rest the minimiser's L-BFGS step on the
+        forces without their components along them."""
+        solver, forces = state.solver, state.last.forces
+        if hasattr(solver, 'modes'):
+            values, modes = solver.modes()
+        else:
+            values, modes = solver.lowest(self.rule.order + 1, state.modes)
+        up = self._followed(state, values, modes)
+        modes = modes.copy()
+        modes[up] = state.modes   # signed as followed
+        gradient = -np.einsum('kij,ij->k', modes, forces)
+        limit = state.gamma * self._limits(state.last.x)
+        # within CLIMB_SIDE of the trust length of a followed mode's minimum,
+        # either side is uphill: climb along the mode as followed (``mode``)
+        b, climb = values[up], gradient[up]
+        side = (b > 0) & (np.abs(climb) < CLIMB_SIDE * b * limit.min())
+        climb = np.where(side, np.maximum(np.abs(climb), np.finfo(float).eps * b), climb)
+        move = np.einsum('k,kij->ij', _rfo_step(b, climb, uphill=True), state.modes)
+        if hasattr(solver, 'modes'):
+            down = np.setdiff1d(np.arange(len(values)), up)
+            move += np.einsum('k,kij->ij', _rfo_step(values[down], gradient[down],
+                                                     uphill=False), modes[down])
+            return _bound(move, limit, whole=True)
+        rest = _off(forces, state.modes)
+        descent = _off(self._direction(state, rest), state.modes)
+        along = np.einsum('kij,ij->k', state.modes, move)
+        bounded = _bound(move + descent, limit, whole=True)
+        t = np.linalg.norm(bounded) / max(np.linalg.norm(move + descent), 1e-300)
+        # the quadratic model's energy change: the followed modes' curvatures,
+        # and the L-BFGS model B (B descent = rest) for the rest
+        state.predicted = float(np.dot(gradient[up], t * along)
+                                + 0.5 * np.dot(b, (t * along)**2)
+                                - (t - 0.5 * t * t) * np.vdot(rest, descent))
+        return bounded
+
+    def _followed(self, state: MaudState, values: np.ndarray,
+                  modes: np.ndarray) -> np.ndarray:
+        """The indices of the ``order`` modes followed uphill: those that
+        overlap most with the modes followed so far (the start's, see
+        :attr:`mode`); ``state.modes`` becomes them, signs kept."""
+        order = self.rule.order
+        if order > len(values):
+            raise ValueError(f'order={order} exceeds the {len(values)} internal '
+                             'modes of the scene (free moves less rigid-body ones)')
+        reference = state.modes if state.modes is not None else self._start(modes)
+        overlap = np.abs(np.einsum('kij,mij->km', reference, modes))
+        picked = np.zeros(len(reference), dtype=int)
+        taken = np.zeros(len(modes), dtype=bool)
+        for row in np.argsort(-overlap.max(axis=1, initial=0.0)):
+            picked[row] = int(np.argmax(np.where(taken, -1.0, overlap[row])))
+            taken[picked[row]] = True
+        for row in np.argsort(-values[picked]):   # no negative mode left downhill
+            lower = np.flatnonzero(~taken & (values < min(values[picked[row]], 0.0)))
+            if lower.size:
+                taken[picked[row]], taken[lower[0]] = False, True
+                picked[row] = lower[0]
+        signs = np.sign(np.einsum('kij,kij->k', reference, modes[picked]))
+        state.modes = modes[picked] * np.where(signs == 0, 1.0, signs)[:, None, None]
+        return picked
+
+    def _start(self, modes: np.ndarray) -> np.ndarray:
+        """The modes a saddle search starts to follow (see :attr:`mode`)."""
+        order, mode = self.rule.order, self.mode
+        if mode is None or order == 0:
+            return modes[:order]
+        if isinstance(mode, (int, np.integer)):
+            if not 0 <= mode < len(modes):
+                raise ValueError(f'mode={mode} is not one of the {len(modes)} internal '
+                                 'modes of the scene (0 is the lowest)')
+            first = int(mode)
+        else:
+            overlap = np.abs(np.einsum('ij,mij->m', mode, modes))
+            if not overlap.max(initial=0.0) > 0:
+                raise ValueError('mode: the move given has no internal component '
+                                 '(it is held by the constraints, or rigid)')
+            first = int(np.argmax(overlap))
+            sign = np.sign(np.vdot(mode, modes[first])) or 1.0
+            modes = modes.copy()
+            modes[first] *= sign
+        rest = [m for m in range(len(modes)) if m != first][:order - 1]
+        return modes[[first, *rest]]
+
+    def _trust(self, state: MaudState, s: np.ndarray, y: np.ndarray) -> None:
+        """Grow or cut the saddle step's trust fraction ``gamma`` by the ratio
+        of the energy change over the step ``s`` (the trapezoid rule, from
+        the forces at both ends: ``y`` is their drop) to the change the
+        Hessian at its start predicted (module docstring)."""
+        if state.solver is None:   # resumed from a restart file
+            return
+        forces = state.last.forces
+        if hasattr(state.solver, 'modes'):
+            values, modes = state.solver.modes()
+            along = np.einsum('kij,ij->k', modes, s)
+            predicted = -np.vdot(forces, s) + 0.5 * np.dot(values, along**2)
+        elif state.predicted is None:
+            return
+        else:   # the lowest modes only: what the move's model predicted
+            predicted = state.predicted
+        actual = -np.vdot(forces - 0.5 * y, s)
+        if abs(predicted) <= merit_tolerance(np.vdot(forces, forces) ** 0.5
+                                             * np.linalg.norm(s)):
+            return
+        ratio = actual / predicted
+        if abs(ratio - 1) <= TRUST_GOOD:
+            state.gamma = min(1.5 * state.gamma, self.rule.gamma_max)
+        elif abs(ratio - 1) > TRUST_BAD:
+            state.gamma *= 0.5
+
+    def _direction(self, state: MaudState, forces: np.ndarray | None = None) -> np.ndarray:
+        """``K^-1 f`` (``f`` the forces at ``state.last``, or ``forces``), or
+        its L-BFGS correction over the stored pairs; if that is not downhill,
+        ``K^-1 f`` and the memory is cleared."""
+        solve = state.solver.solve
+        forces = state.last.forces if forces is None else forces
         if not state.pairs:
             return solve(forces)
         q = forces.copy()
@@ -302,7 +478,7 @@ class MaudMethod:
         z = solve(q)
         for (s, y), alpha in zip(state.pairs, reversed(alphas), strict=True):
             z += s * (alpha - np.vdot(y, z) / np.vdot(s, y))
-        if self.model.target == 'minimum' and not np.vdot(z, forces) > 0:
+        if self.model.target != 'stationary' and not np.vdot(z, forces) > 0:
             state.pairs = []
             return solve(forces)
         return z
@@ -366,6 +542,27 @@ class MaudMethod:
             first = int(np.argmax(ratio <= 1)) if (ratio <= 1).any() else len(mus) - 1
             low, high, best = mus[max(first - 1, 0)], mus[first], moves[first]
         return best
+
+
+def _off(move: np.ndarray, modes: np.ndarray) -> np.ndarray:
+    """``move`` (N, 3) without its components along the orthonormal ``modes``
+    (k, N, 3)."""
+    return move - np.einsum('k,kij->ij', np.einsum('kij,ij->k', modes, move), modes)
+
+
+def _rfo_step(values: np.ndarray, gradient: np.ndarray, uphill: bool) -> np.ndarray:
+    """The rational-function step ``-g_i / (b_i - lambda)`` on one part of
+    the eigenbasis (eigenvalues ``b``, gradient components ``g``), with
+    ``lambda`` the largest (``uphill``: a maximum along these modes) or the
+    smallest (a minimum) eigenvalue of ``[[diag b, g], [g^T, 0]]``."""
+    if len(values) == 0:
+        return np.zeros(0)
+    augmented = np.diag(np.append(values, 0.0))
+    augmented[-1, :-1] = augmented[:-1, -1] = gradient
+    shift = np.linalg.eigvalsh(augmented)[-1 if uphill else 0]
+    gap = values - shift   # <= 0 uphill, >= 0 downhill
+    least = np.finfo(float).eps * max(np.abs(values).max(), np.abs(gradient).max(), 1e-300)
+    return -gradient / np.where(np.abs(gap) > least, gap, -least if uphill else least)
 
 
 def _reach(start: np.ndarray, step: np.ndarray, limit: np.ndarray) -> float:

@@ -46,6 +46,12 @@ class StagnationError(MaudError):
     """No progress: gamma underflowed or fmax stopped improving."""
 
 
+class WrongIndexError(MaudError):
+    """A saddle search (``target='saddle'``) converged on a stationary point
+    whose index (negative curvatures of the analytic Hessian) is not the
+    ``order`` it sought."""
+
+
 class NoEquilibriumError(MaudError):
     """The scene can have no finite equilibrium (a net load that nothing
     holds, spring components that fly away); raised before the first step,

@@ -17,7 +17,11 @@ every energy and force is finite. The step is
   options; a calculator with no stiffness gets the secant model ``kappa I``.
 - ``target='minimum'`` makes every model positive definite (absolute
   eigenvalues, floored), so no step is meant uphill; ``'stationary'`` keeps the
-  signs: saddles and maxima are fixed points too.
+  signs: saddles and maxima are fixed points too; ``'saddle'`` climbs along
+  ``order`` modes by eigenvector following (the exact model; minimum-mode
+  following on the springs model above its size) and, once converged,
+  checks the index of the point found (:class:`WrongIndexError` if it is
+  another).
 - Nothing silently wrong (docs/hard_cases.md): a bad keyword or run argument
   is a ValueError naming it; every energy and force the calculator returns
   is checked finite before it is logged or written: a non-finite one puts
@@ -52,6 +56,7 @@ from .monitor import (
     NoEquilibriumError,
     RunMonitor,
     StagnationError,
+    WrongIndexError,
 )
 from .neighbours import NearestDistances
 from .restart import RestartFile, difference, signature
@@ -64,7 +69,7 @@ from .trajectory import last_frame, repair
 CELL_MAXSTEP = 0.2
 
 __all__ = ['DivergenceError', 'FileInUseError', 'Maud', 'MaudError', 'NoEquilibriumError',
-           'StagnationError']
+           'StagnationError', 'WrongIndexError']
 
 
 
@@ -80,8 +85,10 @@ class Maud(Optimizer):
         :func:`ase_maud.stiffness.choose_model`).
     method : 'tensor' (default) or 'scalar'
         For ``model='nodal'``: ``K_mm^-1 f_m`` or ``f_m / Tr K_mm``.
-    target : 'minimum', 'stationary' or None
-        Move only downhill, or seek any stationary point. None (default):
+    target : 'minimum', 'stationary', 'saddle' or None
+        Move only downhill, seek any stationary point, or climb to a
+        stationary point with exactly ``order`` negative curvatures
+        (eigenvector following; docs/optimizer.md). None (default):
         'minimum', except for a band of images (ASE's ``NEB``), whose forces
         are not the gradient of an energy: 'stationary' (said in the log).
         With a StiffnessModel given, the model's own.
@@ -110,6 +117,16 @@ class Maud(Optimizer):
     patience : int
         Steps without progress after which the run stops as stagnant
         (default 2000).
+    order : int
+        For ``target='saddle'``: the negative curvatures sought (default 1;
+        0: a minimum). A converged run checks the index of the point from the
+        analytic Hessian (:func:`ase_maud.analysis.classify`, in
+        :attr:`found`) and raises :class:`WrongIndexError` if it differs.
+    mode : int, array (N, 3) or None
+        For ``target='saddle'``: which way to climb first: an index of the
+        Hessian's internal modes at the start (0 the lowest), or a move whose
+        closest mode is followed (with the next lowest for ``order`` > 1).
+        None (default): the lowest ``order`` modes.
     restart, logfile, trajectory, append_trajectory, **kwargs
         As for every ASE optimizer.
     """
@@ -124,11 +141,13 @@ class Maud(Optimizer):
                  floor: float | None = None, maxstep_nn: float | None = None,
                  maxstep: float | None = None, kappa0: float = 70.0,
                  overshoot_shrink: float = 0.6, divergence_factor: float = 3.0,
-                 patience: int = 2000, **kwargs: Any):
+                 patience: int = 2000, order: int = 1,
+                 mode: int | np.ndarray | None = None, **kwargs: Any):
         steps = check_all(gamma=gamma, gamma_max=gamma_max, gamma_growth=gamma_growth,
                           beta_max=beta_max, memory=memory, maxstep_nn=maxstep_nn,
                           maxstep=maxstep, overshoot_shrink=overshoot_shrink)
         run = check_all(divergence_factor=divergence_factor, patience=patience)
+        order = check('order', order)
         _check_files(restart, logfile, trajectory, append_trajectory)
         self._lock = RunLock(restart, trajectory)
         self._lock.check()   # before ASE empties a trajectory another run writes
@@ -157,7 +176,10 @@ class Maud(Optimizer):
                                  floor=floor, kappa0=kappa0)
         self.model = model
         self._points = scene is not None
-        self.maud = MaudMethod(model, _step_rule(model, scene, image_size, steps), nearest)
+        self.maud = MaudMethod(model, _step_rule(model, scene, image_size, steps, order),
+                               nearest, _check_mode(mode, scene))
+        #: For ``target='saddle'``: the converged point's classification.
+        self.found: Any = None
         self.divergence_factor, self.patience = run['divergence_factor'], run['patience']
         super().__init__(atoms, restart, logfile, trajectory,
                          append_trajectory=append_trajectory, **kwargs)
@@ -183,6 +205,8 @@ class Maud(Optimizer):
     def todict(self) -> dict[str, Any]:
         d = super().todict()
         rule = self.rule
+        if self.target == 'saddle':
+            d['order'] = rule.order
         d.update(model=self.model.name, target=self.target, gamma=rule.gamma,
                  gamma_max=rule.gamma_max, gamma_growth=rule.gamma_growth,
                  overshoot_shrink=rule.overshoot_shrink, beta_max=rule.beta_max,
@@ -381,13 +405,56 @@ class Maud(Optimizer):
 
     def _locked(self, steps: Iterator[bool]) -> Iterator[bool]:
         with self._lock:
-            yield from steps
+            for converged in steps:
+                if converged:
+                    self._verify()
+                yield converged
 
     def run(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS) -> bool:
         self.fmax, steps = check('fmax', fmax), check('steps', steps)
         self._preflight()
         with self._lock:
-            return super().run(self.fmax, steps)
+            converged = super().run(self.fmax, steps)
+        if converged:
+            self._verify()
+        return converged
+
+    def gradient_converged(self, gradient: np.ndarray) -> bool:
+        """ASE's test (``fmax``); for ``target='saddle'`` also the index of
+        the model's Hessian there (its lowest eigenvalues: negative beyond
+        :data:`ase_maud.analysis.RTOL` of the largest): a stationary point of
+        another index (the minimum a search starts from) is left, not
+        reported."""
+        if not super().gradient_converged(gradient):
+            return False
+        if self.target != 'saddle':
+            return True
+        from .analysis import RTOL
+        solver = self._solver_at(self.optimizable.get_x().reshape(-1, 3))
+        values = (solver.modes()[0] if hasattr(solver, 'modes')   # the exact model
+                  else solver.lowest(self.rule.order + 1, self.state.modes)[0])
+        negative = int(np.sum(values < -RTOL * np.abs(values).max(initial=0.0)))
+        return negative == self.rule.order
+
+    def _verify(self) -> None:
+        """For ``target='saddle'``: classify the converged point from the
+        analytic Hessian (:attr:`found`); a WrongIndexError if its index is
+        not the ``order`` sought, or a zero curvature leaves it unknown."""
+        if self.target != 'saddle':
+            return
+        from .analysis import classify
+        atoms = self._atoms()
+        self.found = point = classify(atoms, ftol=max(self.fmax, self.fmax_now))
+        order = self.rule.order
+        self.logfile.write(f'Maud: converged on a {point.verdict} of index '
+                           f'{point.index} (order {order} sought)\n')
+        if point.index != order or point.n_zero:
+            zero = (f' and {point.n_zero} zero curvatures' if point.n_zero else '')
+            self._stop(WrongIndexError(
+                f'converged at step {self.nsteps} on a {point.verdict} of index '
+                f'{point.index}{zero}, not of index {order}: lowest curvatures '
+                f'{np.array2string(point.eigenvalues[:order + 2], precision=4)}; '
+                'try another mode= or start'))
 
     def _preflight(self) -> None:
         """Stop with a NoEquilibriumError before the first step if the
@@ -494,6 +561,27 @@ class _CheckedOptimizable:
                                        f'{self.optimizer.nsteps}; {where}'))
 
 
+def _check_mode(mode: Any, scene: Atoms | None) -> int | np.ndarray | None:
+    """``mode`` (see :class:`Maud`) checked: None, a whole number >= 0, or a
+    finite move of ``scene``'s N points, shape (N, 3) or (3 N,)."""
+    if mode is None:
+        return None
+    if isinstance(mode, (int, np.integer)) and not isinstance(mode, bool):
+        if mode < 0:
+            raise ValueError(f'mode must be an index >= 0 of the Hessian\'s modes, '
+                             f'got {mode!r}')
+        return int(mode)
+    n = 0 if scene is None else len(scene)
+    try:
+        move = np.asarray(mode, dtype=float)
+    except (TypeError, ValueError):
+        move = None
+    if move is None or move.size != 3 * n or not np.isfinite(move).all():
+        raise ValueError(f'mode must be None, an index of the Hessian\'s modes or a '
+                         f'finite move of the {n} points, shape ({n}, 3); got {mode!r}')
+    return move.reshape(n, 3)
+
+
 def _other_scene(frame: Atoms, atoms: Atoms) -> str | None:
     """How a trajectory's ``frame`` and the ``atoms`` given differ (points,
     fixed points, and with a MaudCalculator its springs, a, Q, dim), or None."""
@@ -509,14 +597,15 @@ def _other_scene(frame: Atoms, atoms: Atoms) -> str | None:
 
 
 def _step_rule(model: StiffnessModel, scene: Atoms | None, image_size: int | None,
-               steps: dict[str, Any]) -> StepRule:
+               steps: dict[str, Any], order: int | None = None) -> StepRule:
     """The step rule of ``model`` (:func:`~ase_maud.method.step_rule`, with
-    the user's ``steps``) for what the model sees: a cell filter's coordinates
-    (``scene`` None) get ASE's usual ``maxstep`` instead of the nearest-neighbour
-    bound; atoms under constraints ASE adjusts every move for (SHAKE for a bond
-    length, which fails on a move long against the distances between points)
-    keep the nearest-neighbour bound in every model."""
-    rule = step_rule(model.name, model.target, image_size, **steps)
+    the user's ``steps`` and the saddle ``order``) for what the model sees: a
+    cell filter's coordinates (``scene`` None) get ASE's usual ``maxstep``
+    instead of the nearest-neighbour bound; atoms under constraints ASE adjusts
+    every move for (SHAKE for a bond length, which fails on a move long against
+    the distances between points) keep the nearest-neighbour bound in every
+    model."""
+    rule = step_rule(model.name, model.target, image_size, order=order, **steps)
     if scene is None:
         return replace(rule, maxstep_nn=None, maxstep=rule.maxstep or CELL_MAXSTEP)
     if rule.maxstep_nn is None and not all(isinstance(c, PROJECTIONS)

@@ -254,3 +254,49 @@ def save_animation(frames: Sequence[Atoms], path: str | os.PathLike, fps: int = 
 
     FuncAnimation(fig, update, frames=len(frames)).save(path, writer=PillowWriter(fps=fps))
     return len(frames)
+
+
+def save_disconnectivity(energies: Sequence[float], saddles: Sequence[float],
+                         joins: Sequence[tuple[int, int]], path: str | os.PathLike) -> None:
+    """A disconnectivity graph of minima (``energies``) joined by saddles
+    (their ``saddles`` energies, ``joins`` the two minima of each): each
+    minimum a vertical line from its energy up to the lowest saddle that
+    joins its group to another, where the two groups' lines meet in one
+    (the lower saddle first); groups never joined run to the top. Energy
+    units on the y axis, minima labelled by index; any format matplotlib
+    writes."""
+    count = len(energies)
+    group = list(range(count))          # each minimum's group (union-find root)
+    bottom = {m: float(e) for m, e in enumerate(energies)}   # where its line starts
+    order = sorted(range(count), key=lambda m: energies[m])
+    x = {m: float(i) for i, m in enumerate(order)}   # a group's line, by its root
+
+    def root(m):
+        while group[m] != m:
+            m = group[m]
+        return m
+
+    top = max([*energies, *saddles], default=0.0)
+    top += 0.1 * max(top - min(energies, default=top), 1e-12)
+    fig = Figure(figsize=(6, 4))
+    ax = fig.add_subplot()
+    for s in np.argsort(saddles):
+        a, b = root(joins[s][0]), root(joins[s][1])
+        if a == b:
+            continue
+        level = float(saddles[s])
+        for r in (a, b):
+            ax.plot([x[r], x[r]], [bottom[r], level], color='k', lw=1)
+        ax.plot([x[a], x[b]], [level, level], color='k', lw=1)
+        group[b] = a
+        x[a], bottom[a] = 0.5 * (x[a] + x[b]), level
+    for r in {root(m) for m in range(count)}:
+        ax.plot([x[r], x[r]], [bottom[r], top], color='k', lw=1)
+    for i, m in enumerate(order):
+        ax.annotate(str(m), (i, energies[m]), textcoords='offset points', xytext=(0, -12),
+                    ha='center', fontsize=8)
+    ax.set_xticks([])
+    ax.set_xlim(-1, count)
+    ax.set_ylabel('energy')
+    ax.set_title(f'{count} minima, {len(saddles)} saddle' + ('' if len(saddles) == 1 else 's'))
+    fig.savefig(path)

@@ -33,7 +33,11 @@ it for a step it may take back. Four models, from the cheapest:
 replaced by their absolute values and floored at ``floor`` times the largest
 (per block for the nodal and global models, over the whole matrix for the
 exact one), so no direction is uphill. ``target='stationary'`` keeps the signs
-(saddles and maxima are then fixed points of the step). Degrees of freedom
+(saddles and maxima are then fixed points of the step). ``target='saddle'``
+gives the Hessian's eigenpairs on the internal moves (rigid-body motions
+projected out), signed and unfloored, for the step rule's eigenvector
+following: all of them (the exact model, :func:`internal_basis`), or the
+lowest few from Hessian-vector products (the springs model). Degrees of freedom
 held by :class:`~ase.constraints.FixAtoms` and
 :class:`~ase.constraints.FixCartesian` are removed from ``K`` and never move;
 other constraints are left to ASE (the optimizer applies them to every move).
@@ -47,6 +51,7 @@ step rule's defaults for each model are in :data:`ase_maud.method.STEP_DEFAULTS`
 
 from __future__ import annotations
 
+import warnings
 from abc import ABC, abstractmethod
 from typing import Any
 
@@ -94,7 +99,7 @@ class Solver(ABC):
 class StiffnessModel(ABC):
     """What the Maud step divides the forces by; see the module docstring.
 
-    ``target`` ('minimum' or 'stationary') and ``floor`` (relative
+    ``target`` ('minimum', 'stationary' or 'saddle') and ``floor`` (relative
     eigenvalue floor; None: the model's :attr:`default_floor`) are checked
     here. ``prop`` names the calculator property whose request computes, in
     the same calculator call as the energy and forces, what :meth:`at`
@@ -149,6 +154,32 @@ def free_dofs(atoms: Atoms, dim: int) -> np.ndarray:
         if isinstance(constraint, (FixAtoms, FixCartesian)):
             constraint.adjust_forces(atoms, free)
     return free[:, :dim] != 0
+
+
+def rigid_body_modes(positions: np.ndarray, free: np.ndarray, dim: int,
+                     rcond: float = 1e-8) -> np.ndarray:
+    """Orthonormal rigid-body modes on the free degrees of freedom.
+
+    The translations and rotations about the centroid that leave every fixed
+    degree of freedom at rest, restricted to the free ones: an array of
+    shape (free.sum(), m), m <= 6 (3D) or 3 (2D). A rotation that moves the
+    points less than ``rcond`` times the most moving one does not count: a
+    collinear scene (to that precision) loses the rotation about its line.
+    """
+    x = positions[:, :dim] - positions[:, :dim].mean(axis=0)
+    if dim == 3:
+        rotations = np.array([np.cross(e, x).ravel() for e in np.eye(3)])
+    else:
+        rotations = np.column_stack([-x[:, 1], x[:, 0]]).reshape(1, -1)
+    sizes = np.linalg.norm(rotations, axis=1)
+    rotations = rotations[sizes > rcond * sizes.max()]
+    rotations /= max(sizes.max(), np.finfo(float).tiny)
+    translations = np.kron(np.ones(len(x)), np.eye(dim)) / np.sqrt(len(x))
+    modes = np.vstack([translations, rotations]).T
+    flat = free.ravel()
+    if (~flat).any():
+        modes = modes @ scipy.linalg.null_space(modes[~flat], rcond=rcond)
+    return scipy.linalg.orth(modes[flat], rcond=rcond)
 
 
 #: The constraints that project each atom's move onto a line, a plane or
@@ -347,6 +378,10 @@ class ExactModel(StiffnessModel):
         basis = self.basis(atoms, dim)
         matrix = hessian if basis is None else basis.T @ hessian @ basis
         free = np.ones((len(atoms), dim), dtype=bool)
+        if self.target == 'saddle':
+            internal = internal_basis(atoms.positions, dim, basis)
+            return _EigenSolver(internal.T @ hessian @ internal, internal, free,
+                                np.asarray).decomposed()
         eigen = _EigenSolver(matrix, basis, free, self._absolute)
         if self.target == 'minimum':
             shift = self.floor * np.abs(matrix).sum(axis=1).max(initial=0.0)
@@ -367,6 +402,24 @@ class ExactModel(StiffnessModel):
             basis = allowed_basis(atoms, dim) if atoms.constraints else None
             self._basis = key, basis
         return self._basis[1]
+
+
+def internal_basis(positions: np.ndarray, dim: int,
+                   basis: np.ndarray | None) -> np.ndarray:
+    """Orthonormal columns (dim N, m) spanning the moves ``basis`` allows
+    (:func:`allowed_basis`; None: every move) that are orthogonal to the
+    rigid-body motions it allows (:func:`rigid_body_modes`: the translations
+    and rotations of a free scene, none once three non-collinear points are
+    held): the internal moves, on which the Hessian has no zero modes of
+    symmetry."""
+    rigid = rigid_body_modes(positions, np.ones((len(positions), dim), bool), dim)
+    if basis is None:
+        return scipy.linalg.null_space(rigid.T)
+    outside = rigid - basis @ (basis.T @ rigid)
+    kept = rigid @ scipy.linalg.null_space(outside, rcond=1e-8)
+    if kept.shape[1] == 0:
+        return basis
+    return basis @ scipy.linalg.null_space(scipy.linalg.orth(basis.T @ kept).T)
 
 
 class _EigenSolver(_DofSolver):
@@ -394,6 +447,15 @@ class _EigenSolver(_DofSolver):
     @property
     def values(self) -> np.ndarray:
         return self.decomposed()._pairs[0]
+
+    def modes(self) -> tuple[np.ndarray, np.ndarray]:
+        """The eigenvalues (ascending for ``'saddle'``, whose are left
+        signed and unfloored; force per length) and the eigenvectors as moves,
+        shape (m, N, 3), orthonormal."""
+        values, vectors = self.decomposed()._pairs
+        out = np.zeros((len(values), len(self.free), 3))
+        out[:, :, :self.dim] = vectors.T.reshape(len(values), -1, self.dim)
+        return values, out
 
     def _solve(self, rhs):
         values, vectors = self.decomposed()._pairs
@@ -629,6 +691,10 @@ class SpringsModel(StiffnessModel):
         kept = self._kept
         if kept is None or kept[0] is not potential or not np.array_equal(kept[1], free):
             self._kept = potential, free, self._solver(atoms, potential, free)
+        if self.target == 'saddle':
+            frozen = atoms.copy()   # the positions of this step, the same calculator
+            frozen.calc = atoms.calc
+            return _LowestModes(self._kept[2], frozen, free)
         return self._kept[2]
 
     def _solver(self, atoms: Atoms, potential: Any, free: np.ndarray) -> Solver:
@@ -657,6 +723,63 @@ def _floating(springs: np.ndarray, held: np.ndarray) -> np.ndarray:
     anchored = np.zeros(labels.max(initial=-1) + 1, dtype=bool)
     anchored[labels[held]] = True
     return ~anchored[labels]
+
+
+#: Relative residual (of the largest diagonal entry of ``P``) to which the
+#: lowest modes of a large saddle search are computed (LOBPCG).
+MODES_RTOL = 1e-4
+#: ... in at most this many LOBPCG iterations per step.
+MODES_MAXITER = 50
+
+
+class _LowestModes(Solver):
+    """``P^-1`` of the springs model and the Hessian's lowest eigenpairs on
+    the internal moves (:meth:`lowest`), by LOBPCG on Hessian-vector
+    products (:func:`ase_maud.analysis.hessian_operator`, rigid-body motions
+    projected out) preconditioned by ``P^-1``: what a large saddle search
+    follows (:mod:`ase_maud.method`)."""
+
+    def __init__(self, inner: Solver, atoms: Atoms, free: np.ndarray):
+        self.inner, self.atoms, self.free = inner, atoms, free
+
+    def solve(self, forces):
+        return self.inner.solve(forces)
+
+    def lowest(self, count: int, guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The ``count`` lowest eigenvalues (ascending) and their modes
+        (count, N, 3), started from the moves ``guess`` (k, N, 3) if given."""
+        from scipy.sparse.linalg import lobpcg
+
+        from .analysis import hessian_operator
+        atoms, free = self.atoms, self.free
+        dim, flat = free.shape[1], free.ravel()
+        rigid = rigid_body_modes(atoms.positions, free, dim)
+        operator = hessian_operator(atoms, free, rigid)
+
+        def spread(v):   # free components (n, k) -> moves (k, N, 3)
+            out = np.zeros((v.shape[1], len(free), 3))
+            out[:, :, :dim][:, free] = v.T
+            return out
+
+        def precondition(v):
+            v = v.reshape(len(v), -1)
+            moves = [self.solve(move) for move in spread(v)]
+            return np.column_stack([m[:, :dim][free] for m in moves])
+
+        start = np.random.default_rng(0).standard_normal((int(flat.sum()), count))
+        if guess is not None:
+            start[:, :len(guess)] = guess[:, :, :dim][:, free].T
+        diagonal = precondition(np.eye(len(start), 1)).max()   # a scale of 1 / P
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', UserWarning)   # LOBPCG's "not reaching tol"
+            values, vectors = lobpcg(
+                operator, start, M=LinearOperator(operator.shape, matvec=precondition,
+                                                  matmat=precondition, dtype=float),
+                Y=rigid if rigid.size else None, tol=MODES_RTOL / abs(diagonal),
+                maxiter=MODES_MAXITER, largest=False)
+        order = np.argsort(values)
+        vectors = vectors[:, order] / np.linalg.norm(vectors[:, order], axis=0)
+        return values[order], spread(vectors)
 
 
 class _CoordinateSolver(Solver):
@@ -690,6 +813,8 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
                  **options: Any) -> StiffnessModel:
     """The stiffness model ``name`` for ``atoms``' calculator.
 
+    ``target='saddle'`` takes ``exact``, or ``springs`` above
+    :data:`EXACT_MAX_DOFS` (ValueError if ``name`` is another model).
     ``'auto'``: ``exact`` while the free degrees of freedom are at most
     :data:`EXACT_MAX_DOFS`, the calculator has a ``hessian`` and every
     constraint is one of :data:`PROJECTIONS` (a Hookean tether, say, adds
@@ -703,6 +828,8 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
     """
     calc = getattr(atoms, 'calc', None)
     offers = set(getattr(calc, 'implemented_properties', ()))
+    if target == 'saddle':
+        name = _saddle_model(atoms, name, offers)
     if name == 'auto':
         dim = 2 if getattr(calc, 'dim', 3) == 2 else 3
         if ('hessian' in offers and free_dofs(atoms, dim).sum() <= EXACT_MAX_DOFS
@@ -729,6 +856,26 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
         options['nearest'] = nearest
         taken.add('nearest')
     return cls(target=target, **{k: v for k, v in options.items() if k in taken})
+
+
+def _saddle_model(atoms: Atoms | None, name: Any, offers: set[str]) -> str:
+    """The model of ``target='saddle'``: ``exact`` (all the Hessian's
+    eigenpairs) up to :data:`EXACT_MAX_DOFS` free degrees of freedom,
+    ``springs`` (the lowest eigenpairs from Hessian-vector products) above,
+    or ``name`` if it is one of these; a ValueError for another model, a
+    calculator that has neither the Hessian nor a potential, or a band of
+    images."""
+    if name not in ('auto', 'exact', 'springs'):
+        raise ValueError(f"target='saddle' needs model='exact' or 'springs' (or 'auto'), "
+                         f'got model={name!r}')
+    calc = getattr(atoms, 'calc', None)
+    if atoms is None or not ('hessian' in offers and hasattr(calc, 'potential')):
+        raise ValueError("target='saddle' needs one scene whose calculator gives the "
+                         'Hessian and its products (such as MaudCalculator)')
+    if name != 'auto':
+        return name
+    dim = 2 if getattr(calc, 'dim', 3) == 2 else 3
+    return 'exact' if free_dofs(atoms, dim).sum() <= EXACT_MAX_DOFS else 'springs'
 
 
 #: Options beyond ``target`` and ``floor`` that a model takes.

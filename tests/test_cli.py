@@ -366,3 +366,35 @@ def test_argument_errors_are_one_line_with_status_2(capsys, argv, message):
     error = capsys.readouterr().err
     assert stop.value.code == 2 and error.startswith(message) and error.count('\n') == 1
     assert error.rstrip().endswith('--help')
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_saddles_prints_draws_and_writes_the_landscape(tmp_path, capsys, seed):
+    """``ase-maud saddles`` relaxes the net, finds the landscape the library
+    finds from the same minimum, and writes the picture and its JSON."""
+    import json
+
+    from ase_maud import Maud
+    from ase_maud.landscape import landscape
+
+    atoms = build('all_pairs2d', 9, seed=seed)
+    write_net(tmp_path / 'c.traj', atoms)
+    out = tmp_path / 'graph.png'
+    assert main(['saddles', str(tmp_path / 'c.traj'), '--modes', '2', '--out',
+                 str(out)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    graph = json.loads(out.with_suffix('.json').read_text())
+    assert out.stat().st_size > 0
+    Maud(atoms, logfile=None).run(fmax=1e-6, steps=1000)
+    found = landscape(atoms, modes=2)
+    assert len(graph['minima']) == len(found.minima)
+    assert len(graph['saddles']) == len(found.saddles) == len(lines) - 1
+    assert sorted(s['energy'] for s in graph['saddles']) == pytest.approx(
+        sorted(s.get_potential_energy() for s in found.saddles), rel=1e-9)
+    assert graph['failed'] == 0 and lines[-1].startswith(f"{len(found.minima)} minima")
+
+
+def test_saddles_checks_its_output_first(tmp_path):
+    with pytest.raises(ValueError, match='--out .*does not exist'):
+        cli.check_outputs(cli.build_parser().parse_args(
+            ['saddles', 'x.traj', '--out', str(tmp_path / 'no' / 'g.png')]))

@@ -14,6 +14,7 @@ from ase_maud.method import (
     MaudMethod,
     MaudState,
     Point,
+    _rfo_step,
     step_rule,
 )
 from ase_maud.monitor import ENERGY_PROGRESS, DivergenceError, RunMonitor, StagnationError
@@ -288,3 +289,32 @@ def test_monitor_catches_a_creep_at_any_scale(seed):
     with pytest.raises(StagnationError, match='creep'):
         run(fall=0.5 * ENERGY_PROGRESS)
     assert run(fall=5 * ENERGY_PROGRESS).lowest[1] > 2 * patience
+
+
+@pytest.mark.parametrize('seed', range(4))
+@pytest.mark.parametrize('uphill', [True, False])
+def test_rfo_step_solves_the_augmented_eigenproblem(seed, uphill):
+    """The rational-function step ``s`` and its shift ``lambda`` make an
+    eigenpair of ``[[diag b, g], [g^T, 0]]`` with eigenvector ``(s, 1)``
+    (so ``lambda = g.s``), ``lambda`` its largest (uphill) or smallest one;
+    uphill the step climbs every mode (``g_i s_i > 0``), downhill it falls."""
+    rng = np.random.default_rng(seed)
+    b, g = rng.normal(size=5) * 3, rng.normal(size=5)
+    s = _rfo_step(b, g, uphill)
+    augmented = np.diag(np.append(b, 0.0))
+    augmented[-1, :-1] = augmented[:-1, -1] = g
+    shift = np.vdot(g, s)
+    np.testing.assert_allclose(augmented @ np.append(s, 1.0), shift * np.append(s, 1.0),
+                               atol=1e-10 * (1 + np.abs(s).max()))
+    values = np.linalg.eigvalsh(augmented)
+    assert shift == pytest.approx(values[-1] if uphill else values[0], rel=1e-10)
+    assert np.all(np.sign(g * s) == (1 if uphill else -1))
+
+
+def test_rfo_step_at_zero_gradient_is_finite():
+    """A degenerate pair of negative curvatures with no gradient (a symmetric
+    point) gives a finite step, not an overflow."""
+    b = np.array([-2.0, -2.0, 1.0])
+    for g in (np.zeros(3), np.array([0.0, 1e-14, 0.3])):
+        for uphill in (True, False):
+            assert np.isfinite(_rfo_step(b, g, uphill)).all()

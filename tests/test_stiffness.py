@@ -17,8 +17,10 @@ from ase_maud.stiffness import (
     GlobalModel,
     NodalModel,
     SecantModel,
+    allowed_basis,
     choose_model,
     free_dofs,
+    internal_basis,
 )
 
 
@@ -271,3 +273,67 @@ def test_precon_drives_ase_optimizers_under_fixatoms(optimizer, seed):
     assert np.array_equal(atoms.positions[fixed], start[fixed])
     assert atoms.get_potential_energy() == pytest.approx(
         reference.get_potential_energy(), rel=1e-9)
+
+
+@pytest.mark.parametrize('seed', range(3))
+@pytest.mark.parametrize('scene, held, rigid', [
+    ('all_pairs', [], 6), ('all_pairs', [0], 3), ('all_pairs', [0, 1, 2], 0),
+    ('all_pairs2d', [], 3), ('all_pairs2d', [0], 1), ('ring', [], 3)])
+def test_internal_basis_leaves_out_the_rigid_motions_the_constraints_allow(
+        seed, scene, held, rigid):
+    """Orthonormal, inside the allowed moves, orthogonal to every translation
+    and rotation that stays allowed: the allowed moves less ``rigid`` of them."""
+    from ase_maud.analysis import classify
+    atoms = build(scene, 7, seed=seed)
+    if held:
+        atoms.set_constraint(FixAtoms(held))
+    dim = atoms.calc.parameters['dim']
+    allowed = allowed_basis(atoms, dim) if held else np.eye(dim * len(atoms))
+    basis = internal_basis(atoms.positions, dim, allowed if held else None)
+    assert basis.shape[1] == allowed.shape[1] - rigid
+    np.testing.assert_allclose(basis.T @ basis, np.eye(basis.shape[1]), atol=1e-12)
+    np.testing.assert_allclose(allowed @ (allowed.T @ basis), basis, atol=1e-12)
+    # the saddle model's spectrum is classify's (rigid modes removed there too)
+    values, modes = ExactModel('saddle').at(atoms).modes()
+    np.testing.assert_allclose(values, classify(atoms, ftol=np.inf).eigenvalues, rtol=1e-9,
+                               atol=1e-9 * np.abs(values).max())
+    hessian = atoms.calc.get_hessian(atoms)
+    flat = modes[:, :, :dim].reshape(len(values), -1)
+    np.testing.assert_allclose(basis.T @ hessian @ flat.T, basis.T @ flat.T * values,
+                               atol=1e-9 * np.abs(values).max())
+
+
+def test_saddle_target_takes_the_exact_or_the_springs_model():
+    atoms = build('all_pairs', 6)
+    with pytest.raises(ValueError, match="target='saddle' needs model='exact' or 'springs'"):
+        Maud(atoms, target='saddle', model='nodal', logfile=None)
+    assert Maud(atoms, target='saddle', logfile=None).model.name == 'exact'
+    big = build('all_pairs', 60)   # 180 free DOFs
+    assert Maud(big, target='saddle', logfile=None).model.name == 'springs'
+    assert Maud(big, target='saddle', model='exact', logfile=None).model.name == 'exact'
+
+
+@pytest.mark.parametrize('seed', range(3))
+@pytest.mark.parametrize('scene, size, held', [
+    ('all_pairs', 20, []), ('all_pairs2d', 30, []), ('tree', 25, [0]), ('net2d', 6, None)])
+def test_springs_saddle_model_gives_the_lowest_eigenpairs(seed, scene, size, held):
+    """The lowest eigenpairs from Hessian-vector products (LOBPCG,
+    preconditioned by the springs model) are the dense Hessian's lowest on
+    the internal moves (:func:`ase_maud.analysis.classify`), rigid-body
+    motions left out."""
+    from ase_maud.analysis import classify
+    atoms = build(scene, size, seed=seed)
+    if held:
+        atoms.set_constraint(FixAtoms(held))
+    Maud(atoms, logfile=None).run(fmax=1e-3, steps=300)
+    model = choose_model(atoms, 'springs', target='saddle')
+    values, modes = model.at(atoms).lowest(3, None)
+    dense = classify(atoms, ftol=np.inf)
+    # to MODES_RTOL's residual: eigenvalues to ~its square, modes to ~it over the gap;
+    # the block's last pair converges last, so the two lowest are checked
+    scale = np.abs(dense.eigenvalues).max()
+    np.testing.assert_allclose(values[:2], dense.eigenvalues[:2], atol=1e-5 * scale)
+    gaps = np.diff(dense.eigenvalues[:3])
+    for k in range(2):
+        if min(gaps[max(k - 1, 0):k + 1]) > 1e-2 * scale:
+            assert abs(np.vdot(modes[k], dense.modes[k])) == pytest.approx(1.0, abs=1e-3)

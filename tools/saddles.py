@@ -1,4 +1,4 @@
-"""Index-1 saddle searches: Maud's signed steps against Sella, in calculator calls and CPU seconds.
+"""Saddle searches: Maud's eigenvector following and signed steps against Sella, in calls and CPU.
 
 Starts (seeded), named ``scene:size:amp``:
 
@@ -8,15 +8,25 @@ Starts (seeded), named ``scene:size:amp``:
   every pair sprung), next to a collective saddle: every nodal block is positive definite there;
 - ``scene:N:amp``: the scene relaxed with Maud to fmax 1e-9 (a minimum, checked with
   :func:`ase_maud.analysis.classify`), then moved along its lowest Hessian mode so that the
-  point that moves most moves ``amp`` a. 2D scenes also get ``FixCartesian`` on z (Maud never
-  moves z in 2D; Sella would otherwise see z as a free, flat direction).
+  point that moves most moves ``amp`` a; ``amp`` ``up`` or ``down``: moves ``SHIFT`` = 0.1 of
+  the mean nearest-neighbour distance, along the lowest mode either way, ``random``: along a
+  seeded random combination of the modes. 2D scenes also get ``FixCartesian`` on z (Maud never
+  moves z in 2D; Sella would otherwise see z as a free, flat direction). Scenes are those of
+  :func:`ase_maud.scenes.build` and two of the tool's own: ``chords`` (``ring`` with a chord
+  from each point to the one a third of the way round) and ``corners`` (``net3d`` with its
+  four corners fixed).
 
-From each start, to ``--fmax`` (units of ``Q a``), at most ``--steps`` steps:
+From each start, to ``--fmax`` (units of ``Q a``), at most ``--steps`` steps, seeking an
+index-``--order`` point (default 1):
+
+- ``Maud-saddle``: ``Maud(target='saddle', order=order)``, eigenvector following on the
+  exact model up to 150 free degrees of freedom, minimum-mode following on the springs
+  model above; ``Maud-saddle-exact``: the same with ``model='exact'`` at any size;
 
 - ``Maud-exact``: ``Maud(target='stationary', model='exact')``, signed Newton on the analytic
   Hessian with its trust-region damping;
 - ``Maud-nodal``: ``Maud(target='stationary', model='nodal')``, the specification's step;
-- ``Sella``: ``Sella(order=1, internal=False)``, its Hessian estimated by its own iterative
+- ``Sella``: ``Sella(order=order, internal=False)``, its Hessian estimated by its own iterative
   diagonalisation through force calls; on scenes with ``FixAtoms`` it gets ``proj_rot=False``
   (Sella projects out rotations whenever ``pbc`` is off, and on a scene with fixed points it
   then reports convergence with forces along the rotations left: fmax 0.1 on ``chain``);
@@ -28,10 +38,11 @@ finite-difference force calls included; a call that also computes the Hessian co
 (its cost is in the CPU seconds). CPU seconds are ``time.process_time`` over the optimiser's
 construction and run (every thread; run with one). Each optimiser is run once on a small cage
 before the table, so imports and first compilations are not counted. Each end point is
-classified (dense Hessian): index, energy, fmax; ``same as Sella`` when its energy is within
-``--energy-rtol`` (relative) of Sella's end point and its sorted pair distances within
-``--distance-atol`` (units of a). A run that raised (Maud's StagnationError, say) is a result:
-its error is in the row and its end point is classified where it stopped. Run::
+classified (dense Hessian, a fresh calculator): index, energy, fmax; ``same as Sella`` when
+its energy is within ``--energy-rtol`` (relative) of Sella's end point and its sorted pair
+distances within ``--distance-atol`` (units of a). A run that raised (Maud's
+StagnationError, say) is a result: its error is in the row and its end point is classified
+where it stopped. Run::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
         python tools/saddles.py --out saddles
@@ -52,11 +63,12 @@ import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian
 from ase.optimize.optimize import Optimizer
-from scipy.spatial.distance import pdist
+from scipy.spatial import cKDTree
 
 from ase_maud import Maud
 from ase_maud.analysis import StationaryPoint, classify
 from ase_maud.bench.runner import CallRecorder, fresh_copy
+from ase_maud.landscape import same_point
 from ase_maud.scenes import build
 
 EXAMPLE = Path(__file__).resolve().parent.parent / 'examples' / 'saddle_and_minima.py'
@@ -84,7 +96,7 @@ def _sella(hessian: bool) -> Callable[[Atoms], Optimizer]:
         from sella import Sella
         fixed = any(isinstance(c, FixAtoms) for c in atoms.constraints)
         extra = {'hessian_function': analytic_hessian} if hessian else {}
-        return Sella(atoms, order=1, internal=False, logfile=None,
+        return Sella(atoms, order=ORDER[0], internal=False, logfile=None,
                      proj_rot=not fixed, **extra)
     return make
 
@@ -93,22 +105,62 @@ def _maud(model: str) -> Callable[[Atoms], Optimizer]:
     return lambda atoms: Maud(atoms, target='stationary', model=model, logfile=None)
 
 
+def _maud_saddle(model: str) -> Callable[[Atoms], Optimizer]:
+    return lambda atoms: Maud(atoms, target='saddle', order=ORDER[0], model=model,
+                              logfile=None)
+
+
+#: The index sought (``--order``); Sella's and Maud-saddle's ``order``.
+ORDER = [1]
+
 #: The compared saddle searches, by name.
 OPTIMIZERS: dict[str, Callable[[Atoms], Optimizer]] = {
-    'Maud-exact': _maud('exact'), 'Maud-nodal': _maud('nodal'),
-    'Sella': _sella(hessian=False), 'Sella-H': _sella(hessian=True)}
+    'Maud-saddle': _maud_saddle('auto'), 'Maud-saddle-exact': _maud_saddle('exact'),
+    'Maud-exact': _maud('exact'),
+    'Maud-nodal': _maud('nodal'), 'Sella': _sella(hessian=False),
+    'Sella-H': _sella(hessian=True)}
 
 
-def make_start(scene: str, size: int, seed: int, amp: float) -> Atoms:
-    """The start ``scene:size:amp`` (see the module docstring); ``seed`` seeds the scene."""
+def _chords(size: int, seed: int) -> Atoms:
+    """``ring`` with a chord from each point to the one a third of the way round."""
+    atoms = build('ring', size, seed=seed)
+    n = len(atoms)
+    chords = np.column_stack([np.arange(n), (np.arange(n) + n // 3) % n])
+    atoms.calc = type(atoms.calc)(**{**atoms.calc.parameters, 'springs': np.vstack(
+        [atoms.calc.parameters['springs'], chords])})
+    return atoms
+
+
+def _corners(size: int, seed: int) -> Atoms:
+    """``net3d`` with its four corners fixed."""
+    atoms = build('net3d', size, seed=seed)
+    side = int(round(np.sqrt(len(atoms))))
+    atoms.set_constraint(FixAtoms([0, side - 1, side * (side - 1), side * side - 1]))
+    return atoms
+
+
+#: Scenes of the benchmark's own (beside :func:`ase_maud.scenes.build`'s).
+OWN_SCENES = {'chords': _chords, 'corners': _corners}
+
+#: Displacements of a minimum by a fraction :data:`SHIFT` of the mean
+#: nearest-neighbour distance (module docstring).
+SHIFT = 0.1
+DISPLACEMENTS = ('up', 'down', 'random')
+
+
+def make_start(scene: str, size: int, seed: int, amp: float | str) -> Atoms:
+    """The start ``scene:size:amp`` (see the module docstring); ``seed`` seeds the scene
+    and the random displacement."""
     if scene == 'six':
         atoms = runpy.run_path(str(EXAMPLE))['guess']()
+    elif scene in OWN_SCENES:
+        atoms = OWN_SCENES[scene](size, seed)
     else:
         atoms = build(scene, size, seed=seed)
     if atoms.calc.parameters['dim'] == 2:
         atoms.set_constraint([*atoms.constraints,
                               FixCartesian(range(len(atoms)), mask=(False, False, True))])
-    if amp == 0:
+    if amp in (0, '0'):
         return atoms
     Maud(atoms, logfile=None).run(fmax=1e-9, steps=5000)
     point = classify(atoms)
@@ -116,8 +168,14 @@ def make_start(scene: str, size: int, seed: int, amp: float) -> Atoms:
         raise ValueError(f'{scene} {size} seed {seed} relaxed to a {point.verdict}, '
                          'not a minimum: no lowest mode to leave it along')
     mode = point.modes[0]
+    if amp in DISPLACEMENTS:
+        if amp == 'random':
+            weights = np.random.default_rng(seed).normal(size=len(point.modes))
+            mode = np.einsum('k,kij->ij', weights, point.modes)
+        spacing = np.mean(cKDTree(atoms.positions).query(atoms.positions, k=2)[0][:, 1])
+        amp = SHIFT * spacing * (-1 if amp == 'down' else 1)
     start = fresh_copy(atoms)
-    start.positions += amp * mode / np.linalg.norm(mode, axis=1).max()
+    start.positions += float(amp) * mode / np.linalg.norm(mode, axis=1).max()
     return start
 
 
@@ -136,30 +194,18 @@ def search(start: Atoms, optimiser: str, fmax: float, steps: int
     cpu = time.process_time() - cpu
     with warnings.catch_warnings():
         warnings.simplefilter('ignore')  # a run that stopped early is not stationary
-        point = classify(atoms)
+        point = classify(fresh_copy(atoms))
     row = {'optimiser': optimiser, 'converged': converged, 'calls': len(recorder.samples),
            'cpu_s': cpu, 'energy': atoms.get_potential_energy(), 'index': point.index,
            'verdict': point.verdict, 'fmax': point.fmax, 'error': error}
     return atoms, row, point
 
 
-def same_point(a: Atoms, b: Atoms, energy_rtol: float = 1e-8,
-               distance_atol: float = 1e-4) -> bool:
-    """Whether ``a`` and ``b`` are the same configuration up to rigid motion and
-    relabelling: energies within ``energy_rtol`` (relative) and sorted pair distances
-    within ``distance_atol`` (length units)."""
-    ea, eb = a.get_potential_energy(), b.get_potential_energy()
-    if abs(ea - eb) > energy_rtol * max(abs(ea), abs(eb)):
-        return False
-    return bool(np.abs(np.sort(pdist(a.positions)) - np.sort(pdist(b.positions))).max()
-                <= distance_atol)
-
-
 def compare(start: str, seed: int, optimisers: list[str], fmax: float, steps: int,
             energy_rtol: float, distance_atol: float) -> list[dict]:
     """The rows of one start: every optimiser, and whether it ended where Sella did."""
     scene, size, amp = start.split(':')
-    atoms = make_start(scene, int(size), seed, float(amp))
+    atoms = make_start(scene, int(size), seed, amp if amp in DISPLACEMENTS else float(amp))
     ends, rows = {}, []
     for name in optimisers:
         ends[name], row, _ = search(atoms, name, fmax, steps)
@@ -194,16 +240,18 @@ def markdown(rows: list[dict], fmax: float) -> str:
 
 
 def summary(rows: list[dict], fmax: float) -> str:
-    """Per optimiser: the starts from which it ended, converged, on an index-1 saddle,
-    how many of those are Sella's end point, and the median calls and CPU seconds."""
-    lines = []
+    """Per optimiser: the starts from which it ended, converged, on a point of the index
+    sought (``ORDER``, no zero curvature), how many of those are Sella's end point, and
+    the median calls and CPU seconds."""
+    lines, order = [], ORDER[0]
     for name in dict.fromkeys(r['optimiser'] for r in rows):
         mine = [r for r in rows if r['optimiser'] == name]
-        hits = [r for r in mine if r['index'] == 1 and r['fmax'] <= fmax]
+        hits = [r for r in mine if r['index'] == order and r['fmax'] <= fmax
+                and r['verdict'] != 'degenerate']
         median = (f", median {np.median([r['calls'] for r in hits]):.0f} calls, "
                   f"{np.median([r['cpu_s'] for r in hits]):.2f} CPU s" if hits else '')
         same = sum(r['same_as_Sella'] is True for r in hits)
-        lines.append(f'- {name}: an index-1 saddle (fmax <= {fmax:g}) from {len(hits)} of '
+        lines.append(f'- {name}: an index-{order} point (fmax <= {fmax:g}) from {len(hits)} of '
                      f"{len(mine)} starts ({same} Sella's){median}")
     return '\n'.join(lines) + '\n'
 
@@ -215,12 +263,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seeds', type=int, nargs='+', default=[0])
     parser.add_argument('--optimizers', nargs='+', choices=OPTIMIZERS,
                         default=list(OPTIMIZERS))
+    parser.add_argument('--order', type=int, default=1,
+                        help="the index sought (Maud-saddle's and Sella's order)")
     parser.add_argument('--fmax', type=float, default=1e-6)
     parser.add_argument('--steps', type=int, default=1000)
     parser.add_argument('--energy-rtol', type=float, default=1e-8)
     parser.add_argument('--distance-atol', type=float, default=1e-4)
     parser.add_argument('--out', type=Path, default=Path('saddles'))
     args = parser.parse_args(argv)
+    ORDER[0] = args.order
     for name in args.optimizers:  # warm up: imports, first compilations
         search(make_start('cage', 4, 0, 0.0), name, 1e-3, 50)
     rows = []

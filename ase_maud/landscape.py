@@ -1,0 +1,134 @@
+"""The landscape around a minimum: the saddles its lowest modes climb to, and
+the minima each saddle joins.
+
+:func:`landscape` climbs from a minimum along each of its ``modes`` lowest
+Hessian modes, both ways (``Maud(target='saddle', mode=...)``), relaxes from
+each index-1 saddle found to the minimum on either side of its unstable mode
+(:func:`ase_maud.analysis.displace_along_mode`), and returns a
+:class:`Landscape`: the distinct minima and saddles and which minima each
+saddle joins. Two configurations are the same (:func:`same_point`) when their
+energies agree to ``energy_rtol`` (relative) and their sorted pair distances
+to ``distance_atol`` (length units): that is blind to rigid motion and to
+relabelling of the points (and takes mirror images as one). A climb or
+descent that fails (a :class:`~ase_maud.monitor.MaudError`, or no convergence
+in ``steps``) is counted in :attr:`Landscape.failed`, never silently dropped.
+The climbs and descents run one after another, in this process.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from ase import Atoms
+from scipy.spatial.distance import pdist
+
+from .analysis import classify, displace_along_mode
+from .bench.runner import fresh_copy
+from .monitor import MaudError
+from .optimizer import Maud
+
+#: Default tolerances of :func:`same_point`: energies relative, pair
+#: distances in length units (for scenes relaxed to fmax 1e-6 ``Q a``, whose
+#: energies agree to ~1e-12 and distances to ~1e-7 a).
+ENERGY_RTOL, DISTANCE_ATOL = 1e-8, 1e-4
+
+
+def same_point(a: Atoms, b: Atoms, energy_rtol: float = ENERGY_RTOL,
+               distance_atol: float = DISTANCE_ATOL) -> bool:
+    """Whether ``a`` and ``b`` are the same configuration up to rigid motion and
+    relabelling: energies within ``energy_rtol`` (relative) and sorted pair
+    distances within ``distance_atol`` (length units)."""
+    ea, eb = a.get_potential_energy(), b.get_potential_energy()
+    if abs(ea - eb) > energy_rtol * max(abs(ea), abs(eb)):
+        return False
+    return bool(np.abs(np.sort(pdist(a.positions)) - np.sort(pdist(b.positions))).max()
+                <= distance_atol)
+
+
+@dataclass
+class Landscape:
+    """Distinct ``minima`` and index-1 ``saddles`` (Atoms with their own
+    calculators, the first minimum the start), ``joins``: for each saddle
+    the indices of the two minima it joins (the same one twice if both sides
+    fall back into it), and ``failed``: climbs and descents that ended
+    elsewhere or raised."""
+
+    minima: list[Atoms] = field(default_factory=list)
+    saddles: list[Atoms] = field(default_factory=list)
+    joins: list[tuple[int, int]] = field(default_factory=list)
+    failed: int = 0
+
+    def todict(self) -> dict:
+        """The graph as plain data (JSON): energies and positions of the
+        minima and saddles, ``joins``, ``barriers`` and ``failed``."""
+        def points(atoms_list):
+            return [{'energy': a.get_potential_energy(), 'positions': a.positions.tolist()}
+                    for a in atoms_list]
+        return {'minima': points(self.minima), 'saddles': points(self.saddles),
+                'joins': [list(pair) for pair in self.joins],
+                'barriers': [list(pair) for pair in self.barriers()], 'failed': self.failed}
+
+    def barriers(self) -> list[tuple[float, float]]:
+        """For each saddle, its energy above each of the two minima it joins
+        (energy units), in the order of :attr:`joins`."""
+        return [(saddle.get_potential_energy() - self.minima[i].get_potential_energy(),
+                 saddle.get_potential_energy() - self.minima[j].get_potential_energy())
+                for saddle, (i, j) in zip(self.saddles, self.joins, strict=True)]
+
+
+def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 1000,
+              energy_rtol: float = ENERGY_RTOL,
+              distance_atol: float = DISTANCE_ATOL) -> Landscape:
+    """The :class:`Landscape` around the minimum ``atoms`` (a MaudCalculator
+    scene relaxed to ``fmax``; a ValueError if it is not a minimum): climbs
+    along its ``modes`` lowest modes both ways, each saddle's two sides
+    relaxed, all to ``fmax`` in at most ``steps`` steps; points compared by
+    :func:`same_point` with ``energy_rtol`` and ``distance_atol``."""
+    start = fresh_copy(atoms)
+    point = classify(start, ftol=np.inf)   # its fmax is tested here
+    if point.verdict != 'minimum' or point.fmax > fmax:
+        raise ValueError(f'landscape needs a minimum to start from; this is a '
+                         f'{point.verdict} with fmax {point.fmax:.3g} (> {fmax:g}?): '
+                         'relax it first')
+    found = Landscape(minima=[start])
+
+    def index_of(points: list[Atoms], candidate: Atoms) -> int:
+        for i, known in enumerate(points):
+            if same_point(known, candidate, energy_rtol, distance_atol):
+                return i
+        points.append(candidate)
+        return len(points) - 1
+
+    for mode in point.modes[:modes]:
+        for sign in (1.0, -1.0):
+            saddle = fresh_copy(start)
+            if not _run(Maud(saddle, target='saddle', mode=sign * mode, logfile=None),
+                        fmax, steps):
+                found.failed += 1
+                continue
+            before = len(found.saddles)
+            k = index_of(found.saddles, saddle)
+            if k < before:
+                continue
+            ends = []
+            for side in displace_along_mode(saddle, classify(saddle, ftol=fmax)):
+                if not _run(Maud(side, logfile=None), fmax, steps) or \
+                        classify(side, ftol=fmax).verdict != 'minimum':
+                    found.failed += 1
+                    ends.append(None)
+                    continue
+                ends.append(index_of(found.minima, side))
+            if None in ends:   # a saddle joins what its two sides reached
+                found.saddles.pop()
+                continue
+            found.joins.append((ends[0], ends[1]))
+    return found
+
+
+def _run(opt: Maud, fmax: float, steps: int) -> bool:
+    """Whether ``opt`` converged (a MaudError, a wrong index say, is no)."""
+    try:
+        return bool(opt.run(fmax=fmax, steps=steps))
+    except MaudError:
+        return False

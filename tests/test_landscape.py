@@ -1,0 +1,68 @@
+"""The landscape around a minimum (ase_maud.landscape) against ASE's basin hopping."""
+
+import numpy as np
+import pytest
+from ase.optimize.basin import BasinHopping
+
+from ase_maud import Maud
+from ase_maud.analysis import classify
+from ase_maud.bench.runner import fresh_copy
+from ase_maud.landscape import landscape, same_point
+from ase_maud.scenes import build
+
+FMAX = 1e-6
+
+
+def _minimum(scene, size, seed):
+    atoms = build(scene, size, seed=seed)
+    Maud(atoms, logfile=None).run(fmax=FMAX, steps=3000)
+    return atoms
+
+
+@pytest.mark.parametrize('scene, size, seed', [
+    ('all_pairs2d', 9, 0), ('all_pairs2d', 9, 1), ('all_pairs', 6, 0), ('all_pairs', 7, 1)])
+def test_landscape_is_minima_joined_by_index_one_saddles(scene, size, seed):
+    """Each saddle is a verified index-1 point above both minima it joins,
+    each minimum a verified minimum, and no two of either are the same."""
+    found = landscape(_minimum(scene, size, seed), modes=2, fmax=FMAX)
+    assert found.saddles and found.failed == 0
+    for saddle in found.saddles:
+        point = classify(fresh_copy(saddle), ftol=FMAX)
+        assert point.verdict == 'saddle' and point.index == 1
+    for minimum in found.minima:
+        assert classify(fresh_copy(minimum), ftol=FMAX).verdict == 'minimum'
+    assert all(min(pair) > 0 for pair in found.barriers())
+    for points in (found.minima, found.saddles):
+        assert not any(same_point(a, b) for i, a in enumerate(points) for b in points[:i])
+
+
+@pytest.mark.parametrize('scene, size, seed', [
+    ('all_pairs2d', 9, 0), ('all_pairs2d', 9, 1), ('all_pairs', 6, 1)])
+def test_basin_hopping_finds_no_minimum_the_landscape_misses(scene, size, seed):
+    """Every minimum a seeded basin-hopping run (30 hops, Maud as its local
+    optimiser) visits is one of the landscape's, the lowest among them."""
+    found = landscape(_minimum(scene, size, seed), modes=2, fmax=FMAX)
+    atoms = build(scene, size, seed=seed)
+    visited = []
+
+    def keep():
+        here = fresh_copy(atoms)
+        if not any(same_point(here, known) for known in visited):
+            visited.append(here)
+
+    np.random.seed(seed)
+    with BasinHopping(atoms, temperature=1.0, dr=0.5, optimizer=Maud, fmax=FMAX,
+                      logfile=None, optimizer_logfile=None, trajectory=None,
+                      local_minima_trajectory=None) as hopping:
+        hopping.attach(keep)
+        hopping.run(30)
+    assert visited
+    for minimum in visited:
+        assert any(same_point(minimum, known) for known in found.minima)
+    lowest = min(m.get_potential_energy() for m in found.minima)
+    assert min(m.get_potential_energy() for m in visited) == pytest.approx(lowest, rel=1e-9)
+
+
+def test_landscape_needs_a_minimum():
+    with pytest.raises(ValueError, match='needs a minimum to start from'):
+        landscape(build('all_pairs2d', 7), modes=1)

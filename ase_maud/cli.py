@@ -34,6 +34,7 @@ any work (:func:`check_outputs`).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import warnings
 from collections.abc import Sequence
@@ -240,7 +241,9 @@ def saddles(args: argparse.Namespace) -> int:
 
     atoms = read_net(args.file, index=args.frame, **_net_options(args))
     Maud(atoms, logfile=None).run(fmax=args.fmax, steps=args.steps)
-    found = landscape(atoms, modes=args.modes, fmax=args.fmax, steps=args.steps)
+    with _dask_client(args.workers, args.scheduler) as client:
+        found = landscape(atoms, modes=args.modes, fmax=args.fmax, steps=args.steps,
+                          client=client)
     energies = [m.get_potential_energy() for m in found.minima]
     barriers = [s.get_potential_energy() for s in found.saddles]
     for s, ((i, j), (up_i, up_j)) in enumerate(zip(found.joins, found.barriers(),
@@ -253,6 +256,29 @@ def saddles(args: argparse.Namespace) -> int:
     save_disconnectivity(energies, barriers, found.joins, args.out)
     Path(_graph_json(args)).write_text(json.dumps(found.todict()))
     return 1 if found.failed else 0
+
+
+@contextlib.contextmanager
+def _dask_client(workers: int | None, scheduler: str | None):
+    """A dask.distributed Client: of a LocalCluster of ``workers`` processes
+    (one thread each), or of the scheduler at ``scheduler``; None for
+    neither. A ValueError if dask.distributed is not installed."""
+    if workers is None and scheduler is None:
+        yield None
+        return
+    try:
+        import distributed
+    except ImportError:
+        raise ValueError("--workers and --scheduler need dask.distributed: pip install "
+                         "'ase_maud[cluster]'") from None
+    if scheduler is not None:
+        with distributed.Client(scheduler) as client:
+            yield client
+        return
+    with distributed.LocalCluster(n_workers=workers, threads_per_worker=1,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        yield client
 
 
 def _graph_json(args: argparse.Namespace) -> str:
@@ -530,6 +556,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--out', default='graph.png',
                    help='the disconnectivity graph (default: %(default)s); its JSON '
                    'beside it, .json')
+    spread = p.add_mutually_exclusive_group()
+    spread.add_argument('--workers', type=_ruled('count', int), metavar='N',
+                        help='run the climbs and descents on a dask LocalCluster of N '
+                        'worker processes on this machine')
+    spread.add_argument('--scheduler', metavar='ADDRESS',
+                        help='run them on the dask.distributed scheduler at ADDRESS '
+                        '(tcp://host:8786: a cluster of machines)')
     _add_net_options(p)
     _add_threads(p, None, 'leave the environment alone')
     p.set_defaults(func=saddles)

@@ -12,12 +12,19 @@ to ``distance_atol`` (length units): that is blind to rigid motion and to
 relabelling of the points (and takes mirror images as one). A climb or
 descent that fails (a :class:`~ase_maud.monitor.MaudError`, or no convergence
 in ``steps``) is counted in :attr:`Landscape.failed`, never silently dropped.
-The climbs and descents run one after another, in this process.
+
+The climbs are independent tasks, and so are the descents from the saddles
+they find: with a ``dask.distributed`` ``Client`` (a ``LocalCluster`` on this
+machine, or a scheduler of a cluster of machines) they run on its workers,
+otherwise one after another in this process; the graph is the same either
+way (the results are merged in the order of the tasks).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from ase import Atoms
@@ -78,13 +85,15 @@ class Landscape:
 
 
 def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 1000,
-              energy_rtol: float = ENERGY_RTOL,
-              distance_atol: float = DISTANCE_ATOL) -> Landscape:
+              energy_rtol: float = ENERGY_RTOL, distance_atol: float = DISTANCE_ATOL,
+              client: Any = None) -> Landscape:
     """The :class:`Landscape` around the minimum ``atoms`` (a MaudCalculator
     scene relaxed to ``fmax``; a ValueError if it is not a minimum): climbs
     along its ``modes`` lowest modes both ways, each saddle's two sides
     relaxed, all to ``fmax`` in at most ``steps`` steps; points compared by
-    :func:`same_point` with ``energy_rtol`` and ``distance_atol``."""
+    :func:`same_point` with ``energy_rtol`` and ``distance_atol``. The climbs
+    and descents run on the workers of ``client`` (a
+    ``dask.distributed.Client``) if given, else in this process."""
     start = fresh_copy(atoms)
     point = classify(start, ftol=np.inf)   # its fmax is tested here
     if point.verdict != 'minimum' or point.fmax > fmax:
@@ -100,30 +109,48 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
         points.append(candidate)
         return len(points) - 1
 
-    for mode in point.modes[:modes]:
-        for sign in (1.0, -1.0):
-            saddle = fresh_copy(start)
-            if not _run(Maud(saddle, target='saddle', mode=sign * mode, logfile=None),
-                        fmax, steps):
-                found.failed += 1
-                continue
-            before = len(found.saddles)
-            k = index_of(found.saddles, saddle)
-            if k < before:
-                continue
-            ends = []
-            for side in displace_along_mode(saddle, classify(saddle, ftol=fmax)):
-                if not _run(Maud(side, logfile=None), fmax, steps) or \
-                        classify(side, ftol=fmax).verdict != 'minimum':
-                    found.failed += 1
-                    ends.append(None)
-                    continue
-                ends.append(index_of(found.minima, side))
-            if None in ends:   # a saddle joins what its two sides reached
-                found.saddles.pop()
-                continue
-            found.joins.append((ends[0], ends[1]))
+    directions = [sign * mode for mode in point.modes[:modes] for sign in (1.0, -1.0)]
+    distinct: list[Atoms] = []   # the saddles climbed to, each once
+    for saddle in _map(client, _climb, [(start, d, fmax, steps) for d in directions]):
+        if saddle is None:
+            found.failed += 1
+        else:
+            index_of(distinct, saddle)
+    descents = _map(client, _descend, [(s, fmax, steps) for s in distinct])
+    for saddle, ends in zip(distinct, descents, strict=True):
+        if None in ends:   # a saddle joins what its two sides reached
+            found.failed += ends.count(None)
+            continue
+        found.saddles.append(saddle)
+        found.joins.append(tuple(index_of(found.minima, end) for end in ends))
     return found
+
+
+def _map(client: Any, task: Callable, arguments: list[tuple]) -> list:
+    """``task(*a)`` for each ``a`` of ``arguments``, in their order: on the
+    workers of ``client`` if given, else here."""
+    if client is None:
+        return [task(*a) for a in arguments]
+    return client.gather([client.submit(task, *a, pure=False) for a in arguments])
+
+
+def _climb(start: Atoms, direction: np.ndarray, fmax: float, steps: int) -> Atoms | None:
+    """The index-1 saddle Maud climbs to from ``start`` along ``direction``,
+    or None if the climb fails."""
+    saddle = fresh_copy(start)
+    opt = Maud(saddle, target='saddle', mode=direction, logfile=None)
+    return saddle if _run(opt, fmax, steps) else None
+
+
+def _descend(saddle: Atoms, fmax: float, steps: int) -> list[Atoms | None]:
+    """The minima relaxed to from either side of ``saddle``'s unstable mode
+    (None for a side that fails or ends elsewhere than at a minimum)."""
+    ends = []
+    for side in displace_along_mode(saddle, classify(saddle, ftol=fmax)):
+        converged = _run(Maud(side, logfile=None), fmax, steps)
+        ends.append(side if converged and classify(side, ftol=fmax).verdict == 'minimum'
+                    else None)
+    return ends
 
 
 def _run(opt: Maud, fmax: float, steps: int) -> bool:

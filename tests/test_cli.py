@@ -1,6 +1,7 @@
 """The ase-maud command: help, relax (a scene or a net file), show, classify,
 scene selection."""
 
+import json
 import re
 import subprocess
 import sys
@@ -392,6 +393,21 @@ def test_saddles_prints_draws_and_writes_the_landscape(tmp_path, capsys, seed):
     assert sorted(s['energy'] for s in graph['saddles']) == pytest.approx(
         sorted(s.get_potential_energy() for s in found.saddles), rel=1e-9)
     assert graph['failed'] == 0 and lines[-1].startswith(f"{len(found.minima)} minima")
+
+
+def test_saddles_on_two_local_workers_writes_the_same_graph(tmp_path, capsys):
+    pytest.importorskip('distributed')
+    write_net(tmp_path / 'c.traj', build('all_pairs2d', 9, seed=2))
+    graphs = []
+    for spread in ([], ['--workers', '2']):
+        out = tmp_path / f'graph{len(spread)}.png'
+        assert main(['saddles', str(tmp_path / 'c.traj'), '--modes', '2', '--out',
+                     str(out), *spread]) == 0
+        graphs.append(json.loads(out.with_suffix('.json').read_text()))
+    capsys.readouterr()
+    assert graphs[0]['joins'] == graphs[1]['joins'] and graphs[0]['saddles']
+    assert [s['energy'] for s in graphs[0]['saddles']] == pytest.approx(
+        [s['energy'] for s in graphs[1]['saddles']], rel=1e-12)
 
 
 def test_saddles_checks_its_output_first(tmp_path):

@@ -66,3 +66,22 @@ def test_basin_hopping_finds_no_minimum_the_landscape_misses(scene, size, seed):
 def test_landscape_needs_a_minimum():
     with pytest.raises(ValueError, match='needs a minimum to start from'):
         landscape(build('all_pairs2d', 7), modes=1)
+
+
+def _graph(found):
+    """A landscape as comparable numbers: energies of minima and saddles, joins."""
+    return ([round(m.get_potential_energy(), 9) for m in found.minima],
+            [round(s.get_potential_energy(), 9) for s in found.saddles],
+            found.joins, found.failed)
+
+
+@pytest.mark.parametrize('scene, size, seed', [('all_pairs2d', 9, 0), ('all_pairs', 6, 1)])
+def test_a_landscape_on_two_workers_is_the_one_in_process(scene, size, seed):
+    distributed = pytest.importorskip('distributed')
+    minimum = _minimum(scene, size, seed)
+    here = landscape(minimum, modes=2, fmax=FMAX)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        spread = landscape(minimum, modes=2, fmax=FMAX, client=client)
+    assert _graph(spread) == _graph(here) and here.saddles

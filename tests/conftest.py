@@ -12,7 +12,8 @@ import pytest
 
 #: Test modules whose every test is an integration test.
 INTEGRATION_MODULES = {'test_accuracy', 'test_bench', 'test_cli', 'test_drivers',
-                       'test_examples', 'test_restart_kill'}
+                       'test_examples', 'test_filters', 'test_landscape',
+                       'test_restart_kill', 'test_run_files'}
 
 
 def pytest_collection_modifyitems(config, items):

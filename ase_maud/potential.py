@@ -144,13 +144,6 @@ class MaudPotential:
         return self._kept(('hessian', natoms), lambda: physics.spring_hessian(
             self._springs_within(natoms), natoms, self.Q * self.stiffnesses, self.dim))
 
-    def spring_energy_forces(self, positions: np.ndarray) -> tuple[float, np.ndarray]:
-        """The springs' energy and forces (N, 3) at ``positions`` (length units)."""
-        check_range(self.springs, len(positions))
-        energy, forces = physics.spring_terms(self.reduced(positions), self.springs,
-                                              self.stiffnesses)
-        return self.energy_unit * energy, self.force_unit * forces
-
     def _springs_within(self, natoms: int) -> np.ndarray:
         check_range(self.springs, natoms)
         return self.springs

@@ -46,30 +46,31 @@ def _read(frames, index: int) -> Atoms | None:
         return None
 
 
+def _last_intact(path: Path) -> tuple[Atoms | None, int, int]:
+    """The last intact frame of ``path`` (or None), how many frames read whole
+    from the start, and how many the file names."""
+    if not path.is_file() or path.stat().st_size == 0:
+        return None, 0, 0
+    with _frames(path) as frames:
+        named = len(frames)
+        for index in range(named - 1, -1, -1):
+            if (atoms := _read(frames, index)) is not None:
+                return atoms, index + 1, named
+    return None, 0, named
+
+
 def intact(path: str | os.PathLike) -> tuple[int, int]:
     """``(intact, named)``: how many frames of the trajectory at ``path`` read
     whole from its start, and how many it names (0, 0 for a missing or empty
     file)."""
-    path = Path(path)
-    if not path.is_file() or path.stat().st_size == 0:
-        return 0, 0
-    with _frames(path) as frames:
-        named = len(frames)
-        for index in range(named - 1, -1, -1):
-            if _read(frames, index) is not None:
-                return index + 1, named
-    return 0, named
+    return _last_intact(Path(path))[1:]
 
 
 def last_frame(path: str | os.PathLike) -> Atoms | None:
     """The last intact frame of the trajectory at ``path``, or None if it has
     none (missing, empty, killed before its first frame was complete, or cut
     before it)."""
-    count, _ = intact(path)
-    if count == 0:
-        return None
-    with _frames(Path(path)) as frames:
-        return _read(frames, count - 1)
+    return _last_intact(Path(path))[0]
 
 
 def repair(path: str | os.PathLike) -> str | None:

@@ -205,12 +205,14 @@ class MaudState:
     restart; ``v``: the last move (after constraints), or None; ``last``:
     where the last step began; ``pairs``: the L-BFGS memory ``(s, y)``;
     ``model``: what the stiffness model has learnt (:meth:`StiffnessModel.state`);
-    ``modes``: the modes a saddle search follows uphill, (order, N, 3), or
-    None before its first step, and ``predicted`` the energy change its last
-    move's model predicted (lowest modes only) (a restart file does not keep them: a resumed
-    search follows the lowest modes where it resumes).
+    ``modes``: the modes a saddle search follows uphill, (order, N, 3),
+    signed as followed, or None before its first step (and for other
+    targets); ``predicted``: the energy change its last move's model
+    predicted (lowest modes only; else None). A restart file keeps them, so
+    a resumed search follows the same modes.
     ``solver``, the model at ``last.x``, is not saved: after a restart it is
-    computed again if a step goes back there.
+    computed there again when the next step needs it (a step taken back, or
+    a saddle step's trust ratio).
     """
 
     gamma: float
@@ -274,10 +276,14 @@ class MaudMethod:
         (merit, forces and the merit's relative error ``noise``); ``state.last``
         becomes where the move starts (``x``, or the last point if the step
         to ``x`` is taken back)."""
-        if self.uphill(state, x, merit, forces, noise):
+        uphill = self.uphill(state, x, merit, forces, noise)
+        if state.solver is None and state.last is not None and (
+                uphill or self.model.target == 'saddle'):
+            # resumed from a restart file: the model where the last step began,
+            # for the step taken back or the saddle step's trust ratio
+            state.solver = solver_at(state.last.x)
+        if uphill:
             self._revert(state, x, merit, forces)
-            if state.solver is None:   # resumed from a restart file
-                state.solver = solver_at(state.last.x)
         else:
             self._accept(state, x, forces)
             state.last = Point(x.copy(), merit, forces.copy(), noise)
@@ -317,8 +323,6 @@ class MaudMethod:
         s, y = x - state.last.x, state.last.forces - forces
         state.model = self.model.observe(s, y, state.model)
         if self.model.target == 'saddle':   # gamma is the trust fraction
-            if state.modes is None:   # resumed from a restart file: modes not kept
-                return
             self._trust(state, s, y)
             s, y = _off(s, state.modes), _off(y, state.modes)   # the minimiser's part
         else:
@@ -440,8 +444,6 @@ class MaudMethod:
         of the energy change over the step ``s`` (the trapezoid rule, from
         the forces at both ends: ``y`` is their drop) to the change the
         Hessian at its start predicted (module docstring)."""
-        if state.solver is None:   # resumed from a restart file
-            return
         forces = state.last.forces
         if hasattr(state.solver, 'modes'):
             values, modes = state.solver.modes()

@@ -278,9 +278,11 @@ class Maud(Optimizer):
 
     def _restart_file(self) -> RestartFile:
         """The run's :class:`~ase_maud.restart.RestartFile` (one per run, so
-        that each step writes only what is new)."""
+        that each step writes only what is new), with a row per mode a saddle
+        search follows."""
         if getattr(self, '_restart', None) is None:
-            self._restart = RestartFile(self.restart)
+            self._restart = RestartFile(
+                self.restart, self.rule.order if self.target == 'saddle' else None)
         return self._restart
 
     @classmethod

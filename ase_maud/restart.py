@@ -3,11 +3,13 @@ and enough to carry on exactly.
 
 Two files. ``NAME`` is JSON: the step, the run monitor's state, the step
 rule's scalars (gamma, momentum count, the last point's merit and noise, the
-model's learnt state) and which rows of the arrays file hold what.
-``NAME.arrays`` holds the arrays as raw float64 rows of 3N numbers each:
+model's learnt state, a saddle search's predicted energy change) and which
+rows of the arrays file hold what. ``NAME.arrays`` holds the arrays as raw
+float64 rows of 3N numbers each:
 
-- two state slots of three rows (the positions, the last point and its
-  forces), used in turn;
+- two state slots, used in turn, of three rows (the positions, the last
+  point and its forces) and, for a saddle search, one row per followed mode
+  (its ``order``, signed as followed: ``modes`` in ``NAME``);
 - pair slots of two rows (an L-BFGS pair ``s``, ``y``), each pair written
   once, into a slot the committed JSON does not name (at most ``memory + 1``
   slots are ever used).
@@ -44,8 +46,9 @@ from .method import MaudState, Point
 from .topology import fixed_atoms
 
 #: The version of the layout; a file of another one is refused by name.
-FORMAT = 'maud-restart-3'
-#: Rows per state slot: positions, the last point, its forces.
+FORMAT = 'maud-restart-4'
+#: Rows per state slot before the followed modes: positions, the last
+#: point, its forces.
 STATE_ROWS = 3
 #: Longest time between two flushes of the files to disk (``fsync``), from
 #: the first write on: what a crash of the machine (not of the process) can
@@ -57,11 +60,15 @@ SYNC_SECONDS = 10.0
 
 class RestartFile:
     """Reads and writes the restart files of one run (module docstring);
-    ``path`` is the JSON file, ``path + '.arrays'`` the rows."""
+    ``path`` is the JSON file, ``path + '.arrays'`` the rows; ``modes``: the
+    modes the run follows uphill (a saddle search's ``order``; None for other
+    targets), which fixes the size of a state slot."""
 
-    def __init__(self, path: str | os.PathLike):
+    def __init__(self, path: str | os.PathLike, modes: int | None = None):
         self.path = Path(path)
         self.arrays = self.path.with_name(self.path.name + '.arrays')
+        self.modes = modes
+        self._slot_rows = STATE_ROWS + (modes or 0)
         remove_leftovers(self.path)   # of runs killed while replacing it
         self._slot = 1   # the state slot written last
         self._synced = time.monotonic()   # of the last fsync (or of the start)
@@ -72,8 +79,8 @@ class RestartFile:
     def write(self, step: int, x: np.ndarray, state: MaudState,
               monitor: dict[str, Any], fmax_now: float, scene: dict[str, Any]) -> None:
         """Save the run at ``step``: positions ``x`` (N, 3), the step rule's
-        ``state`` (whose ``last`` is set), the monitor's state and the
-        scene's :func:`signature`."""
+        ``state`` (whose ``last`` is set, and ``modes`` for a saddle search),
+        the monitor's state and the scene's :func:`signature`."""
         rows = x.size
         self._slot = 1 - self._slot
         kept = {id(s): self._pairs[id(s)] for s, _ in state.pairs if id(s) in self._pairs}
@@ -81,13 +88,16 @@ class RestartFile:
         free = (slot for slot in itertools.count() if slot not in taken)
         sync = time.monotonic() - self._synced >= SYNC_SECONDS
         with open(self.arrays, 'r+b' if self.arrays.exists() else 'w+b') as handle:
-            state_crc = self._write_rows(handle, self._slot * STATE_ROWS, rows,
+            first = self._slot * self._slot_rows
+            state_crc = self._write_rows(handle, first, rows,
                                          [x, state.last.x, state.last.forces])
+            modes_crc = self._write_rows(handle, first + STATE_ROWS, rows,
+                                         [] if self.modes is None else list(state.modes))
             for s, y in state.pairs:
                 if id(s) not in kept:
                     slot = next(free)
                     kept[id(s)] = s, slot, self._write_rows(
-                        handle, 2 * STATE_ROWS + 2 * slot, rows, [s, y])
+                        handle, 2 * self._slot_rows + 2 * slot, rows, [s, y])
             if sync:
                 handle.flush()
                 os.fsync(handle.fileno())
@@ -95,11 +105,12 @@ class RestartFile:
         document = {
             'format': FORMAT, 'rows': rows, 'step': step, 'slot': self._slot,
             'pairs': [kept[id(s)][1] for s, _ in state.pairs],
-            'crc': {'state': state_crc, 'pairs': [kept[id(s)][2] for s, _ in state.pairs]},
+            'crc': {'state': state_crc, 'modes': modes_crc,
+                    'pairs': [kept[id(s)][2] for s, _ in state.pairs]},
             'gamma': state.gamma, 'k': state.k, 'moving': state.v is not None,
             'merit': state.last.merit, 'noise': state.last.noise,
-            'model': state.model, 'monitor': _plain(monitor), 'fmax_now': fmax_now,
-            'scene': scene}
+            'model': state.model, 'modes': self.modes, 'predicted': state.predicted,
+            'monitor': _plain(monitor), 'fmax_now': fmax_now, 'scene': scene}
         replace_text(self.path, json.dumps(document), sync)
         if sync:
             self._synced = time.monotonic()
@@ -107,22 +118,31 @@ class RestartFile:
     def read(self) -> dict[str, Any]:
         """What :meth:`write` saved: ``step``, ``x`` (N, 3), ``state`` (a
         :class:`MaudState`), ``monitor``, ``fmax_now``, ``scene``. A file of another
-        layout or one whose arrays file is missing or short is a ValueError
-        naming it."""
+        layout, a damaged field, a file of a run that follows other modes
+        (see :attr:`modes`), or one whose arrays file is missing, short or
+        damaged is a ValueError naming it (and the field)."""
         try:
             document = json.loads(self.path.read_text())
         except (OSError, ValueError, RecursionError) as error:
             raise ValueError(f'restart file {str(self.path)!r} cannot be read: '
                              f'{error}') from None
         if not isinstance(document, dict) or document.get('format') != FORMAT:
+            held = document.get('format') if isinstance(document, dict) else None
             raise ValueError(f'restart file {str(self.path)!r} was not written by this '
-                             'version of Maud; delete it')
+                             f'version of Maud (format {held!r}, this version reads '
+                             f'{FORMAT!r}); delete it and its arrays file')
         if (damaged := _damaged_field(document)) is not None:
             raise ValueError(f'restart file {str(self.path)!r} is damaged: {damaged}; '
                              'delete it and its arrays file')
+        if document['modes'] != self.modes:
+            raise ValueError(f'restart file {str(self.path)!r} is of another run: '
+                             f"'modes' {document['modes']!r} in it, {self.modes!r} in "
+                             'this run (the modes a saddle search follows, its order; '
+                             "null for other targets); give that run's target and "
+                             'order, or delete it')
         rows, slot, pairs = document['rows'], document['slot'], document['pairs']
-        last_row = max((slot + 1) * STATE_ROWS,
-                       2 * STATE_ROWS + 2 * (max(pairs) + 1) if pairs else 0)
+        size, modes = self._slot_rows, self.modes or 0
+        last_row = max((slot + 1) * size, 2 * size + 2 * (max(pairs) + 1) if pairs else 0)
         needed = last_row * rows * 8
         if not self.arrays.is_file() or self.arrays.stat().st_size < needed:
             raise ValueError(f'restart file {str(self.path)!r}: its arrays file '
@@ -130,28 +150,36 @@ class RestartFile:
         table = np.fromfile(self.arrays, dtype=np.float64, count=last_row * rows
                             ).reshape(-1, rows)
         crc = document['crc']
-        groups = [(slot * STATE_ROWS, STATE_ROWS, crc['state'])] + [
-            (2 * STATE_ROWS + 2 * p, 2, c) for p, c in zip(pairs, crc['pairs'], strict=True)]
-        for first, count, expected in groups:
+        groups = [('the positions, the last point and its forces', slot * size,
+                   STATE_ROWS, crc['state'])]
+        if modes:
+            groups.append(("the followed modes, 'modes'", slot * size + STATE_ROWS,
+                           modes, crc['modes']))
+        groups += [(f'pair slot {p}', 2 * size + 2 * p, 2, c)
+                   for p, c in zip(pairs, crc['pairs'], strict=True)]
+        for what, first, count, expected in groups:
+            where = (f'restart file {str(self.path)!r}: rows {first}-{first + count - 1} '
+                     f'of {str(self.arrays)!r}')
             if zlib.crc32(table[first:first + count].tobytes()) != expected:
-                raise ValueError(f'restart file {str(self.path)!r}: rows {first}-'
-                                 f'{first + count - 1} of {str(self.arrays)!r} are not '
-                                 'what it wrote (a crash of the machine before they '
-                                 'reached the disk?); delete both files')
+                raise ValueError(f'{where} are not what it wrote ({what}; a crash of the '
+                                 'machine before they reached the disk?); delete both files')
             if not np.isfinite(table[first:first + count]).all():
-                raise ValueError(f'restart file {str(self.path)!r}: rows {first}-'
-                                 f'{first + count - 1} of {str(self.arrays)!r} hold '
-                                 'non-finite numbers; delete both files')
-        x, last_x, forces = (table[slot * STATE_ROWS + k].reshape(-1, 3).copy()
+                raise ValueError(f'{where} hold non-finite numbers ({what}); delete both '
+                                 'files')
+        x, last_x, forces = (table[slot * size + k].reshape(-1, 3).copy()
                              for k in range(STATE_ROWS))
+        followed = table[slot * size + STATE_ROWS:(slot + 1) * size].reshape(
+            modes, rows // 3, 3).copy()
         state = MaudState(
             gamma=float(document['gamma']), k=document['k'],
             v=x - last_x if document['moving'] else None,
             last=Point(last_x, float(document['merit']), forces, float(document['noise'])),
-            pairs=[(table[2 * STATE_ROWS + 2 * p].reshape(-1, 3).copy(),
-                    table[2 * STATE_ROWS + 2 * p + 1].reshape(-1, 3).copy())
+            pairs=[(table[2 * size + 2 * p].reshape(-1, 3).copy(),
+                    table[2 * size + 2 * p + 1].reshape(-1, 3).copy())
                    for p in pairs],
-            model=dict(document['model']))
+            model=dict(document['model']),
+            modes=None if self.modes is None else followed,
+            predicted=None if document['predicted'] is None else float(document['predicted']))
         self._slot = slot
         self._pairs = {id(s): (s, p, c) for (s, _), p, c
                        in zip(state.pairs, pairs, crc['pairs'], strict=True)}
@@ -187,8 +215,8 @@ FIELDS: dict[str, tuple[str, Any]] = {
     'slot': ('0 or 1', lambda v: _whole(v) and v <= 1),
     'pairs': ('a list of distinct whole numbers >= 0',
               lambda v: isinstance(v, list) and all(map(_whole, v)) and len(set(v)) == len(v)),
-    'crc': ('{"state": a CRC-32, "pairs": one per pair}',
-            lambda v: isinstance(v, dict) and _whole(v.get('state'))
+    'crc': ('{"state": a CRC-32, "modes": a CRC-32, "pairs": one per pair}',
+            lambda v: isinstance(v, dict) and _whole(v.get('state')) and _whole(v.get('modes'))
             and isinstance(v.get('pairs'), list) and all(map(_whole, v['pairs']))),
     'gamma': ('a positive finite number', _positive),
     'k': ('a whole number >= 0', _whole),
@@ -197,6 +225,9 @@ FIELDS: dict[str, tuple[str, Any]] = {
     'noise': ('a finite number >= 0', lambda v: as_number(v) == 0 or _positive(v)),
     'model': ('an object of positive finite numbers',
               lambda v: isinstance(v, dict) and all(map(_positive, v.values()))),
+    'modes': ('null or a whole number >= 0 (the modes a saddle search follows)',
+              lambda v: v is None or _whole(v)),
+    'predicted': ('null or a finite number', lambda v: v is None or as_number(v) is not None),
     'monitor': ('an object', lambda v: isinstance(v, dict)),
     'fmax_now': ('a number >= 0',
                  lambda v: as_number(v) == 0 or _positive(v) or v == math.inf),

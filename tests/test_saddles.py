@@ -2,16 +2,20 @@
 against Sella (tools/saddles.py)."""
 
 import importlib.util
+import json
+import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
+from ase.io import read
 from ase.mep import NEB
 from ase.optimize.optimize import Optimizer
 
 from ase_maud import Maud, MaudError, WrongIndexError
 from ase_maud.analysis import classify, displace_along_mode
 from ase_maud.bench.runner import fresh_copy
+from ase_maud.restart import STATE_ROWS
 from ase_maud.scenes import build
 from ase_maud.stiffness import ExactModel
 
@@ -252,19 +256,142 @@ def test_large_scene_saddle_search_follows_the_lowest_mode(seed):
     assert _verified_index(atoms) == (1, True)
 
 
-@pytest.mark.parametrize('seed', range(2))
-def test_saddle_search_resumes_from_its_restart_file(tmp_path, seed):
-    """A search stopped after a few steps and resumed from its restart file
-    (which does not keep the followed modes) still ends on a verified
-    index-1 saddle."""
-    start = saddles.make_start('all_pairs2d', 9, seed, 'up')
+def _frames(start, directory, stop=None, **keywords):
+    """The frames of a search from ``start`` to ``FMAX``, run whole
+    (``stop`` None) or stopped after ``stop`` steps and resumed from its
+    restart file with ``Maud.resume``; and its end point."""
+    directory.mkdir()
     atoms = fresh_copy(start)
-    restart, trajectory = tmp_path / 'maud.json', tmp_path / 'maud.traj'
-    with Maud(atoms, target='saddle', restart=restart, trajectory=trajectory,
+    restart, trajectory = directory / 'maud.json', directory / 'maud.traj'
+    if stop is not None:
+        with Maud(atoms, target='saddle', restart=restart, trajectory=trajectory,
+                  logfile=None, **keywords) as opt:
+            assert not opt.run(fmax=FMAX, steps=stop)
+        atoms = fresh_copy(start)
+        opt = Maud.resume(atoms, restart=restart, trajectory=trajectory,
+                          target='saddle', logfile=None, **keywords)
+    else:
+        opt = Maud(atoms, target='saddle', trajectory=trajectory, logfile=None,
+                   **keywords)
+    with opt:
+        assert opt.run(fmax=FMAX, steps=300)
+    return [frame.positions for frame in read(trajectory, ':')], atoms
+
+
+def _assert_same_search(whole, resumed):
+    (frames, end), (again, resumed_end) = whole, resumed
+    assert len(again) == len(frames)
+    for k, (x, y) in enumerate(zip(frames, again, strict=True)):
+        assert np.abs(x - y).max() <= 1e-12, f'frame {k} differs'
+    np.testing.assert_allclose(resumed_end.positions, end.positions, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize('seed', range(3))
+@pytest.mark.parametrize('order', [1, 2])
+def test_saddle_search_resumes_exactly_after_any_step(tmp_path, seed, order):
+    """A search stopped after any of its steps and resumed from its restart
+    file makes the uninterrupted search's steps (the followed modes, the
+    trust fraction and the prediction it is judged by carry over) and ends
+    on the same point, of the index sought."""
+    start = saddles.make_start('all_pairs2d', 12, seed, 'up')
+    whole = _frames(start, tmp_path / 'whole', order=order)
+    steps = len(whole[0]) - 1
+    assert steps >= 3
+    for stop in range(1, steps):
+        resumed = _frames(start, tmp_path / f'stop{stop}', stop, order=order)
+        _assert_same_search(whole, resumed)
+    assert _verified_index(whole[1]) == (order, True)
+
+
+@pytest.mark.parametrize('seed', range(2))
+def test_large_scene_saddle_search_resumes_exactly(tmp_path, seed):
+    """The same with the lowest modes only (the springs model: LOBPCG
+    started from the followed modes, the trust ratio judged by the last
+    move's prediction, the L-BFGS memory for the rest), stopped after early
+    steps, while the trust fraction still changes."""
+    start = saddles.make_start('all_pairs2d', 12, seed, 'up')
+    whole = _frames(start, tmp_path / 'whole', model='springs')
+    for stop in (2, 6):
+        _assert_same_search(whole, _frames(start, tmp_path / f'stop{stop}', stop,
+                                           model='springs'))
+    assert _verified_index(whole[1]) == (1, True)
+
+
+def _modes_rows(document):
+    """The rows of the arrays file that hold the followed modes."""
+    first = document['slot'] * (STATE_ROWS + document['modes']) + STATE_ROWS
+    return slice(first, first + document['modes'])
+
+
+def _change_a_mode(value, crc):
+    """Set one number of the followed modes (chosen by ``rng``) to ``value``
+    of it, and the CRC-32 of their rows to match if ``crc``."""
+    def edit(document, table, rng):
+        rows = _modes_rows(document)
+        row, column = rng.integers(rows.start, rows.stop), rng.integers(table.shape[1])
+        table[row, column] = value(table[row, column])
+        if crc:
+            document['crc']['modes'] = zlib.crc32(table[rows].tobytes())
+    return edit
+
+
+def _set(key, value):
+    def edit(document, table, rng):
+        document[key] = value
+    return edit
+
+
+def _unchanged(document, table, rng):
+    pass
+
+
+#: A restart file of an order-2 search damaged, or resumed with other
+#: keywords: (the damage, the resumed run's keywords, the error's words).
+MODES_DAMAGES = {
+    'a mode changed': (_change_a_mode(lambda v: v + 0.5, crc=False), {'order': 2},
+                       r": rows \d+-\d+ of '.*maud.json.arrays' are not what it wrote "
+                       r"\(the followed modes, 'modes'"),
+    'a mode NaN': (_change_a_mode(lambda v: np.nan, crc=True), {'order': 2},
+                   r"hold non-finite numbers \(the followed modes, 'modes'\)"),
+    'modes negative': (_set('modes', -1), {'order': 2},
+                       "is damaged: 'modes' must be null or a whole number"),
+    'modes a string': (_set('modes', '2'), {'order': 2},
+                       "is damaged: 'modes' must be null or a whole number"),
+    'predicted a string': (_set('predicted', 'x'), {'order': 2},
+                           "is damaged: 'predicted' must be null or a finite number"),
+    'no CRC of the modes': (lambda d, t, r: d['crc'].pop('modes'), {'order': 2},
+                            'is damaged: \'crc\' must be {"state": a CRC-32, "modes"'),
+    'resumed with order 1': (_unchanged, {'order': 1},
+                             "is of another run: 'modes' 2 in it, 1 in this run"),
+    'resumed as a minimisation': (_unchanged, {'target': 'minimum'},
+                                  "is of another run: 'modes' 2 in it, None in this run"),
+    'the layout before the modes': (
+        _set('format', 'maud-restart-3'), {'order': 2},
+        r"was not written by this version of Maud \(format 'maud-restart-3', this "
+        r"version reads 'maud-restart-4'\); delete it and its arrays file"),
+}
+
+
+@pytest.mark.parametrize('damage', sorted(MODES_DAMAGES))
+@pytest.mark.parametrize('seed', range(3))
+def test_damaged_or_other_modes_of_a_restart_file_are_named(tmp_path, damage, seed):
+    """The followed modes of a restart file are checked as its other rows and
+    fields are: damaged ones, or a file of a run that follows another number
+    of modes, are refused naming the file and the field, before the atoms
+    move."""
+    edit, keywords, match = MODES_DAMAGES[damage]
+    start = saddles.make_start('all_pairs2d', 12, seed, 'up')
+    restart = tmp_path / 'maud.json'
+    with Maud(fresh_copy(start), target='saddle', order=2, restart=restart,
               logfile=None) as opt:
         assert not opt.run(fmax=FMAX, steps=3)
-    again = fresh_copy(start)
-    with Maud.resume(again, restart=restart, trajectory=trajectory, target='saddle',
-                     logfile=None) as opt:
-        assert opt.run(fmax=FMAX, steps=300)
-    assert _verified_index(again) == (1, True)
+    document = json.loads(restart.read_text())
+    arrays = tmp_path / 'maud.json.arrays'
+    table = np.fromfile(arrays).reshape(-1, document['rows'])
+    edit(document, table, np.random.default_rng(seed))
+    table.tofile(arrays)
+    restart.write_text(json.dumps(document))
+    atoms = fresh_copy(start)
+    with pytest.raises(ValueError, match=r"restart file '.*maud.json'.*" + match):
+        Maud(atoms, restart=restart, logfile=None, **{'target': 'saddle', **keywords})
+    np.testing.assert_array_equal(atoms.positions, start.positions)

@@ -25,7 +25,9 @@ stiffness solver ``K^-1`` (:mod:`ase_maud.stiffness`)::
   the rule returns to where the step began (whose forces and solver it kept),
   cuts gamma and drops the momentum. Gamma is halved, or, with
   ``interpolate``, set to the minimum of the cubic through both ends' merits
-  and slopes (clipped to [0.1, 0.5] of itself, as a line search does). Gamma
+  and slopes (clipped to [0.1, 0.5] of itself, as a line search does; gamma
+  then scales the move after its bound, so that the next move is that
+  fraction of the one taken back even where the bound had clipped it). Gamma
   grows by ``gamma_growth`` after each accepted step, up to ``gamma_max``.
   Energies that agree within their error (rounding, or an approximate
   calculator's tolerance: ``noise``) are told apart by the trapezoid estimate
@@ -49,15 +51,20 @@ stiffness solver ``K^-1`` (:mod:`ase_maud.stiffness`)::
   neighbour search.
 
 ``target='saddle'`` (the exact model, whose solver gives the Hessian's
-eigenpairs on the internal moves) takes the partitioned rational-function
-step of eigenvector following instead (Baker's P-RFO): in the eigenbasis,
-uphill along the ``order`` followed modes and downhill along the rest,
+eigenpairs on the internal moves) takes a step of eigenvector following
+instead: in the eigenbasis (eigenvalues ``b_i``, gradient components
+``g_i``), uphill along the ``order`` followed modes and downhill along the
+rest, each mode on its own (:func:`_mode_steps`):
 
-    s_i = -g_i / (b_i - lambda_up)    (followed: lambda_up the largest
-                                       eigenvalue of [[diag b, g], [g^T, 0]])
-    s_i = -g_i / (b_i - lambda_down)  (the rest: its smallest)
+    s_i = -g_i / b_i         where b_i has the sign sought (negative along
+                             a followed mode, positive along the rest),
+                             at most reach_i long;
+    s_i = +-reach_i          else: the whole reach, uphill along a
+                             followed mode, downhill along the rest,
 
-with ``b_i`` the eigenvalues and ``g_i`` the gradient's components. The
+``reach_i`` the step at which mode ``i`` alone brings a point to its bound
+(where the curvature has the wrong sign the quadratic has no stationary
+point to aim at: a convex climb goes as far as it is trusted). The
 followed modes are those of the start (the lowest ``order``, or the one
 ``mode`` names or points along, with the next lowest), then at each step
 the eigenvectors that overlap most with the last ones: the climb follows
@@ -69,13 +76,12 @@ predicted the energy change well (their ratio within ``TRUST_GOOD`` of 1)
 and halves when it did not (beyond ``TRUST_BAD``).
 
 With the lowest eigenpairs only (the springs model of a large scene, from
-Hessian-vector products), the same holds along the followed modes, and the
-rest of the move is the minimiser's: the L-BFGS direction over ``P^-1`` of
-the forces without their components along the followed modes (and the
-secant pairs without theirs), its components along them removed; the trust
-ratio compares the energy change with that model's prediction (the
-followed modes' curvatures, and ``B d = f`` of the L-BFGS model ``B`` for
-the rest).
+Hessian-vector products; the followed modes and :data:`LOWEST_MODES` more),
+the same holds along those modes, and the rest of the move is the truncated
+Newton move on the forces without their components along them
+(:func:`_truncated_newton`: conjugate gradients on the Hessian off those
+modes, preconditioned by ``P^-1``, within the same bounds); the trust ratio
+compares the energy change with the quadratic model of both parts.
 
 The state of a run is a :class:`MaudState` (what a restart file holds); the
 settings are a frozen :class:`StepRule`, made by :func:`step_rule` from the
@@ -123,6 +129,17 @@ TRUST_GOOD, TRUST_BAD = 0.25, 0.75
 #: minimum along a followed mode climbs that mode the way it is followed.
 CLIMB_SIDE = 1e-3
 
+#: Relative residual of the Newton move off the lowest modes of a large
+#: saddle search (:func:`_truncated_newton`), and its most Hessian-vector
+#: products per step.
+NEWTON_RTOL, NEWTON_MAXITER = 0.1, 100
+
+#: Eigenpairs beyond the followed modes that a large saddle search computes
+#: (LOBPCG) and steps along one by one: the next lowest, negative or soft,
+#: which the truncated Newton move off them would otherwise meet (chosen by
+#: measurement, docs/optimizer.md).
+LOWEST_MODES = 3
+
 #: Shifts per grid of the trust-region search (:meth:`MaudMethod._trust_region`).
 TRUST_GRID = 24
 
@@ -169,7 +186,7 @@ def step_rule(model: str, target: str = 'minimum', image_size: int | None = None
                 **STEP_DEFAULTS.get(model, STEP_DEFAULTS['nodal'])}
     settings.update({name: value for name, value in keywords.items()
                      if value is not None})
-    if target == 'stationary' or (target == 'saddle' and model == 'exact'):
+    if target in ('stationary', 'saddle'):
         settings['memory'] = 0
     if target == 'saddle' and settings['maxstep_nn'] is None:
         settings['maxstep_nn'] = STEP_DEFAULTS['common']['maxstep_nn']
@@ -324,7 +341,6 @@ class MaudMethod:
         state.model = self.model.observe(s, y, state.model)
         if self.model.target == 'saddle':   # gamma is the trust fraction
             self._trust(state, s, y)
-            s, y = _off(s, state.modes), _off(y, state.modes)   # the minimiser's part
         else:
             state.gamma = min(state.gamma * self.rule.gamma_growth, self.rule.gamma_max)
         if self.rule.memory and np.vdot(s, y) > MIN_PAIR_COSINE * np.vdot(
@@ -347,6 +363,8 @@ class MaudMethod:
             state.gamma *= rule.overshoot_shrink  # overshoot: restart
             state.v = None
             state.k = 0
+        if rule.interpolate:   # a line search: gamma cuts the bounded move
+            direction = _bound(direction, limit, whole=rule.bound == 'whole')
         direction = direction * state.gamma
         if state.v is not None and rule.beta_max > 0:
             direction += min(state.k / (state.k + 3.0), rule.beta_max) * state.v
@@ -354,16 +372,16 @@ class MaudMethod:
         return _bound(direction, limit, whole=rule.bound == 'whole')
 
     def _saddle_move(self, state: MaudState) -> np.ndarray:
-        """The P-RFO move of eigenvector following (module docstring), the
-        whole of it scaled to within ``gamma`` times each point's bound; with
-        the lowest modes only (a large scene), minimum-mode following: the
-        followed modes as P-RFO, the rest the minimiser's L-BFGS step on the
-        forces without their components along them."""
+        """The move of eigenvector following (module docstring), the whole
+        of it scaled to within ``gamma`` times each point's bound. With the
+        lowest modes only (a large scene), minimum-mode following: the same
+        on the followed and :data:`LOWEST_MODES` more, the truncated Newton
+        move on the rest of the forces (:func:`_truncated_newton`)."""
         solver, forces = state.solver, state.last.forces
         if hasattr(solver, 'modes'):
             values, modes = solver.modes()
         else:
-            values, modes = solver.lowest(self.rule.order + 1, state.modes)
+            values, modes = solver.lowest(self.rule.order + LOWEST_MODES, state.modes)
         up = self._followed(state, values, modes)
         modes = modes.copy()
         modes[up] = state.modes   # signed as followed
@@ -374,22 +392,26 @@ class MaudMethod:
         b, climb = values[up], gradient[up]
         side = (b > 0) & (np.abs(climb) < CLIMB_SIDE * b * limit.min())
         climb = np.where(side, np.maximum(np.abs(climb), np.finfo(float).eps * b), climb)
-        move = np.einsum('k,kij->ij', _rfo_step(b, climb, uphill=True), state.modes)
+        reach = (limit / np.maximum(np.linalg.norm(modes, axis=2), 1e-300)).min(axis=1)
+        down = np.setdiff1d(np.arange(len(values)), up)
+        steps = np.zeros(len(values))
+        steps[up] = _mode_steps(b, climb, reach[up], uphill=True)
+        steps[down] = _mode_steps(values[down], gradient[down], reach[down], uphill=False)
+        move = np.einsum('k,kij->ij', steps, modes)
         if hasattr(solver, 'modes'):
-            down = np.setdiff1d(np.arange(len(values)), up)
-            move += np.einsum('k,kij->ij', _rfo_step(values[down], gradient[down],
-                                                     uphill=False), modes[down])
             return _bound(move, limit, whole=True)
-        rest = _off(forces, state.modes)
-        descent = _off(self._direction(state, rest), state.modes)
-        along = np.einsum('kij,ij->k', state.modes, move)
+        rest = _off(forces, modes)
+        descent, curved = _truncated_newton(lambda d: _off(solver.curvature(d), modes),
+                                            lambda r: _off(solver.solve(r), modes),
+                                            rest, limit)
         bounded = _bound(move + descent, limit, whole=True)
         t = np.linalg.norm(bounded) / max(np.linalg.norm(move + descent), 1e-300)
-        # the quadratic model's energy change: the followed modes' curvatures,
-        # and the L-BFGS model B (B descent = rest) for the rest
-        state.predicted = float(np.dot(gradient[up], t * along)
-                                + 0.5 * np.dot(b, (t * along)**2)
-                                - (t - 0.5 * t * t) * np.vdot(rest, descent))
+        # the quadratic model's energy change: the lowest modes' curvatures,
+        # and the Hessian off them (curved = H descent)
+        state.predicted = float(t * np.dot(gradient, steps)
+                                + 0.5 * t * t * np.dot(values, steps**2)
+                                - t * np.vdot(rest, descent)
+                                + 0.5 * t * t * np.vdot(descent, curved))
         return bounded
 
     def _followed(self, state: MaudState, values: np.ndarray,
@@ -443,7 +465,7 @@ class MaudMethod:
         """Grow or cut the saddle step's trust fraction ``gamma`` by the ratio
         of the energy change over the step ``s`` (the trapezoid rule, from
         the forces at both ends: ``y`` is their drop) to the change the
-        Hessian at its start predicted (module docstring)."""
+        quadratic model at its start predicted (module docstring)."""
         forces = state.last.forces
         if hasattr(state.solver, 'modes'):
             values, modes = state.solver.modes()
@@ -552,19 +574,53 @@ def _off(move: np.ndarray, modes: np.ndarray) -> np.ndarray:
     return move - np.einsum('k,kij->ij', np.einsum('kij,ij->k', modes, move), modes)
 
 
-def _rfo_step(values: np.ndarray, gradient: np.ndarray, uphill: bool) -> np.ndarray:
-    """The rational-function step ``-g_i / (b_i - lambda)`` on one part of
-    the eigenbasis (eigenvalues ``b``, gradient components ``g``), with
-    ``lambda`` the largest (``uphill``: a maximum along these modes) or the
-    smallest (a minimum) eigenvalue of ``[[diag b, g], [g^T, 0]]``."""
-    if len(values) == 0:
-        return np.zeros(0)
-    augmented = np.diag(np.append(values, 0.0))
-    augmented[-1, :-1] = augmented[:-1, -1] = gradient
-    shift = np.linalg.eigvalsh(augmented)[-1 if uphill else 0]
-    gap = values - shift   # <= 0 uphill, >= 0 downhill
-    least = np.finfo(float).eps * max(np.abs(values).max(), np.abs(gradient).max(), 1e-300)
-    return -gradient / np.where(np.abs(gap) > least, gap, -least if uphill else least)
+def _truncated_newton(hessian: Callable[[np.ndarray], np.ndarray],
+                      precondition: Callable[[np.ndarray], np.ndarray],
+                      forces: np.ndarray, limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The Newton move ``d`` with ``H d = forces`` within the trust region
+    ``|d_i| <= limit_i`` (every point), by Steihaug's truncated conjugate
+    gradients preconditioned by ``precondition`` (``P^-1``): to the relative
+    residual :data:`NEWTON_RTOL` in at most :data:`NEWTON_MAXITER` products,
+    or stopped where the iterates leave the region or a direction of
+    negative curvature appears, which is then followed to the region's edge.
+    The first iterate is along ``P^-1 f``, so a cut move still descends.
+    Returns ``d`` and ``H d`` (N, 3)."""
+    move, curved = np.zeros_like(forces), np.zeros_like(forces)
+    residual = forces.copy()
+    z = precondition(residual)
+    direction, rz = z, np.vdot(residual, z)
+    goal = NEWTON_RTOL * np.linalg.norm(forces)
+    for _ in range(NEWTON_MAXITER):
+        h = hessian(direction)
+        c = np.vdot(direction, h)
+        step = direction * (rz / c) if c > 0 else direction
+        t = _reach(move, step, limit)
+        if not (c > 0 and t >= 1):   # to the edge of the region, and stop
+            t = min(t, 1.0) if c > 0 else t
+            return move + t * step, curved + t * h * (rz / c if c > 0 else 1.0)
+        move += step
+        curved += h * (rz / c)
+        residual -= h * (rz / c)
+        if np.linalg.norm(residual) <= goal:
+            break
+        z = precondition(residual)
+        rz, last = np.vdot(residual, z), rz
+        direction = z + (rz / last) * direction
+    return move, curved
+
+
+def _mode_steps(values: np.ndarray, gradient: np.ndarray, reach: np.ndarray,
+                uphill: bool) -> np.ndarray:
+    """Steps along modes of curvatures ``values`` and gradient components
+    ``gradient``: the Newton step ``-g_i / b_i`` where the curvature has the
+    sign sought (negative ``uphill``, positive downhill), else the whole
+    ``reach_i`` uphill or downhill (no model of where the slope turns);
+    each at most ``reach_i`` long (the step at which the mode alone brings a
+    point to its bound)."""
+    climb = np.sign(gradient) if uphill else -np.sign(gradient)
+    right = values < 0 if uphill else values > 0
+    newton = -gradient / np.where(right, values, 1.0)
+    return np.where(right, np.clip(newton, -reach, reach), climb * reach)
 
 
 def _reach(start: np.ndarray, step: np.ndarray, limit: np.ndarray) -> float:

@@ -728,58 +728,67 @@ def _floating(springs: np.ndarray, held: np.ndarray) -> np.ndarray:
 #: Relative residual (of the largest diagonal entry of ``P``) to which the
 #: lowest modes of a large saddle search are computed (LOBPCG).
 MODES_RTOL = 1e-4
-#: ... in at most this many LOBPCG iterations per step.
-MODES_MAXITER = 50
+#: ... in at most this many LOBPCG iterations: from a random start (a
+#: search's first step), and from the modes followed so far (every later one).
+MODES_MAXITER, MODES_WARM_MAXITER = 100, 20
 
 
 class _LowestModes(Solver):
-    """``P^-1`` of the springs model and the Hessian's lowest eigenpairs on
-    the internal moves (:meth:`lowest`), by LOBPCG on Hessian-vector
-    products (:func:`ase_maud.analysis.hessian_operator`, rigid-body motions
-    projected out) preconditioned by ``P^-1``: what a large saddle search
-    follows (:mod:`ase_maud.method`)."""
+    """``P^-1`` of the springs model, the Hessian on the internal moves
+    (:meth:`curvature`, Hessian-vector products through
+    :func:`ase_maud.analysis.hessian_operator`, rigid-body motions projected
+    out) and its lowest eigenpairs (:meth:`lowest`, LOBPCG preconditioned by
+    ``P^-1``): what a large saddle search follows (:mod:`ase_maud.method`)."""
 
     def __init__(self, inner: Solver, atoms: Atoms, free: np.ndarray):
-        self.inner, self.atoms, self.free = inner, atoms, free
+        from .analysis import hessian_operator
+        self.inner, self.free = inner, free
+        self.rigid = rigid_body_modes(atoms.positions, free, free.shape[1])
+        self.operator = hessian_operator(atoms, free, self.rigid)
 
     def solve(self, forces):
         return self.inner.solve(forces)
+
+    def _gather(self, moves: np.ndarray) -> np.ndarray:
+        """Moves (k, N, 3) -> their free components (n, k)."""
+        return moves[:, :, :self.free.shape[1]][:, self.free].T
+
+    def _spread(self, v: np.ndarray) -> np.ndarray:
+        """Free components (n, k) -> moves (k, N, 3), zero where held."""
+        out = np.zeros((v.shape[1], len(self.free), 3))
+        out[:, :, :self.free.shape[1]][:, self.free] = v.T
+        return out
+
+    def curvature(self, move: np.ndarray) -> np.ndarray:
+        """``H move`` (N, 3) on the internal moves: zero on held
+        coordinates, without rigid-body components."""
+        return self._spread(self.operator @ self._gather(move[None]))[0]
 
     def lowest(self, count: int, guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """The ``count`` lowest eigenvalues (ascending) and their modes
         (count, N, 3), started from the moves ``guess`` (k, N, 3) if given."""
         from scipy.sparse.linalg import lobpcg
 
-        from .analysis import hessian_operator
-        atoms, free = self.atoms, self.free
-        dim, flat = free.shape[1], free.ravel()
-        rigid = rigid_body_modes(atoms.positions, free, dim)
-        operator = hessian_operator(atoms, free, rigid)
-
-        def spread(v):   # free components (n, k) -> moves (k, N, 3)
-            out = np.zeros((v.shape[1], len(free), 3))
-            out[:, :, :dim][:, free] = v.T
-            return out
-
         def precondition(v):
-            v = v.reshape(len(v), -1)
-            moves = [self.solve(move) for move in spread(v)]
-            return np.column_stack([m[:, :dim][free] for m in moves])
+            return self._gather(np.array([self.solve(m) for m in
+                                          self._spread(v.reshape(len(v), -1))]))
 
-        start = np.random.default_rng(0).standard_normal((int(flat.sum()), count))
+        start = np.random.default_rng(0).standard_normal((self.operator.shape[0], count))
         if guess is not None:
-            start[:, :len(guess)] = guess[:, :, :dim][:, free].T
+            start[:, :len(guess)] = self._gather(guess)
         diagonal = precondition(np.eye(len(start), 1)).max()   # a scale of 1 / P
         with warnings.catch_warnings():
             warnings.simplefilter('ignore', UserWarning)   # LOBPCG's "not reaching tol"
             values, vectors = lobpcg(
-                operator, start, M=LinearOperator(operator.shape, matvec=precondition,
-                                                  matmat=precondition, dtype=float),
-                Y=rigid if rigid.size else None, tol=MODES_RTOL / abs(diagonal),
-                maxiter=MODES_MAXITER, largest=False)
+                self.operator, start,
+                M=LinearOperator(self.operator.shape, matvec=precondition,
+                                 matmat=precondition, dtype=float),
+                Y=self.rigid if self.rigid.size else None,
+                tol=MODES_RTOL / abs(diagonal), largest=False,
+                maxiter=MODES_MAXITER if guess is None else MODES_WARM_MAXITER)
         order = np.argsort(values)
         vectors = vectors[:, order] / np.linalg.norm(vectors[:, order], axis=0)
-        return values[order], spread(vectors)
+        return values[order], self._spread(vectors)
 
 
 class _CoordinateSolver(Solver):

@@ -10,11 +10,13 @@ from ase.io.jsonio import read_json, write_json
 
 from ase_maud.method import (
     MIN_PAIR_COSINE,
+    NEWTON_RTOL,
     STEP_DEFAULTS,
     MaudMethod,
     MaudState,
     Point,
-    _rfo_step,
+    _mode_steps,
+    _truncated_newton,
     step_rule,
 )
 from ase_maud.monitor import ENERGY_PROGRESS, DivergenceError, RunMonitor, StagnationError
@@ -124,6 +126,31 @@ def test_an_uphill_step_is_taken_back_with_half_the_gamma():
     assert state.last.x is not x1 and np.array_equal(state.last.x, x0)
     assert state.gamma == 0.5
     np.testing.assert_allclose(again, 0.5 * move)
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_a_line_search_cut_shortens_a_move_the_bound_clipped(seed):
+    """The springs rule (a line search over a bounded move): a move the
+    scene-size bound clipped that raised the energy is followed by the same
+    move cut by the line search's factor, not by the same clipped move
+    again (which had left gamma halving to nothing: a collapsing ring with
+    chords stagnated at its second step)."""
+    quadratic = Quadratic(seed)
+    rule = method(model='springs')
+    state = rule.start()
+    x0 = quadratic.minimum + 1e-3 * start(seed, quadratic)   # near it, a wide scene
+    far_too_soft = MatrixSolver(quadratic.A / 1e6)   # overshoots a millionfold
+    move = rule.step(state, x0, quadratic.energy(x0), quadratic.forces(x0), 0.0,
+                     lambda at: far_too_soft)
+    size = np.linalg.norm(x0 - x0.mean(axis=0), axis=1).max()
+    assert np.linalg.norm(move, axis=1).max() == pytest.approx(size)   # clipped
+    x1 = x0 + move
+    rule.moved(state, x1)
+    assert rule.uphill(state, x1, quadratic.energy(x1), quadratic.forces(x1), 0.0)
+    again = rule.step(state, x1, quadratic.energy(x1), quadratic.forces(x1), 0.0,
+                      lambda at: pytest.fail('the solver of the start is kept'))
+    assert 0.1 <= state.gamma <= 0.5
+    np.testing.assert_allclose(again, state.gamma * move, rtol=1e-12)
 
 
 def test_energies_within_their_noise_are_decided_by_the_forces():
@@ -293,28 +320,68 @@ def test_monitor_catches_a_creep_at_any_scale(seed):
 
 @pytest.mark.parametrize('seed', range(4))
 @pytest.mark.parametrize('uphill', [True, False])
-def test_rfo_step_solves_the_augmented_eigenproblem(seed, uphill):
-    """The rational-function step ``s`` and its shift ``lambda`` make an
-    eigenpair of ``[[diag b, g], [g^T, 0]]`` with eigenvector ``(s, 1)``
-    (so ``lambda = g.s``), ``lambda`` its largest (uphill) or smallest one;
-    uphill the step climbs every mode (``g_i s_i > 0``), downhill it falls."""
+def test_mode_steps_are_newton_where_the_curvature_serves_else_the_whole_reach(seed, uphill):
+    """Along each mode: the Newton step ``-g/b`` (the stationary point of the
+    quadratic) where the curvature has the sign sought and that step is
+    within reach, else a step of the whole reach; every step climbs
+    (``uphill``) or falls, and none is longer than its reach."""
     rng = np.random.default_rng(seed)
-    b, g = rng.normal(size=5) * 3, rng.normal(size=5)
-    s = _rfo_step(b, g, uphill)
-    augmented = np.diag(np.append(b, 0.0))
-    augmented[-1, :-1] = augmented[:-1, -1] = g
-    shift = np.vdot(g, s)
-    np.testing.assert_allclose(augmented @ np.append(s, 1.0), shift * np.append(s, 1.0),
-                               atol=1e-10 * (1 + np.abs(s).max()))
-    values = np.linalg.eigvalsh(augmented)
-    assert shift == pytest.approx(values[-1] if uphill else values[0], rel=1e-10)
+    b, g = rng.normal(size=40), rng.normal(size=40)
+    reach = rng.uniform(0.1, 3.0, size=40)
+    s = _mode_steps(b, g, reach, uphill)
+    right = b < 0 if uphill else b > 0
+    newton = right & (np.abs(g / b) <= reach)
+    assert newton.any() and (~newton).any()
+    np.testing.assert_allclose(s[newton], -g[newton] / b[newton], rtol=1e-14)
+    np.testing.assert_allclose(np.abs(s[~newton]), reach[~newton], rtol=1e-14)
     assert np.all(np.sign(g * s) == (1 if uphill else -1))
+    assert np.all(np.abs(s) <= reach * (1 + 1e-14))
 
 
-def test_rfo_step_at_zero_gradient_is_finite():
-    """A degenerate pair of negative curvatures with no gradient (a symmetric
-    point) gives a finite step, not an overflow."""
-    b = np.array([-2.0, -2.0, 1.0])
-    for g in (np.zeros(3), np.array([0.0, 1e-14, 0.3])):
+def test_mode_steps_at_zero_curvature_or_gradient_are_finite():
+    """A flat mode, or a symmetric point with no gradient, gives a finite step."""
+    b, reach = np.array([0.0, -2.0, 1.0, 0.0]), np.ones(4)
+    for g in (np.zeros(4), np.array([1.0, 0.0, 1e-300, -1e-14])):
         for uphill in (True, False):
-            assert np.isfinite(_rfo_step(b, g, uphill)).all()
+            assert np.isfinite(_mode_steps(b, g, reach, uphill)).all()
+
+
+def _newton_problem(seed, n=12, negative=0):
+    """A random symmetric H on (n, 3) moves (``negative`` of its eigenvalues
+    below 0), its forces, and a diagonal preconditioner."""
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.standard_normal((3 * n, 3 * n)))
+    values = np.geomspace(0.01, 10.0, 3 * n)
+    values[:negative] *= -1
+    hessian = q @ np.diag(values) @ q.T
+    diagonal = np.abs(np.diag(hessian)) + 0.1
+    forces = rng.standard_normal((n, 3))
+    return (hessian, lambda d: (hessian @ d.ravel()).reshape(-1, 3),
+            lambda r: r / diagonal.reshape(-1, 3), forces)
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_truncated_newton_solves_within_a_wide_region(seed):
+    """With room enough, the move solves ``H d = f`` to ``NEWTON_RTOL``, and
+    the ``H d`` returned is ``H`` times the move."""
+    hessian, dot, precondition, forces = _newton_problem(seed)
+    move, curved = _truncated_newton(dot, precondition, forces, np.full(len(forces), 1e9))
+    np.testing.assert_allclose(curved.ravel(), hessian @ move.ravel(), atol=1e-10)
+    residual = np.linalg.norm(forces - curved) / np.linalg.norm(forces)
+    assert residual <= NEWTON_RTOL
+
+
+@pytest.mark.parametrize('seed', range(4))
+@pytest.mark.parametrize('negative', [0, 3])
+def test_truncated_newton_stays_within_each_bound_and_descends(seed, negative):
+    """With tight bounds, or negative curvature, the move keeps every point
+    within its bound, touches one of them, and lowers the quadratic model
+    ``-f.d + d.H d / 2``; ``H d`` is still ``H`` times the move."""
+    hessian, dot, precondition, forces = _newton_problem(seed, negative=negative)
+    limit = np.random.default_rng(seed).uniform(0.01, 0.05, len(forces))
+    move, curved = _truncated_newton(dot, precondition, forces, limit)
+    lengths = np.linalg.norm(move, axis=1)
+    assert np.all(lengths <= limit * (1 + 1e-12))
+    assert np.isclose(lengths / limit, 1.0, rtol=1e-9).any()
+    np.testing.assert_allclose(curved.ravel(), hessian @ move.ravel(), atol=1e-10)
+    assert -np.vdot(forces, move) + 0.5 * np.vdot(move, curved) < 0

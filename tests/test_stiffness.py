@@ -21,6 +21,7 @@ from ase_maud.stiffness import (
     choose_model,
     free_dofs,
     internal_basis,
+    rigid_body_modes,
 )
 
 
@@ -337,3 +338,27 @@ def test_springs_saddle_model_gives_the_lowest_eigenpairs(seed, scene, size, hel
     for k in range(2):
         if min(gaps[max(k - 1, 0):k + 1]) > 1e-2 * scale:
             assert abs(np.vdot(modes[k], dense.modes[k])) == pytest.approx(1.0, abs=1e-3)
+
+
+@pytest.mark.parametrize('seed', range(3))
+@pytest.mark.parametrize('scene, size, held', [
+    ('all_pairs', 12, []), ('all_pairs2d', 15, []), ('tree', 14, [0]), ('net2d', 5, None)])
+def test_springs_saddle_model_curvature_is_the_hessian_on_internal_moves(
+        seed, scene, size, held):
+    """``curvature`` (Hessian-vector products) is the dense analytic Hessian
+    on the free coordinates, with the rigid-body motions projected out on
+    both sides, times a random move; held coordinates get nothing."""
+    atoms = build(scene, size, seed=seed)
+    if held:
+        atoms.set_constraint(FixAtoms(held))
+    dim = atoms.calc.dim
+    free = free_dofs(atoms, dim)
+    rigid = rigid_body_modes(atoms.positions, free, dim)
+    move = np.random.default_rng(seed).normal(size=(len(atoms), 3))
+    got = choose_model(atoms, 'springs', target='saddle').at(atoms).curvature(move)
+    projector = np.eye(int(free.sum())) - rigid @ rigid.T
+    hessian = atoms.calc.get_hessian(atoms)[np.ix_(free.ravel(), free.ravel())]
+    expected = projector @ hessian @ projector @ move[:, :dim][free]
+    np.testing.assert_allclose(got[:, :dim][free], expected,
+                               atol=1e-10 * np.abs(expected).max())
+    assert not got[:, :dim][~free].any() and not got[:, dim:].any()

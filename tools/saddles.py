@@ -256,6 +256,26 @@ def summary(rows: list[dict], fmax: float) -> str:
     return '\n'.join(lines) + '\n'
 
 
+def by_scene(rows: list[dict], fmax: float) -> str:
+    """Per scene (``scene:size``) and optimiser: the starts from which it ended,
+    converged, on a point of the index sought (as :func:`summary`) out of all, and
+    the median calls and CPU seconds over those."""
+    order, names = ORDER[0], list(dict.fromkeys(r['optimiser'] for r in rows))
+    lines = ['| scene | N | ' + ' | '.join(names) + ' |', '|' + '---|' * (len(names) + 2)]
+    for scene in dict.fromkeys(r['start'].rsplit(':', 1)[0] for r in rows):
+        mine = [r for r in rows if r['start'].rsplit(':', 1)[0] == scene]
+        cells = [scene, str(mine[0]['natoms'])]
+        for name in names:
+            runs = [r for r in mine if r['optimiser'] == name]
+            hits = [r for r in runs if r['index'] == order and r['fmax'] <= fmax
+                    and r['verdict'] != 'degenerate']
+            cells.append(f'{len(hits)} of {len(runs)}' + (
+                f", {np.median([r['calls'] for r in hits]):.0f} calls, "
+                f"{np.median([r['cpu_s'] for r in hits]):.2f} s" if hits else ''))
+        lines.append('| ' + ' | '.join(cells) + ' |')
+    return '\n'.join(lines) + '\n'
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--starts', nargs='+', default=STARTS,
@@ -289,7 +309,8 @@ def main(argv: list[str] | None = None) -> int:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    table = markdown(rows, args.fmax) + '\n' + summary(rows, args.fmax)
+    table = (markdown(rows, args.fmax) + '\n' + summary(rows, args.fmax) + '\n'
+             + by_scene(rows, args.fmax))
     (args.out / 'saddles.md').write_text(table)
     print(table)
     return 0

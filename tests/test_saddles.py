@@ -104,6 +104,11 @@ def test_tool_writes_its_table(tmp_path, capsys):
         in table
     assert (tmp_path / 'saddles.csv').read_text().count('\n') == 5
     assert '| cage:4 | 7 | 1 of 1, ' in table and '| six:6 | 6 | 1 of 1, ' in table
+    assert "against Sella's where both do (2): median ratio" in table
+    again = tmp_path / 'again'
+    assert saddles.main(['--tables-from', str(tmp_path / 'saddles.csv'),
+                         '--out', str(again)]) == 0
+    assert (again / 'saddles.md').read_text() == table
 
 
 # -- target='saddle': eigenvector following --------------------------------------

@@ -485,12 +485,11 @@ class MaudMethod:
         elif abs(ratio - 1) > TRUST_BAD:
             state.gamma *= 0.5
 
-    def _direction(self, state: MaudState, forces: np.ndarray | None = None) -> np.ndarray:
-        """``K^-1 f`` (``f`` the forces at ``state.last``, or ``forces``), or
-        its L-BFGS correction over the stored pairs; if that is not downhill,
-        ``K^-1 f`` and the memory is cleared."""
-        solve = state.solver.solve
-        forces = state.last.forces if forces is None else forces
+    def _direction(self, state: MaudState) -> np.ndarray:
+        """``K^-1 f`` (``f`` the forces at ``state.last``), or its L-BFGS
+        correction over the stored pairs; if that is not downhill, ``K^-1 f``
+        and the memory is cleared."""
+        solve, forces = state.solver.solve, state.last.forces
         if not state.pairs:
             return solve(forces)
         q = forces.copy()

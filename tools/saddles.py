@@ -239,6 +239,12 @@ def markdown(rows: list[dict], fmax: float) -> str:
     return '\n'.join(lines) + '\n'
 
 
+def found(row: dict, fmax: float) -> bool:
+    """Whether the run of ``row`` ended, converged, on a point of the index sought
+    (``ORDER``) with no zero curvature: a success."""
+    return row['index'] == ORDER[0] and row['fmax'] <= fmax and row['verdict'] != 'degenerate'
+
+
 def summary(rows: list[dict], fmax: float) -> str:
     """Per optimiser: the starts from which it ended, converged, on a point of the index
     sought (``ORDER``, no zero curvature), how many of those are Sella's end point, and
@@ -246,8 +252,7 @@ def summary(rows: list[dict], fmax: float) -> str:
     lines, order = [], ORDER[0]
     for name in dict.fromkeys(r['optimiser'] for r in rows):
         mine = [r for r in rows if r['optimiser'] == name]
-        hits = [r for r in mine if r['index'] == order and r['fmax'] <= fmax
-                and r['verdict'] != 'degenerate']
+        hits = [r for r in mine if found(r, fmax)]
         median = (f", median {np.median([r['calls'] for r in hits]):.0f} calls, "
                   f"{np.median([r['cpu_s'] for r in hits]):.2f} CPU s" if hits else '')
         same = sum(r['same_as_Sella'] is True for r in hits)
@@ -259,8 +264,8 @@ def summary(rows: list[dict], fmax: float) -> str:
 def _ratios(rows: list[dict], hits: list[dict], fmax: float) -> str:
     """The median ratios of calls and CPU seconds to Sella's over the starts where
     both found a point of the index sought (empty for Sella, or with no such start)."""
-    sella = {(r['start'], r['seed']): r for r in rows if r['optimiser'] == 'Sella'
-             and r['index'] == ORDER[0] and r['fmax'] <= fmax and r['verdict'] != 'degenerate'}
+    sella = {(r['start'], r['seed']): r for r in rows
+             if r['optimiser'] == 'Sella' and found(r, fmax)}
     pairs = [(r, sella[r['start'], r['seed']]) for r in hits
              if r['optimiser'] != 'Sella' and (r['start'], r['seed']) in sella]
     if not pairs:
@@ -284,20 +289,37 @@ def by_scene(rows: list[dict], fmax: float) -> str:
     """Per scene (``scene:size``) and optimiser: the starts from which it ended,
     converged, on a point of the index sought (as :func:`summary`) out of all, and
     the median calls and CPU seconds over those."""
-    order, names = ORDER[0], list(dict.fromkeys(r['optimiser'] for r in rows))
+    names = list(dict.fromkeys(r['optimiser'] for r in rows))
     lines = ['| scene | N | ' + ' | '.join(names) + ' |', '|' + '---|' * (len(names) + 2)]
     for scene in dict.fromkeys(r['start'].rsplit(':', 1)[0] for r in rows):
         mine = [r for r in rows if r['start'].rsplit(':', 1)[0] == scene]
         cells = [scene, str(mine[0]['natoms'])]
         for name in names:
             runs = [r for r in mine if r['optimiser'] == name]
-            hits = [r for r in runs if r['index'] == order and r['fmax'] <= fmax
-                    and r['verdict'] != 'degenerate']
+            hits = [r for r in runs if found(r, fmax)]
             cells.append(f'{len(hits)} of {len(runs)}' + (
                 f", {np.median([r['calls'] for r in hits]):.0f} calls, "
                 f"{np.median([r['cpu_s'] for r in hits]):.2f} s" if hits else ''))
         lines.append('| ' + ' | '.join(cells) + ' |')
     return '\n'.join(lines) + '\n'
+
+
+def run_all(args: argparse.Namespace) -> list[dict]:
+    """The rows of every start of ``args`` from every seed, by every optimiser (after
+    one warm-up search each: imports, first compilations), a line printed per run."""
+    for name in args.optimizers:
+        search(make_start('cage', 4, 0, 0.0), name, 1e-3, 50)
+    rows = []
+    for start in args.starts:
+        for seed in args.seeds:
+            for row in compare(start, seed, args.optimizers, args.fmax, args.steps,
+                               args.energy_rtol, args.distance_atol):
+                rows.append(row)
+                print(f"{row['start']:20s} {seed:3d} {row['optimiser']:11s} "
+                      f"{row['calls']:6d} calls {row['cpu_s']:7.2f} s  E "
+                      f"{row['energy']:.10f}  index {row['index']}  fmax {row['fmax']:.1e}"
+                      f"  same as Sella: {row['same_as_Sella']}  {row['error']}", flush=True)
+    return rows
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -319,18 +341,8 @@ def main(argv: list[str] | None = None) -> int:
                              'running nothing')
     args = parser.parse_args(argv)
     ORDER[0] = args.order
-    rows = [] if args.tables_from is None else read_rows(args.tables_from)
-    for name in args.optimizers if args.tables_from is None else []:  # warm up
-        search(make_start('cage', 4, 0, 0.0), name, 1e-3, 50)
-    for start in args.starts if args.tables_from is None else []:
-        for seed in args.seeds:
-            for row in compare(start, seed, args.optimizers, args.fmax, args.steps,
-                               args.energy_rtol, args.distance_atol):
-                rows.append(row)
-                print(f"{row['start']:20s} {seed:3d} {row['optimiser']:11s} "
-                      f"{row['calls']:6d} calls {row['cpu_s']:7.2f} s  E "
-                      f"{row['energy']:.10f}  index {row['index']}  fmax {row['fmax']:.1e}"
-                      f"  same as Sella: {row['same_as_Sella']}  {row['error']}", flush=True)
+    rows = (read_rows(args.tables_from) if args.tables_from is not None
+            else run_all(args))
     args.out.mkdir(parents=True, exist_ok=True)
     with open(args.out / 'saddles.csv', 'w', newline='') as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))

@@ -76,8 +76,9 @@ predicted the energy change well (their ratio within ``TRUST_GOOD`` of 1)
 and halves when it did not (beyond ``TRUST_BAD``).
 
 With the lowest eigenpairs only (the springs model of a large scene, from
-Hessian-vector products; the followed modes and :data:`LOWEST_MODES` more),
-the same holds along those modes, and the rest of the move is the truncated
+Hessian-vector products; the followed modes and :data:`LOWEST_MODES` more,
+each step's LOBPCG started from the last step's), the same holds along
+those modes, and the rest of the move is the truncated
 Newton move on the forces without their components along them
 (:func:`_truncated_newton`: conjugate gradients on the Hessian off those
 modes, preconditioned by ``P^-1``, within the same bounds); the trust ratio
@@ -222,8 +223,10 @@ class MaudState:
     restart; ``v``: the last move (after constraints), or None; ``last``:
     where the last step began; ``pairs``: the L-BFGS memory ``(s, y)``;
     ``model``: what the stiffness model has learnt (:meth:`StiffnessModel.state`);
-    ``modes``: the modes a saddle search follows uphill, (order, N, 3),
-    signed as followed, or None before its first step (and for other
+    ``modes``: a saddle search's modes, (:meth:`MaudMethod.kept_modes`, N, 3):
+    the ``order`` it follows uphill, signed as followed, then (lowest modes
+    only) the other lowest modes of its last step, from which the next
+    step's LOBPCG starts; None before its first step (and for other
     targets); ``predicted``: the energy change its last move's model
     predicted (lowest modes only; else None). A restart file keeps them, so
     a resumed search follows the same modes.
@@ -282,6 +285,14 @@ class MaudMethod:
     #: modes at the start (ascending), a move (N, 3) (the mode that overlaps
     #: it most), or None (the lowest ``order`` modes).
     mode: int | np.ndarray | None = None
+
+    def kept_modes(self) -> int | None:
+        """Rows of :attr:`MaudState.modes` (None unless a saddle search): its
+        ``order``, and with the lowest modes only (every model but the exact
+        one) :data:`LOWEST_MODES` more."""
+        if self.model.target != 'saddle':
+            return None
+        return self.rule.order + (0 if self.model.name == 'exact' else LOWEST_MODES)
 
     def start(self) -> MaudState:
         """The state before the first step."""
@@ -385,6 +396,7 @@ class MaudMethod:
         up = self._followed(state, values, modes)
         modes = modes.copy()
         modes[up] = state.modes   # signed as followed
+        down = np.setdiff1d(np.arange(len(values)), up)
         gradient = -np.einsum('kij,ij->k', modes, forces)
         limit = state.gamma * self._limits(state.last.x)
         # within CLIMB_SIDE of the trust length of a followed mode's minimum,
@@ -393,13 +405,13 @@ class MaudMethod:
         side = (b > 0) & (np.abs(climb) < CLIMB_SIDE * b * limit.min())
         climb = np.where(side, np.maximum(np.abs(climb), np.finfo(float).eps * b), climb)
         reach = (limit / np.maximum(np.linalg.norm(modes, axis=2), 1e-300)).min(axis=1)
-        down = np.setdiff1d(np.arange(len(values)), up)
         steps = np.zeros(len(values))
         steps[up] = _mode_steps(b, climb, reach[up], uphill=True)
         steps[down] = _mode_steps(values[down], gradient[down], reach[down], uphill=False)
         move = np.einsum('k,kij->ij', steps, modes)
         if hasattr(solver, 'modes'):
             return _bound(move, limit, whole=True)
+        state.modes = modes[np.concatenate([up, down])]   # the next LOBPCG's start
         rest = _off(forces, modes)
         descent, curved = _truncated_newton(lambda d: _off(solver.curvature(d), modes),
                                             lambda r: _off(solver.solve(r), modes),
@@ -423,7 +435,8 @@ class MaudMethod:
         if order > len(values):
             raise ValueError(f'order={order} exceeds the {len(values)} internal '
                              'modes of the scene (free moves less rigid-body ones)')
-        reference = state.modes if state.modes is not None else self._start(modes)
+        reference = (state.modes[:order] if state.modes is not None
+                     else self._start(modes))
         overlap = np.abs(np.einsum('kij,mij->km', reference, modes))
         picked = np.zeros(len(reference), dtype=int)
         taken = np.zeros(len(modes), dtype=bool)

@@ -279,10 +279,9 @@ class Maud(Optimizer):
     def _restart_file(self) -> RestartFile:
         """The run's :class:`~ase_maud.restart.RestartFile` (one per run, so
         that each step writes only what is new), with a row per mode a saddle
-        search follows."""
+        search keeps (:meth:`~ase_maud.method.MaudMethod.kept_modes`)."""
         if getattr(self, '_restart', None) is None:
-            self._restart = RestartFile(
-                self.restart, self.rule.order if self.target == 'saddle' else None)
+            self._restart = RestartFile(self.restart, self.maud.kept_modes())
         return self._restart
 
     @classmethod
@@ -434,7 +433,8 @@ class Maud(Optimizer):
         from .analysis import RTOL
         solver = self._solver_at(self.optimizable.get_x().reshape(-1, 3))
         values = (solver.modes()[0] if hasattr(solver, 'modes')   # the exact model
-                  else solver.lowest(self.rule.order + 1, self.state.modes)[0])
+                  else solver.lowest(self.rule.order + 1,
+                                     self.state.modes[:self.rule.order + 1])[0])
         negative = int(np.sum(values < -RTOL * np.abs(values).max(initial=0.0)))
         return negative == self.rule.order
 

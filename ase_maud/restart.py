@@ -8,8 +8,9 @@ rows of the arrays file hold what. ``NAME.arrays`` holds the arrays as raw
 float64 rows of 3N numbers each:
 
 - two state slots, used in turn, of three rows (the positions, the last
-  point and its forces) and, for a saddle search, one row per followed mode
-  (its ``order``, signed as followed: ``modes`` in ``NAME``);
+  point and its forces) and, for a saddle search, one row per mode it keeps
+  (``modes`` in ``NAME``: the ``order`` it follows, signed as followed, then
+  on the springs model the other lowest modes of its last step);
 - pair slots of two rows (an L-BFGS pair ``s``, ``y``), each pair written
   once, into a slot the committed JSON does not name (at most ``memory + 1``
   slots are ever used).
@@ -46,8 +47,8 @@ from .method import MaudState, Point
 from .topology import fixed_atoms
 
 #: The version of the layout; a file of another one is refused by name.
-FORMAT = 'maud-restart-4'
-#: Rows per state slot before the followed modes: positions, the last
+FORMAT = 'maud-restart-5'
+#: Rows per state slot before a saddle search's modes: positions, the last
 #: point, its forces.
 STATE_ROWS = 3
 #: Longest time between two flushes of the files to disk (``fsync``), from
@@ -61,8 +62,9 @@ SYNC_SECONDS = 10.0
 class RestartFile:
     """Reads and writes the restart files of one run (module docstring);
     ``path`` is the JSON file, ``path + '.arrays'`` the rows; ``modes``: the
-    modes the run follows uphill (a saddle search's ``order``; None for other
-    targets), which fixes the size of a state slot."""
+    modes the run keeps (a saddle search's
+    :meth:`~ase_maud.method.MaudMethod.kept_modes`; None for other targets),
+    which fixes the size of a state slot."""
 
     def __init__(self, path: str | os.PathLike, modes: int | None = None):
         self.path = Path(path)
@@ -137,9 +139,10 @@ class RestartFile:
         if document['modes'] != self.modes:
             raise ValueError(f'restart file {str(self.path)!r} is of another run: '
                              f"'modes' {document['modes']!r} in it, {self.modes!r} in "
-                             'this run (the modes a saddle search follows, its order; '
-                             "null for other targets); give that run's target and "
-                             'order, or delete it')
+                             'this run (the modes a saddle search keeps: its order, '
+                             'and on the springs model the next lowest; null for other '
+                             "targets); give that run's target, order and model, or "
+                             'delete it')
         rows, slot, pairs = document['rows'], document['slot'], document['pairs']
         size, modes = self._slot_rows, self.modes or 0
         last_row = max((slot + 1) * size, 2 * size + 2 * (max(pairs) + 1) if pairs else 0)
@@ -153,7 +156,7 @@ class RestartFile:
         groups = [('the positions, the last point and its forces', slot * size,
                    STATE_ROWS, crc['state'])]
         if modes:
-            groups.append(("the followed modes, 'modes'", slot * size + STATE_ROWS,
+            groups.append(("the saddle search's modes, 'modes'", slot * size + STATE_ROWS,
                            modes, crc['modes']))
         groups += [(f'pair slot {p}', 2 * size + 2 * p, 2, c)
                    for p, c in zip(pairs, crc['pairs'], strict=True)]
@@ -168,7 +171,7 @@ class RestartFile:
                                  'files')
         x, last_x, forces = (table[slot * size + k].reshape(-1, 3).copy()
                              for k in range(STATE_ROWS))
-        followed = table[slot * size + STATE_ROWS:(slot + 1) * size].reshape(
+        saddle_modes = table[slot * size + STATE_ROWS:(slot + 1) * size].reshape(
             modes, rows // 3, 3).copy()
         state = MaudState(
             gamma=float(document['gamma']), k=document['k'],
@@ -178,7 +181,7 @@ class RestartFile:
                     table[2 * size + 2 * p + 1].reshape(-1, 3).copy())
                    for p in pairs],
             model=dict(document['model']),
-            modes=None if self.modes is None else followed,
+            modes=None if self.modes is None else saddle_modes,
             predicted=None if document['predicted'] is None else float(document['predicted']))
         self._slot = slot
         self._pairs = {id(s): (s, p, c) for (s, _), p, c
@@ -225,7 +228,7 @@ FIELDS: dict[str, tuple[str, Any]] = {
     'noise': ('a finite number >= 0', lambda v: as_number(v) == 0 or _positive(v)),
     'model': ('an object of positive finite numbers',
               lambda v: isinstance(v, dict) and all(map(_positive, v.values()))),
-    'modes': ('null or a whole number >= 0 (the modes a saddle search follows)',
+    'modes': ('null or a whole number >= 0 (the modes a saddle search keeps)',
               lambda v: v is None or _whole(v)),
     'predicted': ('null or a finite number', lambda v: v is None or as_number(v) is not None),
     'monitor': ('an object', lambda v: isinstance(v, dict)),

@@ -15,7 +15,8 @@ from ase.optimize.optimize import Optimizer
 from ase_maud import Maud, MaudError, WrongIndexError
 from ase_maud.analysis import classify, displace_along_mode
 from ase_maud.bench.runner import fresh_copy
-from ase_maud.restart import STATE_ROWS
+from ase_maud.method import LOWEST_MODES
+from ase_maud.restart import STATE_ROWS, RestartFile
 from ase_maud.scenes import build
 from ase_maud.stiffness import ExactModel
 
@@ -318,9 +319,9 @@ def test_saddle_search_resumes_exactly_after_any_step(tmp_path, seed, order):
 @pytest.mark.parametrize('seed', range(2))
 def test_large_scene_saddle_search_resumes_exactly(tmp_path, seed):
     """The same with the lowest modes only (the springs model: LOBPCG
-    started from the followed modes, the trust ratio judged by the last
-    move's prediction, the L-BFGS memory for the rest), stopped after early
-    steps, while the trust fraction still changes."""
+    started from the last step's modes, the trust ratio judged by the last
+    move's prediction), stopped after early steps, while the trust fraction
+    still changes."""
     start = saddles.make_start('all_pairs2d', 12, seed, 'up')
     whole = _frames(start, tmp_path / 'whole', model='springs')
     for stop in (2, 6):
@@ -329,8 +330,27 @@ def test_large_scene_saddle_search_resumes_exactly(tmp_path, seed):
     assert _verified_index(whole[1]) == (1, True)
 
 
+@pytest.mark.parametrize('seed', range(3))
+def test_large_scene_search_keeps_its_next_lowest_modes_for_the_next_step(tmp_path, seed):
+    """With the lowest modes only, a search keeps the mode it follows and the
+    :data:`LOWEST_MODES` next lowest of its last step (orthonormal, the
+    start of the next step's LOBPCG), and its restart file holds them all."""
+    start = saddles.make_start('all_pairs2d', 12, seed, 'up')
+    restart = tmp_path / 'maud.json'
+    with Maud(fresh_copy(start), target='saddle', model='springs', restart=restart,
+              logfile=None) as opt:
+        assert not opt.run(fmax=FMAX, steps=3)
+    modes = opt.state.modes
+    assert modes.shape == (1 + LOWEST_MODES, len(start), 3)
+    np.testing.assert_allclose(np.einsum('kij,mij->km', modes, modes),
+                               np.eye(len(modes)), atol=1e-8)
+    assert json.loads(restart.read_text())['modes'] == 1 + LOWEST_MODES
+    saved = RestartFile(restart, 1 + LOWEST_MODES).read()['state'].modes
+    np.testing.assert_array_equal(saved, modes)
+
+
 def _modes_rows(document):
-    """The rows of the arrays file that hold the followed modes."""
+    """The rows of the arrays file that hold the saddle search's modes."""
     first = document['slot'] * (STATE_ROWS + document['modes']) + STATE_ROWS
     return slice(first, first + document['modes'])
 
@@ -362,9 +382,9 @@ def _unchanged(document, table, rng):
 MODES_DAMAGES = {
     'a mode changed': (_change_a_mode(lambda v: v + 0.5, crc=False), {'order': 2},
                        r": rows \d+-\d+ of '.*maud.json.arrays' are not what it wrote "
-                       r"\(the followed modes, 'modes'"),
+                       r"\(the saddle search's modes, 'modes'"),
     'a mode NaN': (_change_a_mode(lambda v: np.nan, crc=True), {'order': 2},
-                   r"hold non-finite numbers \(the followed modes, 'modes'\)"),
+                   r"hold non-finite numbers \(the saddle search's modes, 'modes'\)"),
     'modes negative': (_set('modes', -1), {'order': 2},
                        "is damaged: 'modes' must be null or a whole number"),
     'modes a string': (_set('modes', '2'), {'order': 2},
@@ -380,7 +400,7 @@ MODES_DAMAGES = {
     'the layout before the modes': (
         _set('format', 'maud-restart-3'), {'order': 2},
         r"was not written by this version of Maud \(format 'maud-restart-3', this "
-        r"version reads 'maud-restart-4'\); delete it and its arrays file"),
+        r"version reads 'maud-restart-5'\); delete it and its arrays file"),
 }
 
 

@@ -10,7 +10,7 @@ Starts (seeded), named ``scene:size:amp``:
   :func:`ase_maud.analysis.classify`), then moved along its lowest Hessian mode so that the
   point that moves most moves ``amp`` a; ``amp`` ``up`` or ``down``: moves ``SHIFT`` = 0.1 of
   the mean nearest-neighbour distance, along the lowest mode either way, ``random``: along a
-  seeded random combination of the modes. 2D scenes also get ``FixCartesian`` on z (Maud never
+  seeded random combination of the modes. 2D scenes hold z (``keep_on_plane``: Maud never
   moves z in 2D; Sella would otherwise see z as a free, flat direction). Scenes are those of
   :func:`ase_maud.scenes.build` and two of the tool's own: ``chords`` (``ring`` with a chord
   from each point to the one a third of the way round) and ``corners`` (``net3d`` with its
@@ -61,7 +61,7 @@ from pathlib import Path
 
 import numpy as np
 from ase import Atoms
-from ase.constraints import FixAtoms, FixCartesian
+from ase.constraints import FixAtoms
 from ase.optimize.optimize import Optimizer
 from scipy.spatial import cKDTree
 
@@ -69,7 +69,7 @@ from ase_maud import Maud
 from ase_maud.analysis import StationaryPoint, classify
 from ase_maud.bench.runner import CallRecorder, fresh_copy
 from ase_maud.landscape import same_point
-from ase_maud.scenes import build
+from ase_maud.scenes import build, keep_on_plane
 
 EXAMPLE = Path(__file__).resolve().parent.parent / 'examples' / 'saddle_and_minima.py'
 
@@ -158,8 +158,7 @@ def make_start(scene: str, size: int, seed: int, amp: float | str) -> Atoms:
     else:
         atoms = build(scene, size, seed=seed)
     if atoms.calc.parameters['dim'] == 2:
-        atoms.set_constraint([*atoms.constraints,
-                              FixCartesian(range(len(atoms)), mask=(False, False, True))])
+        keep_on_plane(atoms)
     if amp in (0, '0'):
         return atoms
     Maud(atoms, logfile=None).run(fmax=1e-9, steps=5000)

@@ -605,14 +605,13 @@ def _truncated_newton(hessian: Callable[[np.ndarray], np.ndarray],
     for _ in range(NEWTON_MAXITER):
         h = hessian(direction)
         c = np.vdot(direction, h)
-        step = direction * (rz / c) if c > 0 else direction
+        step, curved_step = (direction * (rz / c), h * (rz / c)) if c > 0 else (direction, h)
         t = _reach(move, step, limit)
         if not (c > 0 and t >= 1):   # to the edge of the region, and stop
-            t = min(t, 1.0) if c > 0 else t
-            return move + t * step, curved + t * h * (rz / c if c > 0 else 1.0)
+            return move + t * step, curved + t * curved_step
         move += step
-        curved += h * (rz / c)
-        residual -= h * (rz / c)
+        curved += curved_step
+        residual -= curved_step
         if np.linalg.norm(residual) <= goal:
             break
         z = precondition(residual)

@@ -729,7 +729,7 @@ def _floating(springs: np.ndarray, held: np.ndarray) -> np.ndarray:
 #: lowest modes of a large saddle search are computed (LOBPCG).
 MODES_RTOL = 1e-4
 #: ... in at most this many LOBPCG iterations: from a random start (a
-#: search's first step), and from the modes followed so far (every later one).
+#: search's first step), and from the last step's modes (every later one).
 MODES_MAXITER, MODES_WARM_MAXITER = 100, 20
 
 

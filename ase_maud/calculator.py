@@ -310,9 +310,17 @@ class MaudCalculator(Calculator):
         potential = self.potential
         dim, a, Q = potential.dim, potential.a, potential.Q
         want_blocks = 'stiffness' in properties
+        want_hessian = 'hessian' in properties
         scaled = potential.reduced(positions)
-        (e_rep, f_rep, block6), choice = backends.evaluate(
-            self.parameters, scaled, dim, want_blocks)
+        if want_hessian:   # energy, forces and Hessian in one pass, exact
+            self.check_hessian_size(len(scaled))
+            e_rep, f_rep, h_rep = backends.repulsion_hessian(
+                scaled, dim, self.parameters['backend'])
+            block6 = _diagonal_blocks(h_rep, dim) if want_blocks else None
+            choice = backends.exact_choice(self.parameters['backend'])
+        else:
+            (e_rep, f_rep, block6), choice = backends.evaluate(
+                self.parameters, scaled, dim, want_blocks)
         if not (np.isfinite(e_rep) and np.isfinite(f_rep).all() and (
                 block6 is None or np.isfinite(block6).all())):
             raise_on_closest(scaled, a)
@@ -325,9 +333,8 @@ class MaudCalculator(Calculator):
             blocks += physics.spring_nodal_blocks(self.springs, len(scaled),
                                                   potential.stiffnesses, dim)
             results['stiffness'] = Q * blocks
-        if 'hessian' in properties:
-            self.check_hessian_size(len(scaled))
-            results['hessian'] = potential.hessian(positions)
+        if want_hessian:
+            results['hessian'] = potential.whole_hessian(h_rep)
         bad = [name for name, value in results.items()
                if not np.all(np.isfinite(value))]
         if bad:
@@ -399,6 +406,16 @@ class MaudCalculator(Calculator):
             return topology.describe_net_load(total)
         components = self.unbounded_components(atoms) if minimum else []
         return topology.describe_unbounded(components) if components else None
+
+
+def _diagonal_blocks(hessian: np.ndarray, dim: int) -> np.ndarray:
+    """The (N, 6) xx, yy, zz, xy, xz, yz entries of the nodal blocks on the
+    diagonal of a (dim N, dim N) ``hessian`` (zeros beyond ``dim``)."""
+    n = len(hessian) // dim
+    blocks = np.zeros((n, 3, 3))
+    index = np.arange(n)
+    blocks[:, :dim, :dim] = hessian.reshape(n, dim, n, dim)[index, :, index, :]
+    return backends.blocks_to_voigt(blocks)
 
 
 def raise_on_closest(scaled: np.ndarray, a: float) -> None:

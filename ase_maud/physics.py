@@ -116,9 +116,10 @@ def spring_terms(positions: np.ndarray, springs: np.ndarray,
     """
     d = positions[springs[:, 0]] - positions[springs[:, 1]]
     force = spring_force(d, Q)
-    forces = np.zeros_like(positions)
-    np.add.at(forces, springs[:, 0], force)
-    np.add.at(forces, springs[:, 1], -force)
+    n = len(positions)
+    forces = np.stack([np.bincount(springs[:, 0], force[:, k], n)
+                       - np.bincount(springs[:, 1], force[:, k], n)
+                       for k in range(positions.shape[1])], axis=1)
     return float(spring_energy(d, Q).sum()), forces
 
 

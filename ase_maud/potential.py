@@ -155,15 +155,24 @@ class MaudPotential:
 
     # -- the whole Hessian --------------------------------------------------
 
-    def hessian(self, positions: np.ndarray) -> np.ndarray:
+    def hessian(self, positions: np.ndarray, backend: str = 'auto') -> np.ndarray:
         """The dense Hessian ``d2E/dr dr``, shape (dim N, dim N), units of
         ``Q``: ``-B_ij`` off the diagonal, the nodal block ``K_ii = sum_j
-        B_ij`` on it (:mod:`.physics`); the repulsion's part by the
-        registry's Hessian backend (:func:`.backends.repulsion_hessian`)."""
-        hess = self.Q * backends.repulsion_hessian(self.reduced(positions), self.dim)
-        springs = self.spring_hessian(len(positions)).tocoo()
-        np.add.at(hess, (springs.row, springs.col), springs.data)
-        return hess
+        B_ij`` on it (:mod:`.physics`); the repulsion's part by ``backend``
+        (:func:`.backends.repulsion_hessian`)."""
+        unit = backends.repulsion_hessian(self.reduced(positions), self.dim, backend)[2]
+        return self.whole_hessian(unit)
+
+    def whole_hessian(self, repulsion: np.ndarray) -> np.ndarray:
+        """The dense Hessian from the unit repulsion's (dim N, dim N): ``Q``
+        times it, plus the springs' (whose entries are kept in a flat index
+        once per N, not converted at every call); ``repulsion`` is overwritten."""
+        n = len(repulsion) // self.dim
+        flat, data = self._kept(('hessian entries', n), lambda: _flat_entries(
+            self.spring_hessian(n), len(repulsion)))
+        repulsion *= self.Q
+        repulsion.ravel()[flat] += data
+        return repulsion
 
     def hvp(self, positions: np.ndarray, v: ArrayLike) -> np.ndarray:
         """``H v`` without forming ``H``: ``(H v)_i = sum_j B_ij (v_i - v_j)``.
@@ -183,3 +192,11 @@ class MaudPotential:
         hv += (self.spring_hessian(n) @ block.reshape(len(block), -1).T
                ).T.reshape(hv.shape)
         return hv.reshape(v.shape)
+
+
+def _flat_entries(matrix: sp.csr_matrix, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The flat indices into a dense (size, size) array of ``matrix``'s
+    stored entries (each (row, column) once), and their values."""
+    coo = matrix.tocoo()
+    coo.sum_duplicates()
+    return coo.row.astype(np.int64) * size + coo.col, coo.data

@@ -48,6 +48,7 @@ from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 
 from . import accuracy
 from .checks import check, check_all, check_writable
+from .dofs import PROJECTIONS
 from .lock import FileInUseError, RunLock
 from .method import STEP_DEFAULTS, MaudMethod, StepRule, merit_tolerance, step_rule
 from .monitor import (
@@ -60,7 +61,7 @@ from .monitor import (
 )
 from .neighbours import NearestDistances
 from .restart import RestartFile, difference, signature
-from .stiffness import PROJECTIONS, StiffnessModel, choose_model
+from .stiffness import StiffnessModel, choose_model
 from .subset import SubsetView
 from .trajectory import last_frame, repair
 

@@ -10,10 +10,11 @@ from ase.constraints import FixAtoms, FixCartesian
 import ase_maud.stiffness as stiffness
 from ase_maud import Maud, MaudCalculator
 from ase_maud.analysis import classify
+from ase_maud.dofs import free_dofs
 from ase_maud.method import MIN_PAIR_COSINE, MaudMethod
 from ase_maud.potential import MaudPotential
 from ase_maud.scenes import build
-from ase_maud.stiffness import SpringsModel, choose_model, free_dofs
+from ase_maud.stiffness import SpringsModel, choose_model
 
 
 def net(seed, side=7, a=1.0, dim=3, partial=False, weighted=False):

@@ -215,6 +215,12 @@ class MaudCalculator(Calculator):
             return changed
         return super().set(**kwargs)
 
+    @property
+    def tolerance(self) -> float:
+        """``tol``: the force error allowed of the next calls
+        (:class:`ase_maud.accuracy.ToleranceAware`)."""
+        return self.parameters['tol']
+
     def set_tolerance(self, tol: float) -> None:
         """Set ``tol`` for the next calls (:class:`ase_maud.accuracy.ToleranceAware`):
         :meth:`set` with ``tol`` alone, without its checks of the other
@@ -269,6 +275,30 @@ class MaudCalculator(Calculator):
             changes.append('pbc')
         return changes
 
+    def _hold(self, atoms: Atoms) -> None:
+        """Keep what :meth:`check_state` compares next time (ASE's
+        ``Calculator.calculate`` keeps ``atoms.copy()``, and ASE's
+        ``get_property`` has made one already): the copy held is updated in
+        place when no more than the positions changed, and made anew
+        otherwise."""
+        old = self.atoms
+        if (old is None or len(old) != len(atoms)
+                or len(old.constraints) != len(atoms.constraints)
+                or set(self.check_state(atoms)) - {'positions'}):
+            self.atoms = atoms.copy()
+        else:
+            old.arrays['positions'][:] = atoms.arrays['positions']
+
+    def compute(self, atoms: Atoms, properties: Sequence[str]) -> dict[str, Any]:
+        """The ``properties`` of ``atoms`` computed now, in one call (what
+        ``get_property`` does after a move, without its change detection and
+        copy of the atoms): for an optimizer that moves the positions itself.
+        Returns :attr:`results`."""
+        with self._lock:
+            self.results = {}
+            self.calculate(atoms, properties, ['positions'])
+            return self.results
+
     def check_atoms(self, atoms: Atoms) -> np.ndarray:
         """Validate ``atoms`` for this potential; return its positions.
 
@@ -305,7 +335,8 @@ class MaudCalculator(Calculator):
     def calculate(self, atoms: Atoms | None = None,
                   properties: Sequence[str] = ('energy',),
                   system_changes: Sequence[str] = all_changes) -> None:
-        super().calculate(atoms, properties, system_changes)
+        if atoms is not None:
+            self._hold(atoms)
         positions = self.check_atoms(self.atoms)
         potential = self.potential
         dim, a, Q = potential.dim, potential.a, potential.Q
@@ -324,7 +355,7 @@ class MaudCalculator(Calculator):
         if not (np.isfinite(e_rep) and np.isfinite(f_rep).all() and (
                 block6 is None or np.isfinite(block6).all())):
             raise_on_closest(scaled, a)
-        e_spr, f_spr = physics.spring_terms(scaled, self.springs, potential.stiffnesses)
+        e_spr, f_spr = potential.spring_terms(scaled)
         e_load, f_load = physics.load_terms(positions, potential.loads)
         results = {'energy': potential.energy_unit * (e_rep + e_spr) + e_load,
                    'forces': potential.force_unit * (f_rep + f_spr) + f_load}

@@ -137,6 +137,18 @@ class MaudPotential:
         return self._kept(('laplacian', natoms), lambda: physics.spring_laplacian(
             self._springs_within(natoms), natoms, self.stiffnesses))
 
+    def spring_terms(self, scaled: np.ndarray) -> tuple[float, np.ndarray]:
+        """Energy and forces (N, 3) of the springs at ``scaled`` positions
+        (units of ``a``), at ``a = Q = 1``: :func:`.physics.spring_terms`'s
+        law, ``Q q L**2 / 2`` and ``-Q q d``, summed by the spring graph's
+        incidence matrix (kept once per N: two sparse products a call)."""
+        n = len(scaled)
+        incidence, transpose = self._kept(('incidence', n), lambda: _with_transpose(
+            physics.spring_incidence(self._springs_within(n), n)))
+        d = incidence @ scaled
+        pull = d * (self.q[:, None] if self.q is not None else 1.0)
+        return 0.5 * float(np.einsum('ij,ij->', d, pull)), -(transpose @ pull)
+
     def spring_hessian(self, natoms: int) -> sp.csr_matrix:
         """The springs' exact, constant Hessian ``Q (L_q (x) I_dim)``
         (:meth:`spring_laplacian`), shape (dim N, dim N), coordinates point
@@ -192,6 +204,11 @@ class MaudPotential:
         hv += (self.spring_hessian(n) @ block.reshape(len(block), -1).T
                ).T.reshape(hv.shape)
         return hv.reshape(v.shape)
+
+
+def _with_transpose(matrix: sp.csr_matrix) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """``matrix`` and its transpose, both in rows (csr) for fast products."""
+    return matrix, sp.csr_matrix(matrix.T)
 
 
 def _flat_entries(matrix: sp.csr_matrix, size: int) -> tuple[np.ndarray, np.ndarray]:

@@ -267,11 +267,12 @@ def hessian(positions: np.ndarray, dim: int) -> tuple[float, np.ndarray, np.ndar
     return repulsion_hessian(np.ascontiguousarray(positions, dtype=float), dim)
 
 
-@numba.njit(fastmath=True, cache=True)
+@numba.njit(fastmath=True, error_model='numpy', cache=True)
 def repulsion_hessian(x: np.ndarray, dim: int) -> tuple[float, np.ndarray, np.ndarray]:
     """Energy ``sum 1 / L``, forces ``sum d / L**3`` and the Hessian: ``-B_ij``
     off the diagonal and ``sum_j B_ij`` on it; every pair once, one thread
-    (for the small scenes a dense Hessian is for)."""
+    (for the small scenes a dense Hessian is for). Coincident points give
+    non-finite results, never an error (the calculator names them)."""
     n = x.shape[0]
     h = np.zeros((n * dim, n * dim))
     f = np.zeros((n, 3))

@@ -40,6 +40,10 @@ from .optimizer import Maud
 #: energies agree to ~1e-12 and distances to ~1e-7 a).
 ENERGY_RTOL, DISTANCE_ATOL = 1e-8, 1e-4
 
+#: The keys of :meth:`Landscape.todict`, in order (``ase-maud saddles``
+#: replaces a JSON file of these keys only).
+GRAPH_KEYS = ('minima', 'saddles', 'joins', 'barriers', 'failed')
+
 
 def same_point(a: Atoms, b: Atoms, energy_rtol: float = ENERGY_RTOL,
                distance_atol: float = DISTANCE_ATOL) -> bool:
@@ -72,9 +76,10 @@ class Landscape:
         def points(atoms_list):
             return [{'energy': a.get_potential_energy(), 'positions': a.positions.tolist()}
                     for a in atoms_list]
-        return {'minima': points(self.minima), 'saddles': points(self.saddles),
-                'joins': [list(pair) for pair in self.joins],
-                'barriers': [list(pair) for pair in self.barriers()], 'failed': self.failed}
+        return dict(zip(GRAPH_KEYS, (points(self.minima), points(self.saddles),
+                                     [list(pair) for pair in self.joins],
+                                     [list(pair) for pair in self.barriers()],
+                                     self.failed), strict=True))
 
     def barriers(self) -> list[tuple[float, float]]:
         """For each saddle, its energy above each of the two minima it joins

@@ -59,6 +59,7 @@ from .monitor import (
     WrongIndexError,
 )
 from .neighbours import NearestDistances
+from .paths import check_run_files
 from .restart import RestartFile, difference, signature
 from .stiffness import PROJECTIONS, StiffnessModel, choose_model
 from .subset import SubsetView
@@ -632,6 +633,7 @@ def _check_files(restart: Any, logfile: Any, trajectory: Any,
             raise ValueError(f'{name} must be None, a file name{opened}{dash}, '
                              f'got {value!r}')
         check_writable(name, value)
+    check_run_files(restart, logfile, trajectory)
     if not isinstance(append_trajectory, (bool, np.bool_)):
         raise ValueError(f'append_trajectory must be True or False, got '
                          f'{append_trajectory!r}')

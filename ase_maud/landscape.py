@@ -32,6 +32,7 @@ from scipy.spatial.distance import pdist
 
 from .analysis import classify, displace_along_mode
 from .bench.runner import fresh_copy
+from .checks import check_all
 from .monitor import MaudError
 from .optimizer import Maud
 
@@ -98,7 +99,13 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
     relaxed, all to ``fmax`` in at most ``steps`` steps; points compared by
     :func:`same_point` with ``energy_rtol`` and ``distance_atol``. The climbs
     and descents run on the workers of ``client`` (a
-    ``dask.distributed.Client``) if given, else in this process."""
+    ``dask.distributed.Client``) if given, else in this process. Each
+    argument is checked first (:data:`~ase_maud.checks.RULES`): a ValueError
+    names a bad one."""
+    checked = check_all(modes=modes, fmax=fmax, steps=steps, energy_rtol=energy_rtol,
+                        distance_atol=distance_atol)
+    modes, fmax, steps = checked['modes'], checked['fmax'], checked['steps']
+    energy_rtol, distance_atol = checked['energy_rtol'], checked['distance_atol']
     start = fresh_copy(atoms)
     point = classify(start, ftol=np.inf)   # its fmax is tested here
     if point.verdict != 'minimum' or point.fmax > fmax:

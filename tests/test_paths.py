@@ -174,3 +174,25 @@ def test_check_distinct_names_both_arguments(tmp_path):
         check_distinct([('A', tmp_path / name)], [('--b', f'{tmp_path}/x/../{name}')])
     check_distinct([('A', tmp_path / name), ('B', None)],
                    [('--b', tmp_path / 'other.obj'), ('--c', None)])
+
+
+@pytest.mark.parametrize('at', [0, 3])
+def test_ctrl_c_ends_relax_in_one_line_with_its_files_whole(capsys, tmp_path, monkeypatch,
+                                                           at):
+    traj = tmp_path / 'o.traj'
+    traj.write_bytes(b'previous')
+    step = Maud.step
+
+    def interrupted(self, *args, **kwargs):
+        if self.nsteps == at:
+            raise KeyboardInterrupt
+        return step(self, *args, **kwargs)
+
+    monkeypatch.setattr(Maud, 'step', interrupted)
+    assert main(['relax', '--scene', 'ring', '--size', '8', '--seed', str(at), '--traj',
+                 str(traj), '--out', str(tmp_path / 'r.obj'), '--quiet']) == 130
+    error = capsys.readouterr().err
+    assert error == (f'ase-maud: interrupted at step {at}; trajectory {traj} holds the '
+                     'steps so far, --out not written\n')
+    assert len(read(traj, ':')) == at + 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['o.traj']

@@ -132,7 +132,8 @@ def relax(args: argparse.Namespace) -> int:
             raise KeyboardInterrupt(
                 f'interrupted at step {opt.nsteps}; ' + (
                     f'trajectory {args.traj} holds the steps so far' if staged.kept
-                    else f'{args.traj} left as it was') + ', --out not written') from None
+                    else f'{args.traj} left as it was')
+                + (', --out not written' if args.out else '')) from None
         finally:
             if bar is not None:
                 bar.close()

@@ -88,8 +88,9 @@ class StagedTrajectory:
     Give :attr:`trajectory` to the optimizer and attach :meth:`keep` as an
     observer after it (ASE runs observers in order, its trajectory's
     first). A run holding ``path`` (:class:`~ase_maud.lock.RunLock`) is
-    refused first; this one holds the lock of its own file, which moves with
-    it onto ``path``.
+    refused first; this one holds the lock of the previous file at ``path``
+    (if any: a lock would create, and on release remove, the file) and of its
+    own file, which moves with it onto ``path``.
     """
 
     def __init__(self, path: PathLike):
@@ -98,7 +99,7 @@ class StagedTrajectory:
         self.path = Path(path)
         RunLock(None, self.path).check()
         self.temporary = temporary_beside(self.path)
-        self._lock = RunLock(None, self.temporary)
+        self._locks = [RunLock(None, self.temporary)]
         try:
             self.trajectory = Trajectory(self.temporary, 'w')
         except BaseException:
@@ -113,14 +114,22 @@ class StagedTrajectory:
             self.kept = True
 
     def __enter__(self) -> StagedTrajectory:
-        self._lock.__enter__()
+        if self.path.exists():
+            self._locks.append(RunLock(None, self.path))
+        try:
+            for lock in self._locks:
+                lock.__enter__()
+        except BaseException:
+            self.__exit__()
+            raise
         return self
 
     def __exit__(self, *exc_info: Any) -> None:
         self.trajectory.close()
         if not self.kept:
             self.temporary.unlink(missing_ok=True)
-        self._lock.__exit__()
+        for lock in self._locks:
+            lock.__exit__()
 
 
 def check_run_files(restart: Any, logfile: Any, trajectory: Any) -> None:

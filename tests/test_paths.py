@@ -14,6 +14,7 @@ from test_io import write_quad_net
 
 from ase_maud import Maud
 from ase_maud.cli import main
+from ase_maud.lock import FileInUseError
 from ase_maud.paths import StagedTrajectory, check_distinct, check_own_json, same_file
 from ase_maud.scenes import build
 
@@ -196,3 +197,23 @@ def test_ctrl_c_ends_relax_in_one_line_with_its_files_whole(capsys, tmp_path, mo
                      'steps so far, --out not written\n')
     assert len(read(traj, ':')) == at + 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ['o.traj']
+
+
+@pytest.mark.parametrize('previous', [True, False])
+def test_a_second_writer_of_a_staged_trajectory_is_refused(tmp_path, previous):
+    traj = tmp_path / 'run.traj'
+    if previous:
+        traj.write_bytes(b'previous')
+    atoms = build('ring', 5, seed=9)
+    with StagedTrajectory(traj) as staged:
+        if previous:   # the previous file is held until the first frame replaces it
+            with pytest.raises(FileInUseError, match='in use by another run'):
+                StagedTrajectory(traj)
+        staged.trajectory.write(atoms)
+        staged.keep()
+        with pytest.raises(FileInUseError, match='in use by another run'):
+            StagedTrajectory(traj)
+    assert len(read(traj, ':')) == 1 and list(tmp_path.iterdir()) == [traj]
+    with StagedTrajectory(traj):   # released
+        pass
+    assert len(read(traj, ':')) == 1

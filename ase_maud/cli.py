@@ -27,8 +27,10 @@ Exit status: 0 done (converged, stationary); 1 not converged within
 ``--steps`` (relax) or not stationary (classify); 2 an error, said in one line
 ``ase-maud: error: ...`` on stderr: a bad argument (argparse's own), a file
 that cannot be read or written, malformed input, or a run that cannot go on
-(:class:`~ase_maud.MaudError`). Every file a command writes is checked before
-any work (:func:`check_outputs`).
+(:class:`~ase_maud.MaudError`); 130 interrupted (Ctrl-C), in one line. Every
+file a command writes is checked before any work (:func:`check_outputs`),
+an output that names an input or another output refused
+(:mod:`ase_maud.paths`).
 """
 
 from __future__ import annotations

@@ -217,3 +217,12 @@ def test_a_second_writer_of_a_staged_trajectory_is_refused(tmp_path, previous):
     with StagedTrajectory(traj):   # released
         pass
     assert len(read(traj, ':')) == 1
+
+
+def test_ctrl_c_in_another_command_is_one_line(capsys, monkeypatch, net):
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr('ase_maud.analysis.classify', interrupted)
+    assert main(['classify', str(net), '--fix', 'boundary']) == 130
+    assert capsys.readouterr().err == 'ase-maud: interrupted\n'

@@ -360,7 +360,7 @@ def check_outputs(args: argparse.Namespace) -> None:
         check_writable('--out', args.out)
         check_writable('--out', _graph_json(args))
         from .landscape import GRAPH_KEYS
-        check_own_json(f'--out {args.out!r}: its graph JSON', _graph_json(args),
+        check_own_json(f'--out {args.out!r} (its graph JSON)', _graph_json(args),
                        GRAPH_KEYS, 'ase-maud saddles')
     elif args.command in ('bench', 'backends'):
         check_writable('--out', args.out, directory=True)

@@ -356,7 +356,13 @@ class MaudCalculator(Calculator):
                 block6 is None or np.isfinite(block6).all())):
             raise_on_closest(scaled, a)
         e_spr, f_spr = potential.spring_terms(scaled)
-        e_load, f_load = physics.load_terms(positions, potential.loads)
+        with np.errstate(over='ignore', invalid='ignore'):   # said below
+            e_load, f_load = physics.load_terms(positions, potential.loads)
+        if not np.isfinite(e_load):
+            raise ValueError(f'the energy of the loads, -sum p.x, overflows float64 (loads '
+                             f'up to {np.abs(potential.loads).max():.3g} force units, '
+                             f'positions up to {np.abs(positions).max():.3g}): choose '
+                             'units nearer the scene')
         results = {'energy': potential.energy_unit * (e_rep + e_spr) + e_load,
                    'forces': potential.force_unit * (f_rep + f_spr) + f_load}
         if want_blocks:

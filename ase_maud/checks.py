@@ -112,6 +112,10 @@ RULES: dict[str, Rule] = {
                       lambda v: v >= 0, whole=True, none=True),
     'fmm_eps': Rule('a number in (0, 1), the requested relative precision',
                     lambda v: 0 < v < 1),
+    # the landscape (ase_maud.landscape)
+    'modes': Rule('a whole number >= 1 (the lowest modes climbed, each both ways)',
+                  lambda v: v >= 1, whole=True),
+    'distance_atol': Rule('a finite number >= 0 (length units)', lambda v: v >= 0),
     # the command line's own
     'count': Rule('a whole number >= 1', lambda v: v >= 1, whole=True),
     'seed': Rule('a whole number >= 0', lambda v: v >= 0, whole=True),

@@ -12,6 +12,7 @@ import numpy as np
 from ase import Atoms
 
 from .checks import check_writable
+from .paths import check_run_files
 from .restart import difference, signature
 
 
@@ -66,6 +67,7 @@ def check_files(restart: Any, logfile: Any, trajectory: Any,
             raise ValueError(f'{name} must be None, a file name{opened}{dash}, '
                              f'got {value!r}')
         check_writable(name, value)
+    check_run_files(restart, logfile, trajectory)
     if not isinstance(append_trajectory, (bool, np.bool_)):
         raise ValueError(f'append_trajectory must be True or False, got '
                          f'{append_trajectory!r}')

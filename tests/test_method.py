@@ -19,7 +19,7 @@ from ase_maud.descent import (
 )
 from ase_maud.monitor import ENERGY_PROGRESS, DivergenceError, RunMonitor, StagnationError
 from ase_maud.neighbours import NearestDistances
-from ase_maud.search import raised
+from ase_maud.search import raised, trust_region
 from ase_maud.stiffness import MODELS, DampedSolver, StiffnessModel
 from ase_maud.strategy import STEP_DEFAULTS, MaudState, Point, compose, step_rule
 
@@ -407,3 +407,82 @@ def test_truncated_newton_stays_within_each_bound_and_descends(seed, negative):
     assert np.isclose(lengths / limit, 1.0, rtol=1e-9).any()
     np.testing.assert_allclose(curved.ravel(), hessian @ move.ravel(), atol=1e-10)
     assert -np.vdot(forces, move) + 0.5 * np.vdot(move, curved) < 0
+
+
+# -- the trust region (search.trust_region) ---------------------------------------
+
+def _quadratic_model(seed, n=8, negative=0):
+    """A random symmetric K on (n, 3) moves (``negative`` eigenvalues below
+    0) as a MatrixSolver, and forces."""
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.standard_normal((3 * n, 3 * n)))
+    values = np.geomspace(0.05, 20.0, 3 * n)
+    values[:negative] *= -1
+    return MatrixSolver(q @ np.diag(values) @ q.T), rng.standard_normal((n, 3)), values
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_trust_region_keeps_a_newton_move_that_fits(seed):
+    model, forces, _ = _quadratic_model(seed)
+    newton = model.solve(forces)
+    limit = np.full(len(forces), 2.0 * np.linalg.norm(newton, axis=1).max())
+    assert trust_region(model, forces, newton, 1.0, limit) is newton
+
+
+@pytest.mark.parametrize('seed', range(4))
+@pytest.mark.parametrize('gamma', [1.0, 0.5])
+def test_dogleg_of_a_definite_model_reaches_the_limit_downhill(seed, gamma):
+    """A Newton move too long for the limits is cut on the dogleg path: its
+    ``gamma`` times touches a limit and stays within every one, and the
+    quadratic model ``-f.d + d.K d / 2`` falls."""
+    model, forces, _ = _quadratic_model(seed)
+    newton = model.solve(forces)
+    limit = np.random.default_rng(seed).uniform(0.05, 0.2, len(forces)) * np.linalg.norm(
+        newton, axis=1).max()
+    move = trust_region(model, forces, newton, gamma, limit)
+    ratio = gamma * np.linalg.norm(move, axis=1) / limit
+    assert ratio.max() == pytest.approx(1.0, rel=1e-9)
+    assert -np.vdot(forces, move) + 0.5 * np.vdot(move, model.dot(move)) < 0
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_damping_of_an_indefinite_model_is_the_smallest_that_fits(seed):
+    """An indefinite model is damped to ``(K + mu I)^-1 f`` with ``K + mu I``
+    definite, the move within the limits, and no ``mu`` 1 % smaller that
+    fits (the bisections pin ``mu`` to 0.2 %)."""
+    model, forces, values = _quadratic_model(seed, negative=3)
+    model.definite = False
+    newton = model.solve(forces)
+    limit = np.full(len(forces), 0.3)
+    move = trust_region(model, forces, newton, 1.0, limit)
+    assert np.linalg.norm(move, axis=1).max() <= 0.3 * (1 + 1e-12)
+    flat = move.ravel()
+    mu = np.vdot(forces.ravel() - model.K @ flat, flat) / np.vdot(flat, flat)
+    assert mu > -values.min()
+    np.testing.assert_allclose((model.K + mu * np.eye(len(flat))) @ flat, forces.ravel(),
+                               rtol=1e-8, atol=1e-10)
+    smaller = model.damped(forces, 0.99 * mu)
+    assert smaller is None or np.linalg.norm(smaller, axis=1).max() > 0.3
+
+
+def test_exact_models_solver_is_cholesky_where_definite_and_eigen_where_not():
+    """The exact model's local model declares which: a definite Hessian gets
+    the Cholesky solver (dogleg), an indefinite one the saddle-free eigen
+    solver (damped), and both solve ``|K| d = f``."""
+    from ase_maud.scenes import build
+    from ase_maud.stiffness import ExactModel
+    model = ExactModel()
+    minimum = build('dimer')
+    minimum.set_distance(0, 1, 1.0)   # the dimer's minimum, L = a
+    definite = model.at(minimum)
+    assert isinstance(definite, DampedSolver) and definite.definite
+    squeezed = build('all_pairs', 6, seed=1)
+    indefinite = model.at(squeezed)
+    assert not indefinite.definite
+    hessian = squeezed.calc.get_hessian(squeezed)
+    values, vectors = np.linalg.eigh(hessian)
+    forces = np.random.default_rng(0).standard_normal((len(squeezed), 3))
+    move = indefinite.solve(forces).ravel()
+    safe = np.maximum(np.abs(values), model.floor * np.abs(values).max())
+    np.testing.assert_allclose(move, vectors @ ((vectors.T @ forces.ravel()) / safe),
+                               rtol=1e-7, atol=1e-9)

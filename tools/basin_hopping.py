@@ -13,11 +13,12 @@ numbers: the same hops, applied to the minima each optimiser found. In 2D a
 
 Counted (``ase_maud.bench.runner.CallRecorder``): every calculator call, line searches
 included, of the whole run, and its CPU seconds (``time.process_time``). Reported per
-run: the number of distinct minima visited (by energy, within ``--energy-rtol``), the lowest energy found (``Q a^2``), the calls spent,
-the calls until the run first found its own lowest energy, and until it first found
-the lowest energy of all the runs from that start (``best``, within ``--energy-rtol``;
-``inf`` if never); local relaxations that hit the ``--relax-steps`` cap (BasinHopping then
-takes the energy where they stopped), and any error. The goal: Maud reaches
+run: the number of distinct minima visited (by energy, within ``--energy-rtol``), the
+lowest energy found (``Q a^2``), the calls spent, the calls until the run first found
+its own lowest energy, and until it first found the lowest energy of all the runs from
+that start (``best``, within ``--energy-rtol``; ``inf`` if never); local relaxations
+that hit the ``--relax-steps`` cap (BasinHopping then takes the energy where they
+stopped), and any error. The goal: Maud reaches
 ``best`` in at most half of BFGS's calls. Run with one thread::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\

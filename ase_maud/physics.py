@@ -61,6 +61,12 @@ def repulsion_block(d: np.ndarray) -> np.ndarray:
     return inv**3 * (3.0 * inv * inv * outer - np.eye(d.shape[-1]))
 
 
+def repulsion_stiffness(length: np.ndarray) -> np.ndarray:
+    """Unit repulsion's stiffness along its pair, ``d2(1/L)/dL2 = 2 / L**3``
+    (the largest eigenvalue of :func:`repulsion_block`), for lengths ``L``."""
+    return 2.0 / length**3
+
+
 def _per_pair(Q: float | np.ndarray, d: np.ndarray) -> np.ndarray:
     """``Q`` (a number, or one value per pair vector of ``d``) shaped to
     broadcast against the pairs of ``d``: ``d.shape[:-1]``."""

@@ -61,6 +61,7 @@ import scipy.sparse as sp
 from ase import Atoms
 from scipy.sparse.linalg import LinearOperator, cg, splu
 
+from . import physics
 from .checks import check
 from .dofs import PROJECTIONS, allowed_basis, free_dofs, internal_basis, rigid_body_modes
 from .neighbours import NearestDistances
@@ -707,7 +708,8 @@ class SpringsModel(StiffnessModel):
         alone = laplacian.diagonal() == 0
         if alone.any() and n > 1:
             distance = self.nearest(atoms.positions)[alone]
-            diagonal[alone] = 2 * potential.a**3 * potential.Q / distance**3
+            diagonal[alone] = potential.Q * physics.repulsion_stiffness(
+                distance / potential.a)
         largest = max(laplacian.diagonal().max(initial=0.0), diagonal.max(initial=0.0))
         matrix = sp.csr_matrix(laplacian + sp.diags(diagonal))
         inverses = {}

@@ -185,3 +185,11 @@ def test_the_potentials_spring_sums_are_the_pair_law(seed, dim):
         expected = physics.spring_terms(positions, springs, 1.0 if q is None else q)
         assert energy == pytest.approx(expected[0], rel=1e-13)
         np.testing.assert_allclose(forces, expected[1], rtol=1e-12, atol=1e-13)
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_repulsion_stiffness_is_the_blocks_largest_eigenvalue(seed):
+    d = np.random.default_rng(seed).normal(size=(5, 3))
+    length = np.linalg.norm(d, axis=1)
+    largest = np.linalg.eigvalsh(physics.repulsion_block(d))[:, -1]
+    np.testing.assert_allclose(physics.repulsion_stiffness(length), largest, rtol=1e-12)

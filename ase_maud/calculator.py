@@ -56,7 +56,9 @@ class MaudCalculator(Calculator):
         order); a duplicate, a self-spring or an index out of range is a
         ``ValueError`` that names the spring.
     a : float
-        Length in the repulsion ``a**3 Q / L`` (default 1).
+        Length in the repulsion ``a**3 Q / L`` (default 1). ``0`` switches
+        the repulsion off: springs and loads alone, the force-density method
+        (:attr:`last_backend` ``'none'``).
     Q : float
         Spring constant, force per length (default 1).
     q : array-like of shape (K,), optional
@@ -310,19 +312,29 @@ class MaudCalculator(Calculator):
         potential = self.potential
         dim, a, Q = potential.dim, potential.a, potential.Q
         want_blocks = 'stiffness' in properties
-        scaled = potential.reduced(positions)
-        (e_rep, f_rep, block6), choice = backends.evaluate(
-            self.parameters, scaled, dim, want_blocks)
-        if not (np.isfinite(e_rep) and np.isfinite(f_rep).all() and (
-                block6 is None or np.isfinite(block6).all())):
-            raise_on_closest(scaled, a)
-        e_spr, f_spr = physics.spring_terms(scaled, self.springs, potential.stiffnesses)
+        if potential.repulsive:
+            scaled = potential.reduced(positions)
+            (e_rep, f_rep, block6), choice = backends.evaluate(
+                self.parameters, scaled, dim, want_blocks)
+            if not (np.isfinite(e_rep) and np.isfinite(f_rep).all() and (
+                    block6 is None or np.isfinite(block6).all())):
+                raise_on_closest(scaled, a)
+            e_spr, f_spr = physics.spring_terms(scaled, self.springs, potential.stiffnesses)
+            backend, tolerance = choice.backend.name, choice.tolerance
+        else:   # a = 0: springs and loads alone, in the user's units (x' = x)
+            scaled, e_rep, f_rep, backend, tolerance = positions, 0.0, 0.0, 'none', 0.0
+            e_spr, f_spr = physics.spring_terms(positions, self.springs,
+                                                potential.stiffnesses)
         e_load, f_load = physics.load_terms(positions, potential.loads)
-        results = {'energy': potential.energy_unit * (e_rep + e_spr) + e_load,
-                   'forces': potential.force_unit * (f_rep + f_spr) + f_load}
+        # at a = 0 the springs' terms are in the user's units: scaled by Q alone
+        e_unit, f_unit = ((potential.energy_unit, potential.force_unit)
+                          if potential.repulsive else (Q, Q))
+        results = {'energy': e_unit * (e_rep + e_spr) + e_load,
+                   'forces': f_unit * (f_rep + f_spr) + f_load}
         if want_blocks:
-            blocks = backends.voigt_to_blocks(block6, dim)
-            blocks += physics.spring_nodal_blocks(self.springs, len(scaled),
+            blocks = (backends.voigt_to_blocks(block6, dim) if potential.repulsive
+                      else np.zeros((len(positions), dim, dim)))
+            blocks += physics.spring_nodal_blocks(self.springs, len(positions),
                                                   potential.stiffnesses, dim)
             results['stiffness'] = Q * blocks
         if 'hessian' in properties:
@@ -331,7 +343,8 @@ class MaudCalculator(Calculator):
         bad = [name for name, value in results.items()
                if not np.all(np.isfinite(value))]
         if bad:
-            raise_on_closest(scaled, a)   # the Hessian's 1/L**3
+            if potential.repulsive:
+                raise_on_closest(scaled, a)   # the Hessian's 1/L**3
             raise ValueError(f'the {", ".join(bad)} overflow float64 at a = '
                              f'{a!r}, Q = {Q!r} (energies scale as a^2 Q, '
                              'forces as a Q): choose units nearer the scene')
@@ -342,10 +355,11 @@ class MaudCalculator(Calculator):
         # them without reset): only those still held count
         held = self.last_tolerance if self.results else None
         self.results.update(results, free_energy=results['energy'])
-        self.last_backend = choice.backend.name
-        self.last_tolerance = max(held or 0.0, choice.tolerance)
+        self.last_backend = backend
+        self.last_tolerance = max(held or 0.0, tolerance)
         self.last_force_scale = potential.force_unit * float(
-            np.sqrt(np.einsum('ij,ij->i', f_rep, f_rep).max(initial=0.0)))
+            np.sqrt(np.einsum('ij,ij->i', f_rep, f_rep).max(initial=0.0))
+            if potential.repulsive else 0.0)
 
     def get_stiffness(self, atoms: Atoms | None = None) -> np.ndarray:
         """Nodal blocks ``K_mm``, shape (N, dim, dim), units of ``Q``."""

@@ -1,0 +1,64 @@
+"""The force-density method: the equilibrium of a net's springs and loads
+alone (``a = 0``), by one sparse linear solve.
+
+With the repulsion off, the forces at the free points are linear in the
+positions, ``f_free = -Q (L_ff x_f + L_fs x_s) + F_f`` (``L`` the springs'
+Laplacian weighted by ``q``, ``s`` the supports), so the equilibrium is
+``Q L_ff x_f = F_f - Q L_fs x_s``: one factorisation of ``L_ff`` serves every
+coordinate (Schek's force-density method; compas_fd's ``fd_numpy``). It is
+the limit of Maud's minimum as ``a -> 0`` (docs/theory.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse.linalg as spla
+from ase import Atoms
+
+from .calculator import MaudCalculator
+from .topology import fixed_atoms, held_directions, spring_components
+
+__all__ = ['solve_force_density']
+
+
+def solve_force_density(atoms: Atoms) -> None:
+    """Move the free points of the net ``atoms`` to the equilibrium of its
+    springs and loads (its calculator's ``springs``, ``Q``, ``q`` and
+    ``loads``; the repulsion ignored, whatever ``a``), the supports held.
+
+    Supports are the points held in all three directions; a ValueError if a
+    point is held in some directions only (that is no linear boundary
+    condition here: relax with :class:`~ase_maud.Maud` instead), or if a
+    spring component has no support (its equilibrium is not unique: it
+    names a point of it). A ``dim=2`` net stays on its plane.
+    """
+    calc = atoms.calc
+    if not isinstance(calc, MaudCalculator):
+        raise ValueError('solve_force_density needs a net with a MaudCalculator attached, '
+                         f'got {type(calc).__name__}')
+    potential = calc.potential
+    natoms = len(atoms)
+    held = fixed_atoms(atoms)
+    partly = np.flatnonzero(held_directions(atoms).any(axis=1) & ~held)
+    if partly.size:
+        raise ValueError(f'point {partly[0]} is held in some directions only: the '
+                         'force-density solve takes supports held in every direction')
+    components = spring_components(natoms, potential.springs)
+    supported = np.zeros(components.max(initial=-1) + 1, dtype=bool)
+    supported[components[held]] = True
+    loose = np.flatnonzero(~supported[components])
+    if loose.size:
+        raise ValueError(f'point {loose[0]} is on a spring component with no support: '
+                         'its force-density equilibrium is not unique (fix a point of '
+                         'each component)')
+    free = np.flatnonzero(~held)
+    if not free.size:
+        return
+    laplacian = potential.spring_laplacian(natoms).tocsr()
+    positions = atoms.get_positions()
+    loads = np.zeros((natoms, 3)) if potential.loads is None else potential.loads
+    right = loads[free] / potential.Q - laplacian[free][:, held] @ positions[held]
+    solve = spla.factorized(laplacian[free][:, free].tocsc())
+    for axis in range(potential.dim):
+        positions[free, axis] = solve(np.ascontiguousarray(right[:, axis]))
+    atoms.set_positions(positions, apply_constraint=False)

@@ -1,0 +1,166 @@
+"""Member forces, reactions and out-of-balance (ase_maud.results), the
+force-density solve (ase_maud.forcedensity) and ``a = 0``."""
+
+import csv
+
+import numpy as np
+import pytest
+from ase import Atoms
+from ase.constraints import FixAtoms
+
+from ase_maud import Maud, MaudCalculator
+from ase_maud.forcedensity import solve_force_density
+from ase_maud.io import read_net
+from ase_maud.results import form_result, write_forces_csv
+
+compas = pytest.importorskip('compas')
+fd_numpy = pytest.importorskip('compas_fd.solvers').fd_numpy
+
+
+def hanging_truss(seed, a=0.0):
+    """Two supports 2 w apart, two free points, three members: a cable
+    hanging under the loads P at its free points, with random q, Q, P, w."""
+    rng = np.random.default_rng(seed)
+    w, Q, P = rng.uniform(0.5, 2.0, 3)
+    q = rng.uniform(0.5, 2.0, 3)
+    start = np.array([[-w, 0, 0], [w, 0, 0], [-w / 3, 0.1, 0.2], [w / 3, -0.1, 0.1]])
+    atoms = Atoms(positions=start)
+    atoms.set_constraint(FixAtoms([0, 1]))
+    loads = np.zeros((4, 3))
+    loads[2:, 2] = -P
+    atoms.calc = MaudCalculator(springs=[[0, 2], [2, 3], [3, 1]], a=a, Q=Q, q=q,
+                                loads=loads)
+    return atoms, w, Q, q, P
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_truss_forces_and_reactions_by_hand(seed):
+    atoms, w, Q, q, P = hanging_truss(seed)
+    solve_force_density(atoms)
+    x = atoms.positions
+    # by hand: each member pulls Q q_s (r_j - r_i); the horizontal pull H is
+    # the same in each member, so Q q_0 (x2 + w) = Q q_1 (x3 - x2) = Q q_2 (w - x3);
+    # vertically point 2 carries P by members 0 and 1, point 3 by 1 and 2
+    d = 1 / q
+    x2 = -w + 2 * w * d[0] / d.sum()
+    x3 = w - 2 * w * d[2] / d.sum()
+    H = Q * q[0] * (x2 + w)
+    # z: Q q0 (0 - z2) + Q q1 (z3 - z2) = P and Q q2 (0 - z3) + Q q1 (z2 - z3) = P
+    matrix = Q * np.array([[q[0] + q[1], -q[1]], [-q[1], q[1] + q[2]]])
+    z2, z3 = np.linalg.solve(matrix, [-P, -P])
+    assert np.allclose(x[2:], [[x2, 0, z2], [x3, 0, z3]], atol=1e-12)
+    result = form_result(atoms)
+    lengths = np.array([np.hypot(x2 + w, z2), np.hypot(x3 - x2, z3 - z2),
+                        np.hypot(w - x3, z3)])
+    assert np.allclose(result.lengths, lengths, rtol=1e-12)
+    assert np.allclose(result.forces, Q * q * lengths, rtol=1e-12)
+    assert np.allclose(result.force_densities, Q * q, rtol=1e-15)
+    # the supports pull the cable outwards by H and hold it up by their share of 2 P
+    assert result.supports.tolist() == [0, 1]
+    assert np.allclose(result.reactions, [[-H, 0, Q * q[0] * -z2], [H, 0, Q * q[2] * -z3]],
+                       atol=1e-12)
+    assert np.allclose(result.reaction_sum, [0, 0, 2 * P], rtol=0, atol=1e-9 * 2 * P)
+    assert result.max_residual < 1e-12 and result.max_out_of_balance < 1e-12
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_maud_at_a_zero_reaches_the_force_density_solution(seed):
+    atoms, *_ = hanging_truss(seed)
+    expected = atoms.copy()
+    expected.calc = atoms.calc
+    solve_force_density(expected)
+    solution = expected.positions.copy()
+    atoms, *_ = hanging_truss(seed)
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-10, steps=20)
+    assert opt.nsteps <= 5
+    assert np.abs(atoms.positions - solution).max() < 1e-9
+    assert atoms.calc.last_backend == 'none'
+
+
+def test_a_zero_has_no_repulsion():
+    atoms, *_ = hanging_truss(3, a=0.0)
+    forces = atoms.get_forces(apply_constraint=False)
+    springs = atoms.calc.get_spring_hessian(atoms)
+    linear = -(springs @ atoms.positions.ravel()).reshape(-1, 3) + atoms.calc.potential.loads
+    assert np.allclose(forces, linear, rtol=1e-12, atol=1e-12)
+    hessian = atoms.calc.get_hessian(atoms)
+    assert np.allclose(hessian, atoms.calc.get_spring_hessian(atoms).toarray())
+    stiffness = atoms.calc.get_stiffness(atoms)
+    assert np.allclose(stiffness, [hessian[3 * m:3 * m + 3, 3 * m:3 * m + 3]
+                                   for m in range(4)])
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_reactions_balance_loads_with_repulsion(seed):
+    atoms, w, Q, q, P = hanging_truss(seed, a=0.05)
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-11, steps=300)
+    result = form_result(atoms)
+    # loads, springs and repulsion: the reactions balance the loads all the same
+    assert np.allclose(result.reaction_sum, [0, 0, 2 * P], rtol=0, atol=1e-9 * 2 * P)
+    # and the repulsion carries what the members and loads leave out of balance
+    assert result.max_out_of_balance > 1e3 * result.max_residual
+
+
+def test_forces_against_compas_fd_on_a_sample_net():
+    atoms = read_net(compas.get('faces.obj'), fixed='boundary', dim=3)
+    rng = np.random.default_rng(4)
+    springs, start = atoms.calc.springs, atoms.positions.copy()
+    edge = np.linalg.norm(start[springs[:, 0]] - start[springs[:, 1]], axis=1).mean()
+    q = rng.uniform(0.5, 2.0, len(springs))
+    fixed = np.flatnonzero([i in atoms.constraints[0].index for i in range(len(atoms))])
+    loads = np.zeros_like(start)
+    free = np.setdiff1d(np.arange(len(atoms)), fixed)
+    loads[free] = rng.normal(0.0, 0.3 * edge, (len(free), 3))
+    atoms.calc.set(a=1e-4 * edge, q=q, loads=loads)
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-11 * edge, steps=200)
+    peer = fd_numpy(vertices=start.tolist(), fixed=fixed.tolist(), edges=springs.tolist(),
+                    forcedensities=q.tolist(), loads=loads.tolist())
+    result = form_result(atoms)
+    scale = np.abs(peer.forces).max()
+    assert np.allclose(result.forces, np.ravel(peer.forces), rtol=0, atol=1e-8 * scale)
+    assert np.allclose(result.lengths, np.ravel(peer.lengths), rtol=1e-8)
+    # compas_fd's residual at a fixed point is the force on it: minus the reaction
+    assert np.allclose(result.reactions, -np.asarray(peer.residuals)[fixed], rtol=0,
+                       atol=1e-8 * scale)
+    assert np.allclose(result.reaction_sum, -loads.sum(axis=0), rtol=0,
+                       atol=1e-9 * np.abs(loads).sum())
+    assert result.repulsion_share < 1e-6
+    # the solve gives the same net at a = 0
+    atoms.calc.set(a=0.0)
+    atoms.positions = start
+    solve_force_density(atoms)
+    assert np.abs(atoms.positions - np.asarray(peer.vertices)).max() < 1e-10 * edge
+
+
+def test_force_density_solve_refuses_an_unsupported_component():
+    atoms = Atoms(positions=np.arange(12.0).reshape(4, 3))
+    atoms.set_constraint(FixAtoms([0]))
+    atoms.calc = MaudCalculator(springs=[[0, 1], [2, 3]], a=0)
+    with pytest.raises(ValueError, match='point 2 is on a spring component with no support'):
+        solve_force_density(atoms)
+
+
+def test_forces_csv(tmp_path):
+    atoms, *_ = hanging_truss(5)
+    solve_force_density(atoms)
+    result = form_result(atoms)
+    path = write_forces_csv(tmp_path / 'forces.csv', result)
+    with open(path, newline='') as f:
+        rows = list(csv.DictReader(f))
+    members = [r for r in rows if r['kind'] == 'member']
+    reactions = [r for r in rows if r['kind'] == 'reaction']
+    assert [[int(r['i']), int(r['j'])] for r in members] == result.edges.tolist()
+    assert [float(r['force']) for r in members] == result.forces.tolist()
+    assert [float(r['force_density']) for r in members] == result.force_densities.tolist()
+    assert [int(r['i']) for r in reactions] == [0, 1]
+    assert np.array_equal([[float(r[k]) for k in ('rx', 'ry', 'rz')] for r in reactions],
+                          result.reactions)
+
+
+def test_form_result_needs_a_maud_calculator():
+    atoms = Atoms('H2', positions=[[0, 0, 0], [1, 0, 0]])
+    with pytest.raises(ValueError, match='MaudCalculator'):
+        form_result(atoms)

@@ -198,3 +198,19 @@ def check_writable(name: str, value: str | os.PathLike, directory: bool = False)
     if not os.access(parent, os.W_OK | os.X_OK):
         raise ValueError(f'{text}: the directory {str(parent)!r} is not writable')
     return path
+
+
+def check_distinct(inputs: dict[str, Any], outputs: dict[str, Any]) -> None:
+    """A ValueError naming both options if a file of ``outputs`` (option
+    name: path or None) is a file of ``inputs`` or of another output: a
+    command must not write over what it reads, nor write one file twice."""
+    seen: dict[Path, str] = {}
+    for group, items in (('reads', inputs), ('writes', outputs)):
+        for name, value in items.items():
+            if value is None or not isinstance(value, (str, os.PathLike)):
+                continue
+            path = Path(value).resolve()
+            if path in seen and group == 'writes':
+                raise ValueError(f'{name} {str(value)!r} is the file of {seen[path]}; '
+                                 'give each output a file of its own')
+            seen.setdefault(path, name)

@@ -40,7 +40,7 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from .checks import check, check_writable
+from .checks import check, check_distinct, check_writable
 from .monitor import MaudError
 from .threads import pin_threads
 
@@ -97,8 +97,10 @@ def relax(args: argparse.Namespace) -> int:
     """``ase-maud relax``: exit status 0 if converged, else 1."""
     from . import kernels_cached
     from .bench.runner import CallRecorder
+    from .forcedensity import solve_force_density
     from .io import mean_spring_length, net_format, read_net, write_net
     from .optimizer import Maud
+    from .results import describe_result, form_result, form_warnings, write_forces_csv
     from .scenes import build
     from .topology import free_point_loads
 
@@ -113,10 +115,14 @@ def relax(args: argparse.Namespace) -> int:
         label = Path(args.net).name
     a, springs = atoms.calc.parameters['a'], atoms.calc.parameters.get('springs', ())
     share = (f' ({a / mean_spring_length(atoms.positions, springs):.3g} x the mean spring '
-             'length at the start)') if len(springs) else ''
-    if not kernels_cached():
+             'length at the start)' if a else ' (the force-density equilibrium: no '
+             'repulsion)') if len(springs) else ''
+    if a == 0:
+        solve_force_density(atoms)   # Maud then has nothing left to do
+    elif not kernels_cached():
         print('compiling the kernels (first run only, ~20 s)...', file=sys.stderr,
               flush=True)
+    start = atoms.positions.copy()
     progress = (sys.stderr.isatty() if args.progress is None else args.progress) \
         and not args.quiet and args.log != '-'
     logfile = args.log or (None if progress or args.quiet else '-')
@@ -130,32 +136,22 @@ def relax(args: argparse.Namespace) -> int:
             if bar is not None:
                 bar.close()
     fmax = (atoms.get_forces()**2).sum(axis=1).max() ** 0.5
+    result = form_result(atoms)
     written = f'trajectory {args.traj}'
     if args.out:
         like = args.net if args.net and net_format(args.net) == net_format(args.out) else None
-        written += ', relaxed net ' + ' '.join(map(str, write_net(args.out, atoms, like=like)))
+        written += ', relaxed net ' + ' '.join(map(str, write_net(args.out, atoms, like=like,
+                                                                  result=result)))
+    if args.forces:
+        written += f', forces {write_forces_csv(args.forces, result)}'
     print(f'{"converged" if converged else "NOT converged"}: {label} '
           f'{len(atoms)} points, {opt.nsteps} steps, '
           f'{len(recorder.samples)} force calls, energy '
           f'{atoms.get_potential_energy():.12g}, fmax {fmax:.3g}, a {a:.4g}{share}; '
-          f'{written}')
-    if args.net is not None:
-        _warn_beyond_supports(atoms, a)
+          f'{describe_result(result)}; {written}')
+    for warning in form_warnings(atoms, start, result) if args.net is not None else ():
+        print(f'ase-maud: warning: {warning}', file=sys.stderr)
     return 0 if converged else 1
-
-
-def _warn_beyond_supports(atoms, a: float) -> None:
-    """A warning on stderr, naming --a, if the free points of the relaxed
-    net reach beyond its supports' bounding box by more than a tenth of its
-    diagonal."""
-    from .topology import support_excursion
-
-    beyond, diagonal = support_excursion(atoms)
-    if beyond > diagonal / 10 > 0:
-        print(f'ase-maud: warning: free points reach {beyond:.3g} beyond the bounding box '
-              f'of the fixed points (diagonal {diagonal:.3g}): the repulsion of a = {a:.4g} '
-              'inflates the net; a smaller --a gives a form closer to the springs\' '
-              'own', file=sys.stderr)
 
 
 def show(args: argparse.Namespace) -> int:
@@ -330,6 +326,11 @@ def check_outputs(args: argparse.Namespace) -> None:
             check_writable('--log', args.log)
         if args.out:
             check_net_path('--out', args.out)
+        if args.forces:
+            check_writable('--forces', args.forces)
+        check_distinct({'NET_FILE': args.net, '--edges': args.edges, '--fix': args.fixed},
+                       {'--traj': args.traj, '--out': args.out, '--forces': args.forces,
+                        '--log': None if args.log == '-' else args.log})
     elif args.command == 'show':
         from matplotlib.figure import Figure
 
@@ -453,6 +454,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--out', metavar='RELAXED_FILE',
                    help='write the relaxed net here, in the format of its suffix '
                    '(.obj, .json, .traj, .xyz plus NAME.edges.txt, ...)')
+    p.add_argument('--forces', metavar='FORCES_CSV',
+                   help='write the member forces (i, j, force Q q L, length, force '
+                   'density Q q) and the support reactions (rx, ry, rz) as one CSV '
+                   'table with a kind column (ase_maud.results.write_forces_csv)')
     p.add_argument('--scene', default='weighted_net', choices=SCENES,
                    metavar='NAME', help=f'without NET_FILE, of: {", ".join(SCENES)} '
                    '(default: %(default)s)')

@@ -16,9 +16,32 @@ import scipy.sparse.linalg as spla
 from ase import Atoms
 
 from .calculator import MaudCalculator
-from .topology import fixed_atoms, held_directions, spring_components
+from .topology import held_directions, spring_components
 
-__all__ = ['solve_force_density']
+__all__ = ['solve_force_density', 'unsupported']
+
+
+def unsupported(atoms: Atoms, springs: np.ndarray, dim: int = 3) -> str | None:
+    """Why the supports of ``atoms`` (its constraints) do not make the
+    force-density equilibrium of ``springs`` ((K, 2) pairs) unique, in
+    words, or None if they do: every spring component (a point without
+    springs is one) must hold a point fixed in every direction of the first
+    ``dim``, and no point may be held in some of them only (the z a
+    ``dim=2`` net's points are held in does not count)."""
+    directions = held_directions(atoms)[:, :dim]
+    held = directions.all(axis=1)
+    partly = np.flatnonzero(directions.any(axis=1) & ~held)
+    if partly.size:
+        return (f'point {partly[0]} is held in some directions only: the '
+                'force-density solve takes supports held in every direction')
+    components = spring_components(len(atoms), springs)
+    supported = np.zeros(components.max(initial=-1) + 1, dtype=bool)
+    supported[components[held]] = True
+    loose = np.flatnonzero(~supported[components])
+    if loose.size:
+        return (f'point {loose[0]} is on a spring component with no support: its '
+                'force-density equilibrium is not unique (fix a point of each component)')
+    return None
 
 
 def solve_force_density(atoms: Atoms) -> None:
@@ -26,31 +49,21 @@ def solve_force_density(atoms: Atoms) -> None:
     springs and loads (its calculator's ``springs``, ``Q``, ``q`` and
     ``loads``; the repulsion ignored, whatever ``a``), the supports held.
 
-    Supports are the points held in all three directions; a ValueError if a
-    point is held in some directions only (that is no linear boundary
-    condition here: relax with :class:`~ase_maud.Maud` instead), or if a
-    spring component has no support (its equilibrium is not unique: it
-    names a point of it). A ``dim=2`` net stays on its plane.
+    Supports are the points held in all three directions; a ValueError
+    where :func:`unsupported` says why they do not make the equilibrium
+    unique (a point held in some directions only: relax with
+    :class:`~ase_maud.Maud` instead). A ``dim=2`` net stays on its plane.
     """
     calc = atoms.calc
     if not isinstance(calc, MaudCalculator):
         raise ValueError('solve_force_density needs a net with a MaudCalculator attached, '
                          f'got {type(calc).__name__}')
     potential = calc.potential
+    why = unsupported(atoms, potential.springs, potential.dim)
+    if why is not None:
+        raise ValueError(why)
     natoms = len(atoms)
-    held = fixed_atoms(atoms)
-    partly = np.flatnonzero(held_directions(atoms).any(axis=1) & ~held)
-    if partly.size:
-        raise ValueError(f'point {partly[0]} is held in some directions only: the '
-                         'force-density solve takes supports held in every direction')
-    components = spring_components(natoms, potential.springs)
-    supported = np.zeros(components.max(initial=-1) + 1, dtype=bool)
-    supported[components[held]] = True
-    loose = np.flatnonzero(~supported[components])
-    if loose.size:
-        raise ValueError(f'point {loose[0]} is on a spring component with no support: '
-                         'its force-density equilibrium is not unique (fix a point of '
-                         'each component)')
+    held = held_directions(atoms)[:, :potential.dim].all(axis=1)
     free = np.flatnonzero(~held)
     if not free.size:
         return

@@ -67,10 +67,12 @@ from ase.constraints import FixAtoms
 from .atomic import replace_text, replace_with
 from .calculator import MaudCalculator
 from .checks import as_whole, check_writable
+from .forcedensity import unsupported
 from .formats import NetData, PathLike
 from .formats.compas import compas_text, read_compas, read_compas_forces
 from .formats.obj import MERGE_TOLERANCE, merge_coincident, obj_text, read_obj
 from .formats.text import coordinates, read_edges, read_indices
+from .results import FormResult
 from .scenes import keep_on_plane
 from .topology import boundary_vertices, fixed_atoms, free_point_loads, leaf_vertices
 
@@ -99,15 +101,23 @@ def mean_spring_length(positions: np.ndarray, springs: np.ndarray) -> float:
     return float(np.linalg.norm(positions[i] - positions[j], axis=1).mean())
 
 
-def default_a(positions: np.ndarray, springs: np.ndarray) -> float:
-    """``a`` of a net that comes without one: :data:`A_PER_MEAN_SPRING`
-    times its mean spring length. The largest fraction of 0.1, 0.2, 0.3,
-    0.4, 0.5, 0.7, 1 with which each of ten compas sample nets (32 to 4900
-    points), its boundary (leaves) fixed, relaxes within the bounding box of
-    its supports (docs/bench/a_rule.md); at 0.4 the largest ones reach out
-    of it (the repulsion of many points adds up), at 1 most balloon.
+def default_a(atoms: Atoms, springs: np.ndarray) -> float:
+    """``a`` of a net that comes without one (its supports set).
+
+    ``0``, the force-density equilibrium of its springs and loads (the
+    repulsion off: none of the out-of-balance of the members and loads is
+    left to it), where the supports make that equilibrium unique
+    (:func:`~ase_maud.forcedensity.unsupported`: a support held in every
+    direction on every spring component). Else the repulsion is what holds
+    the net and sets its spacing: :data:`A_PER_MEAN_SPRING` times its mean
+    spring length, the largest fraction of 0.1, 0.2, 0.3, 0.4, 0.5, 0.7, 1
+    with which each of ten compas sample nets (32 to 4900 points), its
+    boundary (leaves) fixed, relaxes within the bounding box of its supports
+    (docs/bench/a_rule.md).
     """
-    return A_PER_MEAN_SPRING * mean_spring_length(positions, springs)
+    if unsupported(atoms, springs) is None:
+        return 0.0
+    return A_PER_MEAN_SPRING * mean_spring_length(atoms.positions, springs)
 
 
 def net_format(path: PathLike) -> str:
@@ -178,7 +188,8 @@ def read_net(path: PathLike, edges: PathLike | None = None,
     a, Q : float, optional
         Length and spring constant of the potential. Default ``a``: what a
         trajectory stores (1 if it stores its calculator without ``a``),
-        else :func:`default_a` of the net; ``Q``: what a trajectory
+        else :func:`default_a` of the net (0, the force-density
+        equilibrium, where its supports make it unique); ``Q``: what a trajectory
         stores, else 1.
     dim : 2 or 3, optional
         Default: what a trajectory stores, else 2 if every point has the
@@ -229,16 +240,16 @@ def _read(path, edges, fixed, a, Q, dim, index, load=None):
         raise ValueError(f'{path} holds no springs: give an edge list '
                          f'(edges=..., --edges, or {edges_path(path).name} '
                          'beside it)')
-    if a is None and 'a' not in stored:
-        a = default_a(frames[0].positions, stored['springs'])
     given = {'a': a, 'Q': Q, 'dim': dim}
     parameters = {**stored, **{k: v for k, v in given.items() if v is not None}}
     if fixed is not None:
         indices = _fixed_points(path, fixed, natoms, stored['springs'], faces)
+        for atoms in frames:
+            atoms.set_constraint(FixAtoms(indices=indices))
+    if 'a' not in parameters:
+        parameters['a'] = default_a(frames[0], stored['springs'])
     for atoms in frames:
         atoms.pbc = False
-        if fixed is not None:
-            atoms.set_constraint(FixAtoms(indices=indices))
         own = dict(parameters)
         if load is not None:
             own['loads'] = free_point_loads(atoms, load)
@@ -316,7 +327,8 @@ def _fixed_indices(indices, natoms):
     return checked
 
 
-def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None) -> list[Path]:
+def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None,
+              result: FormResult | None = None) -> list[Path]:
     """Write the net ``atoms`` (with a MaudCalculator) to ``path``; return
     the files written.
 
@@ -334,7 +346,11 @@ def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None) -> lis
     (``.extxyz``) is extended XYZ with every digit of the coordinates
     (ASE's writer keeps 8 decimals) and the fixed points as ``move_mask``;
     any other format is written by ASE. Both get the edge list at
-    :func:`edges_path`.
+    :func:`edges_path`. COMPAS JSON keeps the supports as ``is_anchor``
+    and, given a ``result`` (:func:`ase_maud.results.form_result` of
+    ``atoms``), holds the member forces and reactions
+    (:func:`~ase_maud.formats.compas.compas_text`); the other formats ignore
+    ``result``.
     """
     path = Path(path)
     kind = net_format(path)
@@ -346,7 +362,7 @@ def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None) -> lis
     if kind == 'obj':
         replace_text(path, obj_text(atoms, like), newline='')
     elif kind == 'json':
-        replace_text(path, compas_text(atoms, like), newline='')
+        replace_text(path, compas_text(atoms, like, result), newline='')
     elif kind == 'traj':
         replace_with(path, lambda temporary: ase.io.write(temporary, atoms, format='traj'))
     else:

@@ -38,9 +38,19 @@ from ase import Atoms
 from . import physics
 from .atomic import replace_text
 from .calculator import MaudCalculator
-from .topology import fixed_atoms
+from .topology import fixed_atoms, support_excursion
 
-__all__ = ['FormResult', 'form_result', 'write_forces_csv']
+__all__ = ['REPULSION_SHARE', 'FormResult', 'describe_result', 'form_result',
+           'form_warnings', 'write_forces_csv']
+
+#: The out-of-balance of the members and loads, over the mean member force,
+#: above which the repulsion shapes the form (:func:`form_warnings`):
+#: below it the form is the force-density equilibrium for a designer.
+REPULSION_SHARE = 1e-3
+
+#: The move as a whole, or the shrinking, of a net without supports, over
+#: its diagonal, above which :func:`form_warnings` says so.
+FREE_MOTION = 1e-3
 
 
 @dataclass(frozen=True)
@@ -175,3 +185,46 @@ def write_forces_csv(path: str | Path, result: FormResult) -> Path:
                         *map(repr, reaction.tolist())])
     replace_text(path, text.getvalue(), newline='')
     return path
+
+
+def describe_result(result: FormResult) -> str:
+    """The numbers of ``result`` a designer reads first, in one phrase:
+    the largest member force, the sum of the reactions, the largest residual
+    and the members' and loads' out-of-balance (over the mean member force)."""
+    total = ', '.join(f'{value:.4g}' for value in result.reaction_sum.tolist())
+    return (f'largest member force {result.max_force:.4g}, reactions sum to ({total}), '
+            f'residual {result.max_residual:.3g}, out-of-balance {result.max_out_of_balance:.3g}'
+            f' ({result.repulsion_share:.2g} of the mean member force, carried by the '
+            'repulsion)')
+
+
+def form_warnings(atoms: Atoms, start: np.ndarray, result: FormResult) -> list[str]:
+    """What a designer should be told of the relaxed net ``atoms`` (moved
+    from ``start``, (N, 3)), each in one sentence: free points beyond the
+    supports' bounding box by more than a tenth of its diagonal while the
+    repulsion carries more than :data:`REPULSION_SHARE` of the mean member
+    force (loads that hang a net outside its supports are no reason); a net
+    without supports that moved as a whole or shrank by more than
+    :data:`FREE_MOTION` of its diagonal."""
+    warnings = []
+    a = atoms.calc.potential.a
+    beyond, diagonal = support_excursion(atoms)
+    if beyond > diagonal / 10 > 0 and result.repulsion_share > REPULSION_SHARE:
+        warnings.append(
+            f'free points reach {beyond:.3g} beyond the bounding box of the fixed points '
+            f'(diagonal {diagonal:.3g}) and the repulsion of a = {a:.4g} carries '
+            f'{result.repulsion_share:.2g} of the mean member force: it inflates the net; '
+            "a smaller --a gives a form closer to the springs' own (--a 0: the "
+            'force-density equilibrium)')
+    if not len(result.supports) and len(atoms) > 1:
+        size = float(np.linalg.norm(np.ptp(start, axis=0)))
+        moved = float(np.linalg.norm(atoms.positions.mean(axis=0) - start.mean(axis=0)))
+        spread = [float(np.sqrt(((x - x.mean(axis=0))**2).sum(axis=1).mean()))
+                  for x in (start, atoms.positions)]
+        shrank = spread[0] - spread[1]
+        if size > 0 and max(moved, shrank) > FREE_MOTION * size:
+            warnings.append(
+                f'the net has no supports: it moved as a whole by {moved:.3g} and its '
+                f'spread about its centre shrank by {shrank:.3g} (diagonal {size:.3g}); '
+                'fix points (--fix) to hold it where it is')
+    return warnings

@@ -277,7 +277,7 @@ def relaxation(tmp_path_factory):
         path, *_ = write_quad_net(folder, 'obj', n=4, seed=dim, flat=flat)
         trajectories[dim] = folder / f'net{dim}.traj'
         assert main(['relax', str(path), '--fixed', str(folder / 'fixed.txt'), '--fmax',
-                     '1e-8', '--traj', str(trajectories[dim]), '--quiet']) == 0
+                     '1e-8', '--traj', str(trajectories[dim]), '--quiet', '--a', '0.3']) == 0
     return trajectories
 
 
@@ -336,7 +336,7 @@ def test_classify_judges_at_the_fmax_relaxed_to(tmp_path, capsys, seed):
     it), not at the default 1e-6 Q a, unless --fmax says otherwise."""
     path, *_ = write_quad_net(tmp_path, 'obj', n=4, seed=seed)
     traj = tmp_path / 'r.traj'
-    assert main(['relax', str(path), '--fixed', str(tmp_path / 'fixed.txt'),
+    assert main(['relax', str(path), '--fixed', str(tmp_path / 'fixed.txt'), '--a', '0.3',
                  '--fmax', '1e-2', '--traj', str(traj), '--quiet']) == 0
     fmax = np.linalg.norm(read(traj).get_forces(), axis=1).max()
     assert 1e-6 < fmax < 1e-2   # the default would judge otherwise

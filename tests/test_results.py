@@ -9,8 +9,9 @@ from ase import Atoms
 from ase.constraints import FixAtoms
 
 from ase_maud import Maud, MaudCalculator
+from ase_maud.cli import main
 from ase_maud.forcedensity import solve_force_density
-from ase_maud.io import read_net
+from ase_maud.io import read_net, write_net
 from ase_maud.results import form_result, write_forces_csv
 
 compas = pytest.importorskip('compas')
@@ -164,3 +165,72 @@ def test_form_result_needs_a_maud_calculator():
     atoms = Atoms('H2', positions=[[0, 0, 0], [1, 0, 0]])
     with pytest.raises(ValueError, match='MaudCalculator'):
         form_result(atoms)
+
+
+def test_relax_writes_forces_and_compas_reads_them_back(tmp_path, capsys):
+    """relax --forces --out net.json on a compas sample with a load: the CSV
+    and the JSON (read by compas's own Graph) hold the forces and reactions
+    of form_result, the supports as is_anchor; the summary gives them."""
+    from compas.datastructures import Graph
+
+    source = compas.get('faces.obj')
+    csv_path, out = tmp_path / 'forces.csv', tmp_path / 'net.json'
+    assert main(['relax', source, '--fix', 'boundary', '--load', '0', '0', '-0.25',
+                 '--quiet', '--traj', str(tmp_path / 'r.traj'), '--forces', str(csv_path),
+                 '--out', str(out)]) == 0
+    summary = capsys.readouterr().out
+    relaxed = read_net(tmp_path / 'r.traj')
+    result = form_result(relaxed)
+    assert relaxed.calc.parameters['a'] == 0.0 and 'a 0 (the force-density' in summary
+    assert f'largest member force {result.max_force:.4g}' in summary
+    free = len(relaxed) - len(result.supports)
+    assert np.allclose(result.reaction_sum, [0, 0, 0.25 * free], rtol=0, atol=1e-9 * free)
+    graph = Graph.from_json(out)
+    assert sorted(graph.nodes_where(is_anchor=True)) == result.supports.tolist()
+    for (i, j), force, length in zip(result.edges.tolist(), result.forces, result.lengths,
+                                     strict=True):
+        edge = (i, j) if graph.has_edge((i, j)) else (j, i)
+        assert graph.edge_attribute(edge, 'force') == pytest.approx(force, rel=1e-12)
+        assert graph.edge_attribute(edge, 'length') == pytest.approx(length, rel=1e-12)
+        assert graph.edge_attribute(edge, 'q') == 1.0
+    for n, reaction in zip(result.supports.tolist(), result.reactions, strict=True):
+        assert np.allclose(graph.node_attributes(n, ['rx', 'ry', 'rz']), reaction,
+                           rtol=1e-12, atol=1e-12)
+    with open(csv_path, newline='') as f:
+        rows = list(csv.DictReader(f))
+    assert sum(r['kind'] == 'member' for r in rows) == len(result.edges)
+    # read back: the supports survive, and the next relaxation has nothing to do
+    again = read_net(out)
+    assert np.flatnonzero([i in again.constraints[0].index for i in range(len(again))]
+                          ).tolist() == result.supports.tolist()
+    assert np.abs(again.positions - relaxed.positions).max() == 0
+
+
+def test_relax_refuses_forces_over_an_input_or_output(tmp_path, capsys):
+    source = tmp_path / 'net.obj'
+    atoms, *_ = hanging_truss(0)
+    write_net(source, atoms)
+    text = source.read_text()
+    for argv, message in (
+            (['--forces', str(source)], "--forces '" + str(source) + "' is the file of NET_FILE"),
+            (['--forces', str(tmp_path / 'o.json'), '--out', str(tmp_path / 'o.json')],
+             'is the file of --out')):
+        assert main(['relax', str(source), '--quiet', '--traj', str(tmp_path / 'r.traj'),
+                     *argv]) == 2
+        assert message in capsys.readouterr().err
+    assert source.read_text() == text
+
+
+def test_relax_warns_of_a_net_without_supports(tmp_path, capsys):
+    """A quad net with no supports shrinks under its springs: said, naming
+    --fix; with its boundary fixed, nothing is said."""
+    from test_io import write_quad_net
+
+    source, *_ = write_quad_net(tmp_path, 'obj', n=5, seed=int(np.random.default_rng().
+                                                                 integers(100)))
+    traj = str(tmp_path / 'r.traj')
+    assert main(['relax', str(source), '--quiet', '--traj', traj]) == 0
+    err = capsys.readouterr().err
+    assert 'warning: the net has no supports' in err and '--fix' in err
+    assert main(['relax', str(source), '--quiet', '--traj', traj, '--fix', 'boundary']) == 0
+    assert 'warning' not in capsys.readouterr().err

@@ -372,12 +372,15 @@ def _add_net_options(parser):
                         "the file's own springs, or NAME.edges.txt beside NAME.xyz)")
     parser.add_argument('--fix', '--fixed', dest='fixed', metavar='RULE_OR_FILE',
                         help="the points held fixed: 'boundary' (a mesh's: on edges of one "
-                        "face), 'leaves' (a network's: on one spring), or a file of 0-based "
+                        "face), 'outer' (its outer rim only, not a hole's), "
+                        "'leaves' (a network's: on one spring), or a file of 0-based "
                         "indices, one or more per line (default: the file's own: "
                         'trajectory constraints, COMPAS is_anchor or is_fixed)')
     parser.add_argument('--a', type=_ruled('a'),
-                        help='length a of the repulsion a^3 Q / L (default: stored in a '
-                        f'trajectory, else {A_PER_MEAN_SPRING:g} x the mean spring length)')
+                        help='length a of the repulsion a^3 Q / L; 0: none, the '
+                        'force-density equilibrium of springs and loads (default: stored '
+                        'in a trajectory, else 0 if the supports hold every spring '
+                        f'component, else {A_PER_MEAN_SPRING:g} x the mean spring length)')
     parser.add_argument('--Q', type=_ruled('Q'),
                         help='spring constant Q (default: stored in a trajectory, else 1)')
     parser.add_argument('--dim', type=int, choices=(2, 3),
@@ -430,8 +433,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = _command(
         commands, 'relax', 'relax a net from a file, or a built-in scene, with Maud',
         'Relax the net of NET_FILE (OBJ: points and face/polyline/curve edges; COMPAS '
-        'mesh or network JSON; an ASE trajectory; or XYZ and any file ASE reads, '
-        'with an edge list) or, without NET_FILE, a built-in scene, with Maud. '
+        'mesh or network JSON; PLY, STL, OFF, VTK, VTU meshes; an ASE trajectory; '
+        'or XYZ and any file ASE reads, with an edge list) or, without NET_FILE, a '
+        'built-in scene, with Maud. '
         'Shows a progress bar with fmax and the energy on a terminal (else '
         'prints ASE\'s log), writes a trajectory for "ase gui" (it keeps the '
         'springs, a, Q and dim: every command here reads it back), the relaxed '

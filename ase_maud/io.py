@@ -28,6 +28,9 @@ Formats, chosen by the file name's suffix:
   defaults, else 1 and 0. Written back as the original structure with
   ``x``, ``y``, ``z`` replaced, and ``q``, ``px``, ``py``, ``pz`` set
   where the net's differ from the file's.
+- ``.ply``, ``.stl``, ``.off``, ``.vtk``, ``.vtu``, meshes read through
+  meshio (:mod:`ase_maud.formats.mesh`): the springs are the faces' edges
+  and the line cells; coincident points merged. Read only.
 - ``.traj``, ASE trajectory: the springs, ``a``, ``Q``, ``dim``, ``q`` and
   ``loads`` come back
   from the calculator parameters that ASE's trajectory stores with every
@@ -70,13 +73,21 @@ from .checks import as_whole, check_writable
 from .forcedensity import unsupported
 from .formats import NetData, PathLike
 from .formats.compas import compas_text, read_compas, read_compas_forces
+from .formats.mesh import MESH_FORMATS, read_mesh
 from .formats.obj import MERGE_TOLERANCE, merge_coincident, obj_text, read_obj
 from .formats.text import coordinates, read_edges, read_indices
 from .results import FormResult
 from .scenes import keep_on_plane
-from .topology import boundary_vertices, fixed_atoms, free_point_loads, leaf_vertices
+from .topology import (
+    boundary_vertices,
+    fixed_atoms,
+    free_point_loads,
+    leaf_vertices,
+    outer_rim,
+)
 
 __all__ = ['A_PER_MEAN_SPRING', 'CALC_NAME', 'FIX_RULES', 'MERGE_TOLERANCE', 'NetData',
+           'READ_FORMATS',
            'check_net_path', 'default_a', 'edges_path', 'mean_spring_length',
            'merge_coincident', 'net_format', 'read_compas', 'read_compas_forces',
            'read_edges', 'read_frames', 'read_indices', 'read_net', 'read_obj',
@@ -87,7 +98,7 @@ CALC_NAME = 'maudcalculator'
 
 
 #: The rules ``fixed=`` takes by name (:func:`read_net`).
-FIX_RULES = ('boundary', 'leaves')
+FIX_RULES = ('boundary', 'outer', 'leaves')
 
 
 #: ``a`` of a net read from a file that stores none, as a fraction of its
@@ -121,9 +132,18 @@ def default_a(atoms: Atoms, springs: np.ndarray) -> float:
 
 
 def net_format(path: PathLike) -> str:
-    """'obj', 'json', 'traj' or 'ase' (any other file ASE reads), by suffix."""
+    """'obj', 'json', 'traj', 'mesh' (:data:`MESH_FORMATS`, read only) or
+    'ase' (any other file ASE reads), by suffix."""
     suffix = Path(path).suffix.lower()
+    if suffix in MESH_FORMATS:
+        return 'mesh'
     return {'.obj': 'obj', '.json': 'json', '.traj': 'traj'}.get(suffix, 'ase')
+
+
+#: The formats a net is read from, in words (a refused file names them).
+READ_FORMATS = ('OBJ (.obj), COMPAS JSON (.json), an ASE trajectory (.traj), meshes '
+                f'through meshio ({", ".join(MESH_FORMATS)}), or extended XYZ (.xyz) and '
+                'any other file ASE reads, with an edge list')
 
 
 def check_net_path(name: str, path: PathLike) -> Path:
@@ -132,6 +152,9 @@ def check_net_path(name: str, path: PathLike) -> Path:
     suffix names a format (one of :func:`net_format`'s, or one ASE writes);
     else a ValueError naming ``name``, the file and what is accepted."""
     path = check_writable(name, path)
+    if net_format(path) == 'mesh':
+        raise ValueError(f'{name} {str(path)!r}: a net is written as .obj, .json, .traj, '
+                         f'.xyz or another format ASE writes, not {path.suffix}')
     if net_format(path) == 'ase' and path.suffix.lower() not in ('.xyz', '.extxyz'):
         try:
             known = ase.io.formats.ioformats[ase.io.formats.filetype(path, read=False)]
@@ -177,11 +200,12 @@ def read_net(path: PathLike, edges: PathLike | None = None,
     edges : file name, optional
         Edge list (two 0-based indices per line); overrides the springs a
         file holds. Default for point files: ``NAME.edges.txt`` if present.
-    fixed : 'boundary', 'leaves', file name or indices, optional
+    fixed : 'boundary', 'outer', 'leaves', file name or indices, optional
         Points held fixed (:class:`FixAtoms`), replacing the constraints
         read from the file: ``'boundary'``, the boundary of a mesh's faces
-        (:func:`~ase_maud.topology.boundary_vertices`; OBJ and COMPAS
-        meshes); ``'leaves'``, the points on one spring
+        (:func:`~ase_maud.topology.boundary_vertices`; OBJ, COMPAS and
+        mesh files); ``'outer'``, its outer rim alone, not the rims of its
+        holes (:func:`~ase_maud.topology.outer_rim`); ``'leaves'``, the points on one spring
         (:func:`~ase_maud.topology.leaf_vertices`); a file of 0-based
         indices, one or more per line (a ``Path`` is always a file); or the
         indices.
@@ -219,9 +243,9 @@ def _read(path, edges, fixed, a, Q, dim, index, load=None):
         raise ValueError(f'{path} is a directory, not a net file')
     kind = net_format(path)
     faces = []
-    if kind in ('obj', 'json'):
-        positions, springs, faces, anchors = (read_obj(path) if kind == 'obj'
-                                              else read_compas(path))
+    if kind in ('obj', 'json', 'mesh'):
+        positions, springs, faces, anchors = {'obj': read_obj, 'json': read_compas,
+                                              'mesh': read_mesh}[kind](path)
         frames = [Atoms(positions=positions, pbc=False)]
         if len(anchors):
             frames[0].set_constraint(FixAtoms(indices=anchors))
@@ -243,7 +267,7 @@ def _read(path, edges, fixed, a, Q, dim, index, load=None):
     given = {'a': a, 'Q': Q, 'dim': dim}
     parameters = {**stored, **{k: v for k, v in given.items() if v is not None}}
     if fixed is not None:
-        indices = _fixed_points(path, fixed, natoms, stored['springs'], faces)
+        indices = _fixed_points(path, fixed, frames[0].positions, stored['springs'], faces)
         for atoms in frames:
             atoms.set_constraint(FixAtoms(indices=indices))
     if 'a' not in parameters:
@@ -262,19 +286,21 @@ def _read(path, edges, fixed, a, Q, dim, index, load=None):
     return frames
 
 
-def _fixed_points(path, fixed, natoms, springs, faces):
+def _fixed_points(path, fixed, positions, springs, faces):
     """The indices ``fixed=`` names (:func:`read_net`), checked."""
+    natoms = len(positions)
     if isinstance(fixed, str) and fixed in FIX_RULES:
-        if fixed == 'boundary' and not faces:
-            raise ValueError(f"{path}: fixed='boundary' needs a mesh's faces and the "
-                             "file has none (OBJ 'f' lines or a COMPAS mesh); "
-                             "'leaves' fixes the ends of a network's lines")
-        indices = (boundary_vertices(faces) if fixed == 'boundary'
-                   else leaf_vertices(natoms, springs))
+        if fixed in ('boundary', 'outer') and not faces:
+            raise ValueError(f"{path}: fixed={fixed!r} needs a mesh's faces and the "
+                             "file has none (OBJ 'f' lines, a COMPAS mesh or a mesh "
+                             "file); 'leaves' fixes the ends of a network's lines")
+        indices = {'boundary': lambda: boundary_vertices(faces),
+                   'outer': lambda: outer_rim(faces, positions),
+                   'leaves': lambda: leaf_vertices(natoms, springs)}[fixed]()
         if not len(indices):
             raise ValueError(f"{path}: fixed={fixed!r} finds no point (" + (
-                'every edge is in two faces: a closed mesh' if fixed == 'boundary'
-                else "no point is on exactly one spring; 'boundary' fixes a mesh's")
+                'no point is on exactly one spring; \'boundary\' fixes a mesh\'s'
+                if fixed == 'leaves' else 'every edge is in two faces: a closed mesh')
                 + '); name the fixed points')
         return indices.tolist()
     if isinstance(fixed, str) and not Path(fixed).exists():
@@ -304,7 +330,7 @@ def _read_ase(path, index):
         raise
     except Exception as error:   # ASE's readers raise many kinds
         raise ValueError(f'{path}: ASE cannot read it ({type(error).__name__}: '
-                         f'{error})') from error
+                         f'{error}); a net is read from {READ_FORMATS}') from error
     frames = frames if isinstance(frames, list) else [frames]
     if not frames:
         raise ValueError(f'{path}: no frame at index {index}')

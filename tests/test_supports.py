@@ -130,7 +130,7 @@ def test_read_net_fixes_the_leaves_of_a_network(tmp_path):
     with pytest.raises(ValueError, match=r"fixed='leaves' finds no point"):
         read_net(closed, fixed='leaves')
     with pytest.raises(ValueError, match=r"fixed='bondary' is neither a rule \(boundary, "
-                       r'leaves\) nor a file'):
+                       r'outer, leaves\) nor a file'):
         read_net(path, fixed='bondary')
     (tmp_path / 'leaves').write_text('0 3\n')   # a file of that name, given as a Path
     assert read_net(path, fixed=tmp_path / 'leaves').constraints[0].index.tolist() == [0, 3]

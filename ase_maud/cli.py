@@ -98,7 +98,7 @@ def relax(args: argparse.Namespace) -> int:
     from . import kernels_cached
     from .bench.runner import CallRecorder
     from .forcedensity import solve_force_density
-    from .io import mean_spring_length, net_format, read_net, write_net
+    from .io import mean_spring_length, net_format, read_net, set_tables, write_net
     from .optimizer import Maud
     from .results import describe_result, form_result, form_warnings, write_forces_csv
     from .scenes import build
@@ -113,6 +113,7 @@ def relax(args: argparse.Namespace) -> int:
     else:
         atoms = read_net(args.net, load=args.load, **_net_options(args))
         label = Path(args.net).name
+    set_tables(atoms, loads=args.loads, q=args.q)
     a, springs = atoms.calc.parameters['a'], atoms.calc.parameters.get('springs', ())
     share = (f' ({a / mean_spring_length(atoms.positions, springs):.3g} x the mean spring '
              'length at the start)' if a else ' (the force-density equilibrium: no '
@@ -328,7 +329,8 @@ def check_outputs(args: argparse.Namespace) -> None:
             check_net_path('--out', args.out)
         if args.forces:
             check_writable('--forces', args.forces)
-        check_distinct({'NET_FILE': args.net, '--edges': args.edges, '--fix': args.fixed},
+        check_distinct({'NET_FILE': args.net, '--edges': args.edges, '--fix': args.fixed,
+                        '--loads': args.loads, '--q': args.q},
                        {'--traj': args.traj, '--out': args.out, '--forces': args.forces,
                         '--log': None if args.log == '-' else args.log})
     elif args.command == 'show':
@@ -450,11 +452,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('net', nargs='?', metavar='NET_FILE',
                    help='the net to relax (default: the built-in --scene)')
     _add_net_options(p)
-    p.add_argument('--load', nargs=3, type=_ruled('loads'), metavar=('X', 'Y', 'Z'),
+    loads = p.add_mutually_exclusive_group()
+    loads.add_argument('--load', nargs=3, type=_ruled('loads'), metavar=('X', 'Y', 'Z'),
                    help='a constant load (force units) on every free point, e.g. '
                    "self-weight --load 0 0 -0.1; replaces the file's or scene's loads "
                    '(default: those of NET_FILE: COMPAS px, py, pz, or a trajectory\'s; '
                    'the scene\'s)')
+    loads.add_argument('--loads', metavar='LOADS_CSV',
+                       help='per-point loads from a CSV table with the header i,px,py,pz '
+                       '(0-based point index, force units; points not listed: none), '
+                       "replacing the file's or scene's")
+    p.add_argument('--q', metavar='Q_CSV',
+                   help='per-edge force densities from a CSV table with the header i,j,q '
+                   '(the two points of a spring, its multiplier of Q; edges not listed '
+                   'keep theirs)')
     p.add_argument('--out', metavar='RELAXED_FILE',
                    help='write the relaxed net here, in the format of its suffix '
                    '(.obj, .json, .traj, .xyz plus NAME.edges.txt, ...)')

@@ -75,6 +75,7 @@ from .formats import NetData, PathLike
 from .formats.compas import compas_text, read_compas, read_compas_forces
 from .formats.mesh import MESH_FORMATS, read_mesh
 from .formats.obj import MERGE_TOLERANCE, merge_coincident, obj_text, read_obj
+from .formats.tables import read_loads_csv, read_q_csv
 from .formats.text import coordinates, read_edges, read_indices
 from .results import FormResult
 from .scenes import keep_on_plane
@@ -91,7 +92,7 @@ __all__ = ['A_PER_MEAN_SPRING', 'CALC_NAME', 'FIX_RULES', 'MERGE_TOLERANCE', 'Ne
            'check_net_path', 'default_a', 'edges_path', 'mean_spring_length',
            'merge_coincident', 'net_format', 'read_compas', 'read_compas_forces',
            'read_edges', 'read_frames', 'read_indices', 'read_net', 'read_obj',
-           'relaxed_fmax', 'stored_parameters', 'write_net']
+           'relaxed_fmax', 'set_tables', 'stored_parameters', 'write_net']
 
 #: The name under which ASE's trajectory stores a MaudCalculator.
 CALC_NAME = 'maudcalculator'
@@ -309,6 +310,20 @@ def _fixed_points(path, fixed, positions, springs, faces):
     if isinstance(fixed, (str, os.PathLike)):
         return read_indices(fixed, natoms)
     return _fixed_indices(fixed, natoms)
+
+
+def set_tables(atoms: Atoms, loads: PathLike | None = None,
+               q: PathLike | None = None) -> None:
+    """Set the loads and force densities of the net ``atoms`` (with a
+    MaudCalculator) from CSV tables (:mod:`ase_maud.formats.tables`): the
+    loads replace the calculator's, the force densities replace those of
+    the edges listed. None leaves either as it is."""
+    if loads is not None:
+        atoms.calc.set(loads=read_loads_csv(loads, len(atoms)))
+    if q is not None:
+        potential = atoms.calc.potential
+        current = np.broadcast_to(potential.stiffnesses, len(potential.springs))
+        atoms.calc.set(q=read_q_csv(q, potential.springs, current, len(atoms)))
 
 
 def stored_parameters(frame: Atoms) -> dict[str, Any]:

@@ -2,6 +2,7 @@
 force-density solve (ase_maud.forcedensity) and ``a = 0``."""
 
 import csv
+import re
 
 import numpy as np
 import pytest
@@ -234,3 +235,44 @@ def test_relax_warns_of_a_net_without_supports(tmp_path, capsys):
     assert 'warning: the net has no supports' in err and '--fix' in err
     assert main(['relax', str(source), '--quiet', '--traj', traj, '--fix', 'boundary']) == 0
     assert 'warning' not in capsys.readouterr().err
+
+
+def test_relax_takes_loads_and_force_densities_from_csv(tmp_path, capsys):
+    """--loads and --q give the net the force-density solution of those
+    loads and q (compas_fd's); bad rows are named by file and line."""
+    source = compas.get('faces.obj')
+    atoms = read_net(source, fixed='boundary', dim=3)
+    springs, start = atoms.calc.springs, atoms.positions.copy()
+    fixed = atoms.constraints[0].index
+    rng = np.random.default_rng()
+    q = np.ones(len(springs))
+    chosen = rng.choice(len(springs), 10, replace=False)
+    q[chosen] = rng.uniform(0.5, 3.0, 10)
+    loads = np.zeros_like(start)
+    loaded = rng.choice(np.setdiff1d(np.arange(len(atoms)), fixed), 5, replace=False)
+    loads[loaded] = rng.normal(size=(5, 3))
+    q_csv, loads_csv = tmp_path / 'q.csv', tmp_path / 'loads.csv'
+    q_csv.write_text('i,j,q\n' + ''.join(f'{springs[s][1]},{springs[s][0]},{float(q[s])!r}\n'
+                                         for s in chosen.tolist()))
+    loads_csv.write_text('i,px,py,pz\n' + ''.join(
+        f'{n},{x!r},{y!r},{z!r}\n'
+        for n, (x, y, z) in zip(loaded.tolist(), loads[loaded].tolist(), strict=True)))
+    traj = tmp_path / 'r.traj'
+    assert main(['relax', source, '--fix', 'boundary', '--dim', '3', '--loads', str(loads_csv),
+                 '--q', str(q_csv), '--quiet', '--traj', str(traj)]) == 0
+    peer = fd_numpy(vertices=start.tolist(), fixed=list(fixed), edges=springs.tolist(),
+                    forcedensities=q.tolist(), loads=loads.tolist())
+    assert np.abs(read_net(traj).positions - np.asarray(peer.vertices)).max() < 1e-10
+    for name, text, message in (
+            ('q.csv', 'i,j,q\n0,35,1\n', r'q\.csv line 2: points 0 and 35 are tied by no spring'),
+            ('q.csv', 'i,j,q\n0,1,-1\n', r'q\.csv line 2: q must be a positive'),
+            ('q.csv', 'i,j,q\n0,1,x\n', r"q\.csv line 2: q must be a number, got 'x'"),
+            ('loads.csv', 'i,px,py\n', r'loads\.csv line 1: expected the header i,px,py,pz'),
+            ('loads.csv', 'i,px,py,pz\n36,0,0,1\n', r'loads\.csv line 2: point index .36. is '
+             r'not a whole number in 0\.\.35'),
+            ('loads.csv', 'i,px,py,pz\n3,0,0,1\n3,0,0,1\n', r'point 3 is loaded on line 2')):
+        (tmp_path / name).write_text(text)
+        option = '--q' if name == 'q.csv' else '--loads'
+        assert main(['relax', source, '--quiet', '--traj', str(traj), option,
+                     str(tmp_path / name)]) == 2
+        assert re.search(message, capsys.readouterr().err)

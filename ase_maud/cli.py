@@ -39,14 +39,15 @@ import sys
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
-from .checks import check, check_distinct, check_writable
-from .monitor import MaudError
-from .threads import pin_threads
-
-#: Errors a command reports in one line, exit status 2: bad input, files that
-#: cannot be read or written, a run that cannot go on.
-EXPECTED_ERRORS = (ValueError, OSError, MaudError)
+#: The commands and what each does, in one line (``ase-maud --help``).
+COMMANDS = {'relax': 'relax a net from a file, or a built-in scene, with Maud',
+            'show': 'draw a net or a trajectory frame (PNG), or animate (GIF)',
+            'classify': 'minimum, saddle of index k, or not stationary',
+            'saddles': 'the saddles around a minimum and the minima they join',
+            'bench': 'force calls and wall time against error, per optimiser',
+            'backends': 'time per call against accuracy of the calculator backends'}
 
 
 def _size(text):
@@ -61,6 +62,8 @@ def _ruled(name: str, parse=float):
     """An argparse type: the text parsed by ``parse``, then checked by
     ``ase_maud.checks.RULES[name]`` (its message on a bad value)."""
     def convert(text):
+        from .checks import check
+
         try:
             return check(name, parse(text))
         except ValueError as error:
@@ -319,6 +322,7 @@ def _picture_path(args: argparse.Namespace) -> str:
 def check_outputs(args: argparse.Namespace) -> None:
     """Every file the command of ``args`` will write, checked before any
     work: a ValueError naming the option and what is wrong."""
+    from .checks import check_distinct, check_writable
     from .io import check_net_path
 
     if args.command == 'relax':
@@ -413,14 +417,8 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f'{self.prog}: error: {message}; see {self.prog} --help\n')
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argparse parser of ``ase-maud`` and its commands."""
-    from . import backends as registry
-    from .bench.optimizers import OPTIMIZERS
-    from .checks import RULES
-    from .scenes import SCENES, SUITES
-    from .stiffness import MODELS
-
+def _top_parser() -> tuple[argparse.ArgumentParser, Any]:
+    """The parser of ``ase-maud`` itself and its (empty) subparsers action."""
     parser = _Parser(
         prog='ase-maud', description='The Maud algorithm for points that '
         'repel and are tied by springs: relax a net from a file or a built-in '
@@ -430,10 +428,21 @@ def build_parser() -> argparse.ArgumentParser:
         '  ase-maud relax net.obj --fix boundary --out relaxed.obj\n'
         '  ase-maud show maud.traj --gif\n  ase-maud classify maud.traj\n'
         'Each command has its own --help.')
-    commands = parser.add_subparsers(dest='command', metavar='COMMAND')
+    return parser, parser.add_subparsers(dest='command', metavar='COMMAND')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argparse parser of ``ase-maud`` and its commands."""
+    from . import backends as registry
+    from .bench.optimizers import OPTIMIZERS
+    from .checks import RULES
+    from .scenes import SCENES, SUITES
+    from .stiffness import MODELS
+
+    parser, commands = _top_parser()
 
     p = _command(
-        commands, 'relax', 'relax a net from a file, or a built-in scene, with Maud',
+        commands, 'relax', COMMANDS['relax'],
         'Relax the net of NET_FILE (OBJ: points and face/polyline/curve edges; COMPAS '
         'mesh or network JSON; PLY, STL, OFF, VTK, VTU meshes; an ASE trajectory; '
         'or XYZ and any file ASE reads, with an edge list) or, without NET_FILE, a '
@@ -503,7 +512,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=relax)
 
     p = _command(
-        commands, 'show', 'draw a net or a trajectory frame (PNG), or animate (GIF)',
+        commands, 'show', COMMANDS['show'],
         'Draw the net of FILE (any file relax reads; of a trajectory, frame '
         '--frame): springs coloured by their force Q q L (or length) with a '
         'colour bar, supports (fixed points) as black squares and loaded points '
@@ -536,7 +545,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=show)
 
     p = _command(
-        commands, 'classify', 'minimum, saddle of index k, or not stationary',
+        commands, 'classify', COMMANDS['classify'],
         'Classify the net of FILE (of a trajectory, frame --frame) by the '
         'eigenvalues of its Hessian on the free degrees of freedom, rigid-body '
         'modes removed (ase_maud.analysis.classify): minimum, saddle of index k '
@@ -556,7 +565,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=classify)
 
     p = _command(
-        commands, 'saddles', 'the saddles around a minimum and the minima they join',
+        commands, 'saddles', COMMANDS['saddles'],
         'Relax the net of FILE to a minimum (Maud, to --fmax), then climb from it along '
         'each of its --modes lowest Hessian modes, both ways, to index-1 saddles '
         "(Maud(target='saddle')), relax each saddle's two sides to the minima it joins, "
@@ -588,7 +597,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=saddles)
 
     p = _command(
-        commands, 'bench', 'force calls and wall time against error, per optimiser',
+        commands, 'bench', COMMANDS['bench'],
         'Run every optimiser from the same starts (scene, size, '
         'seed), sampling fmax, energy, force calls, wall and CPU time at '
         'every calculator call; the energy error is against the lowest energy '
@@ -637,7 +646,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=bench)
 
     p = _command(
-        commands, 'backends', 'time per call against accuracy of the calculator backends',
+        commands, 'backends', COMMANDS['backends'],
         'Time one energy-and-forces call, and one call with the '
         'nodal stiffness, of every backend on N random points, and its '
         'relative error against the numpy reference. Writes backends.csv, '
@@ -668,21 +677,32 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``ase-maud`` on ``argv`` (default ``sys.argv[1:]``); return the
     exit status (module docstring). Without a command, print the help.
-    :data:`EXPECTED_ERRORS` are said in one line on stderr, status 2."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if args.command is None:
+    Bad input, files that cannot be read or written and runs that cannot go
+    on (ValueError, OSError, :class:`~ase_maud.MaudError`) are said in one
+    line on stderr, status 2. Without a command nothing but argparse is
+    imported (``ase-maud --help`` answers at once)."""
+    words = sys.argv[1:] if argv is None else list(argv)
+    if not COMMANDS.keys() & set(words):
+        parser, commands = _top_parser()
+        for name, text in COMMANDS.items():
+            commands.add_parser(name, help=text)
+        parser.parse_args(words)   # --help, or an error
         parser.print_help()
         return 0
+    from .monitor import MaudError
+    from .threads import pin_threads
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
     if args.command == 'relax' and args.net is None and (
             args.edges or args.fixed or args.dim):
         parser.error('relax: --edges, --fix and --dim need NET_FILE')
-    args.argv = sys.argv[1:] if argv is None else list(argv)
+    args.argv = words
     try:
         check_outputs(args)
         if args.threads is not None:
             pin_threads(args.threads, restart=argv is None)
         return args.func(args)
-    except EXPECTED_ERRORS as error:
+    except (ValueError, OSError, MaudError) as error:
         print(f'{parser.prog}: error: {_one_line(error)}', file=sys.stderr)
         return 2

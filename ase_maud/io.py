@@ -84,6 +84,7 @@ from .topology import (
     fixed_atoms,
     free_point_loads,
     leaf_vertices,
+    mean_spring_length,
     outer_rim,
 )
 
@@ -105,12 +106,6 @@ FIX_RULES = ('boundary', 'outer', 'leaves')
 #: ``a`` of a net read from a file that stores none, as a fraction of its
 #: mean spring length (:func:`default_a`; tools/a_rule.py measures it).
 A_PER_MEAN_SPRING = 0.3
-
-
-def mean_spring_length(positions: np.ndarray, springs: np.ndarray) -> float:
-    """The mean length of the springs, in the positions' unit."""
-    i, j = np.asarray(springs, dtype=int).reshape(-1, 2).T
-    return float(np.linalg.norm(positions[i] - positions[j], axis=1).mean())
 
 
 def default_a(atoms: Atoms, springs: np.ndarray) -> float:

@@ -41,6 +41,7 @@ from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from .analysis import force_tolerance
@@ -170,6 +171,8 @@ def orient(ax: Axes, view: str) -> None:
             getattr(ax, f'set_{axis}ticks')([])
         else:
             getattr(ax, f'set_{axis}label')(axis)
+            # a thin box (a flat net seen from the side) has room for few ticks
+            getattr(ax, f'{axis}axis').set_major_locator(MaxNLocator(nbins=4))
 
 
 def draw(ax: Axes, atoms: Atoms, colour: str = 'force',
@@ -218,7 +221,7 @@ def draw(ax: Axes, atoms: Atoms, colour: str = 'force',
         _arrows(ax, x, load, loaded, arrow_scale(largest_load, extent * LOAD_ARROW / ARROW),
                 'C1', 'load')
     largest = size[free].max(initial=0.0)
-    ftol = force_tolerance(calc.potential) if ftol is None else ftol
+    ftol = force_tolerance(calc.potential, ftol, atoms.positions)
     if largest > ftol:
         scale = arrow_scale(largest, extent) if scale is None else scale
         _arrows(ax, x, forces, free, scale, 'C3', 'residual force')

@@ -194,7 +194,7 @@ def describe_result(result: FormResult) -> str:
     total = ', '.join(f'{value:.4g}' for value in result.reaction_sum.tolist())
     return (f'largest member force {result.max_force:.4g}, reactions sum to ({total}), '
             f'residual {result.max_residual:.3g}, out-of-balance {result.max_out_of_balance:.3g}'
-            f' ({result.repulsion_share:.2g} of the mean member force, carried by the '
+            f' ({result.repulsion_share:.2g} of the mean member force, left to the '
             'repulsion)')
 
 

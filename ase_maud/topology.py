@@ -84,6 +84,13 @@ def outer_rim(faces: Iterable[Sequence[int]], positions: np.ndarray) -> np.ndarr
     return points[loops == int(np.argmax(extent))]
 
 
+def mean_spring_length(positions: np.ndarray, springs: ArrayLike) -> float:
+    """The mean length of the springs ((K, 2) pairs, K >= 1), in the
+    positions' unit."""
+    i, j = np.asarray(springs, dtype=int).reshape(-1, 2).T
+    return float(np.linalg.norm(positions[i] - positions[j], axis=1).mean())
+
+
 def leaf_vertices(natoms: int, springs: ArrayLike) -> np.ndarray:
     """Sorted indices of a network's leaves: the points on exactly one
     spring (of ``springs``, (K, 2) pairs each once)."""

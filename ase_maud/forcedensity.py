@@ -18,7 +18,7 @@ from ase import Atoms
 from .calculator import MaudCalculator
 from .topology import held_directions, spring_components
 
-__all__ = ['solve_force_density', 'unsupported']
+__all__ = ['force_density_positions', 'solve_force_density', 'unsupported']
 
 
 def unsupported(atoms: Atoms, springs: np.ndarray, dim: int = 3) -> str | None:
@@ -46,8 +46,15 @@ def unsupported(atoms: Atoms, springs: np.ndarray, dim: int = 3) -> str | None:
 
 def solve_force_density(atoms: Atoms) -> None:
     """Move the free points of the net ``atoms`` to the equilibrium of its
+    springs and loads (:func:`force_density_positions`), the supports held."""
+    atoms.set_positions(force_density_positions(atoms), apply_constraint=False)
+
+
+def force_density_positions(atoms: Atoms) -> np.ndarray:
+    """The positions (N, 3) of the net ``atoms`` at the equilibrium of its
     springs and loads (its calculator's ``springs``, ``Q``, ``q`` and
-    ``loads``; the repulsion ignored, whatever ``a``), the supports held.
+    ``loads``; the repulsion ignored, whatever ``a``), the supports where
+    they are; ``atoms`` is not changed.
 
     Supports are the points held in all three directions; a ValueError
     where :func:`unsupported` says why they do not make the equilibrium
@@ -56,22 +63,22 @@ def solve_force_density(atoms: Atoms) -> None:
     """
     calc = atoms.calc
     if not isinstance(calc, MaudCalculator):
-        raise ValueError('solve_force_density needs a net with a MaudCalculator attached, '
-                         f'got {type(calc).__name__}')
+        raise ValueError('the force-density solve needs a net with a MaudCalculator '
+                         f'attached, got {type(calc).__name__}')
     potential = calc.potential
     why = unsupported(atoms, potential.springs, potential.dim)
     if why is not None:
         raise ValueError(why)
     natoms = len(atoms)
     held = held_directions(atoms)[:, :potential.dim].all(axis=1)
+    positions = atoms.get_positions()
     free = np.flatnonzero(~held)
     if not free.size:
-        return
+        return positions
     laplacian = potential.spring_laplacian(natoms).tocsr()
-    positions = atoms.get_positions()
     loads = np.zeros((natoms, 3)) if potential.loads is None else potential.loads
     right = loads[free] / potential.Q - laplacian[free][:, held] @ positions[held]
     solve = spla.factorized(laplacian[free][:, free].tocsc())
     for axis in range(potential.dim):
         positions[free, axis] = solve(np.ascontiguousarray(right[:, axis]))
-    atoms.set_positions(positions, apply_constraint=False)
+    return positions

@@ -38,6 +38,7 @@ from ase import Atoms
 from . import physics
 from .atomic import replace_text
 from .calculator import MaudCalculator
+from .forcedensity import force_density_positions, unsupported
 from .topology import fixed_atoms, support_excursion
 
 __all__ = ['REPULSION_SHARE', 'FormResult', 'describe_result', 'form_result',
@@ -198,24 +199,46 @@ def describe_result(result: FormResult) -> str:
             'repulsion)')
 
 
+def _moved_by_repulsion(atoms: Atoms) -> tuple[float, float, str] | None:
+    """How far the repulsion has moved the net ``atoms`` from the form of
+    its members and loads alone, the diagonal of the net's bounding box and
+    what was measured: the largest distance of a point from the
+    force-density equilibrium where the supports make that unique, else how
+    far the free points reach beyond the supports' bounding box (and that
+    box's diagonal); None if neither can be said (nothing fixed)."""
+    if unsupported(atoms, atoms.calc.springs, atoms.calc.dim) is None:
+        reference = force_density_positions(atoms)
+        gap = float(np.linalg.norm(atoms.positions - reference, axis=1).max())
+        diagonal = float(np.linalg.norm(np.ptp(reference, axis=0)))
+        return gap, diagonal, 'moves the form from that equilibrium by up to'
+    beyond, diagonal = support_excursion(atoms)
+    if diagonal == 0:
+        return None
+    return beyond, diagonal, "inflates it: the free points reach beyond the supports' box by"
+
+
 def form_warnings(atoms: Atoms, start: np.ndarray, result: FormResult) -> list[str]:
     """What a designer should be told of the relaxed net ``atoms`` (moved
-    from ``start``, (N, 3)), each in one sentence: free points beyond the
-    supports' bounding box by more than a tenth of its diagonal while the
-    repulsion carries more than :data:`REPULSION_SHARE` of the mean member
-    force (loads that hang a net outside its supports are no reason); a net
+    from ``start``, (N, 3)), each in one sentence: a repulsion that carries
+    more than :data:`REPULSION_SHARE` of the mean member force and has moved
+    the form by more than a tenth of its diagonal from the force-density
+    equilibrium of its members and loads (where the supports make that
+    unique; else free points beyond the supports' bounding box by that
+    much: loads that hang a net below its supports are no reason); a net
     without supports that moved as a whole or shrank by more than
     :data:`FREE_MOTION` of its diagonal."""
     warnings = []
     a = atoms.calc.potential.a
-    beyond, diagonal = support_excursion(atoms)
-    if beyond > diagonal / 10 > 0 and result.repulsion_share > REPULSION_SHARE:
-        warnings.append(
-            f'free points reach {beyond:.3g} beyond the bounding box of the fixed points '
-            f'(diagonal {diagonal:.3g}) and the repulsion of a = {a:.4g} carries '
-            f'{result.repulsion_share:.2g} of the mean member force: it inflates the net; '
-            "a smaller --a gives a form closer to the springs' own (--a 0: the "
-            'force-density equilibrium)')
+    if a > 0 and result.repulsion_share > REPULSION_SHARE:
+        moved = _moved_by_repulsion(atoms)
+        if moved is not None:
+            gap, diagonal, what = moved
+            if gap > diagonal / 10:
+                warnings.append(
+                    f'the repulsion of a = {a:.4g} carries {result.repulsion_share:.2g} of '
+                    f'the mean member force and {what} {gap:.3g} (diagonal {diagonal:.3g}): '
+                    "a smaller --a gives a form closer to the members' own (--a 0: the "
+                    'force-density equilibrium)')
     if not len(result.supports) and len(atoms) > 1:
         size = float(np.linalg.norm(np.ptp(start, axis=0)))
         moved = float(np.linalg.norm(atoms.positions.mean(axis=0) - start.mean(axis=0)))

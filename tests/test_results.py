@@ -276,3 +276,23 @@ def test_relax_takes_loads_and_force_densities_from_csv(tmp_path, capsys):
         assert main(['relax', source, '--quiet', '--traj', str(traj), option,
                      str(tmp_path / name)]) == 2
         assert re.search(message, capsys.readouterr().err)
+
+
+def test_a_net_hanging_below_its_supports_is_no_reason_to_warn(tmp_path, capsys):
+    """The canopy hangs far below its rim under a load: at a small a nothing
+    is said (the loads hang it there); at a = 1 the repulsion moves it and
+    that is said."""
+    from pathlib import Path
+
+    from ase_maud.topology import support_excursion
+
+    canopy = Path(__file__).parent.parent / 'examples' / 'nets' / 'canopy.obj'
+    traj = str(tmp_path / 'r.traj')
+    weight = np.random.default_rng().uniform(0.4, 0.6)
+    for a, warned in (('0.05', False), ('1', True)):
+        assert main(['relax', str(canopy), '--fix', 'outer', '--load', '0', '0',
+                     str(-weight), '--a', a, '--quiet', '--traj', traj]) == 0
+        err = capsys.readouterr().err
+        beyond, diagonal = support_excursion(read_net(traj))
+        assert beyond > diagonal / 10
+        assert ('warning: the repulsion of a = ' in err) == warned

@@ -180,7 +180,7 @@ def test_relax_warns_when_a_balloons_the_net(tmp_path, capsys):
     relaxed = read_net(traj)
     beyond, diagonal = support_excursion(relaxed)
     assert beyond > diagonal / 10
-    assert 'ase-maud: warning: free points reach' in err and '--a' in err
+    assert 'ase-maud: warning: the repulsion of a = 4 carries' in err and '--a' in err
 
 
 def test_relax_fixes_by_rule_like_python(tmp_path, capsys):

@@ -78,7 +78,8 @@ def force_density_positions(atoms: Atoms) -> np.ndarray:
     laplacian = potential.spring_laplacian(natoms).tocsr()
     loads = np.zeros((natoms, 3)) if potential.loads is None else potential.loads
     right = loads[free] / potential.Q - laplacian[free][:, held] @ positions[held]
-    solve = spla.factorized(laplacian[free][:, free].tocsc())
-    for axis in range(potential.dim):
-        positions[free, axis] = solve(np.ascontiguousarray(right[:, axis]))
+    # L_ff is symmetric positive definite: a symmetric ordering, no pivoting
+    factors = spla.splu(laplacian[free][:, free].tocsc(), permc_spec='MMD_AT_PLUS_A',
+                        diag_pivot_thresh=0.0, options={'SymmetricMode': True})
+    positions[free, :potential.dim] = factors.solve(right[:, :potential.dim])
     return positions

@@ -52,13 +52,16 @@ def boundary_edges(faces: Iterable[Sequence[int]]) -> np.ndarray:
     faces' orientations need not agree; an edge of three or more faces (a
     non-manifold edge) is not on the boundary.
     """
-    count: dict[tuple[int, int], int] = {}
+    by_size: dict[int, list[Sequence[int]]] = {}   # numpy does the work, size by size
     for face in faces:
-        ring = [int(i) for i in face]
-        for i, j in zip(ring, ring[1:] + ring[:1], strict=True):
-            edge = (min(i, j), max(i, j))
-            count[edge] = count.get(edge, 0) + 1
-    return np.array([edge for edge, n in count.items() if n == 1], dtype=int).reshape(-1, 2)
+        by_size.setdefault(len(face), []).append(face)
+    pairs = [np.zeros((0, 2), dtype=int)]
+    for rings in by_size.values():
+        ring = np.asarray(rings, dtype=int)
+        pairs.append(np.stack([ring, np.roll(ring, -1, axis=1)], axis=-1).reshape(-1, 2))
+    edges, count = np.unique(np.sort(np.concatenate(pairs), axis=1), axis=0,
+                             return_counts=True)
+    return edges[count == 1]
 
 
 def boundary_vertices(faces: Iterable[Sequence[int]]) -> np.ndarray:

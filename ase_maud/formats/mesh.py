@@ -46,23 +46,19 @@ def read_mesh(path: PathLike) -> NetData:
                          f'{points[bad[0]].tolist()}')
     if not len(points):
         raise ValueError(f'{path}: no points')
-    faces, lines = [], []
+    faces, pairs = [], [np.zeros((0, 2), dtype=int)]
+    merged, points = merge_coincident(points)
     for block in mesh.cells:
+        cells = merged[np.asarray(block.data, dtype=int)]
         if block.type in FACE_CELLS or block.type.startswith('polygon'):
-            faces += np.asarray(block.data, dtype=int).tolist()
+            faces += cells.tolist()
+            pairs.append(np.stack([cells, np.roll(cells, -1, axis=1)], axis=-1).reshape(-1, 2))
         elif block.type == 'line':
-            lines += np.asarray(block.data, dtype=int).tolist()
+            pairs.append(cells)
         elif block.type != 'vertex':
             raise ValueError(f'{path}: cells of type {block.type!r}; a net is made of '
                              f'faces ({", ".join(FACE_CELLS)}) and lines')
-    merged, points = merge_coincident(points)
-    faces = [merged[face].tolist() for face in faces]
-    pairs = [pair for ring in faces for pair in zip(ring, ring[1:] + ring[:1], strict=True)]
-    pairs += [tuple(merged[line].tolist()) for line in lines]
-    springs, seen = [], set()
-    for i, j in pairs:
-        key = (min(i, j), max(i, j))
-        if i != j and key not in seen:
-            seen.add(key)
-            springs.append(key)
-    return NetData(points, np.array(springs, dtype=int).reshape(-1, 2), faces, [])
+    pairs = np.sort(np.concatenate(pairs), axis=1)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]   # corners merged into one
+    first = np.sort(np.unique(pairs, axis=0, return_index=True)[1])
+    return NetData(points, pairs[first], faces, [])

@@ -230,7 +230,7 @@ def draw(ax: Axes, atoms: Atoms, colour: str = 'force',
         ax.set_box_aspect(np.maximum(high - low, THINNEST * extent), zoom=1.1)
     else:
         ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]), aspect='equal')
-    ax.legend(loc='upper left', bbox_to_anchor=(0.0, -0.1) if dim == 3 else None, fontsize=7,
+    ax.legend(loc='upper left', bbox_to_anchor=(0.0, -0.15) if dim == 3 else None, fontsize=7,
               framealpha=0.8)
     state = 'converged' if largest <= ftol else 'not converged'
     ax.set_title(title if title is not None else

@@ -296,3 +296,29 @@ def test_a_net_hanging_below_its_supports_is_no_reason_to_warn(tmp_path, capsys)
         beyond, diagonal = support_excursion(read_net(traj))
         assert beyond > diagonal / 10
         assert ('warning: the repulsion of a = ' in err) == warned
+
+
+@pytest.mark.parametrize('name, rule', [('hypar.obj', 'boundary'),
+                                        ('tubemesh.json', 'boundary'),
+                                        ('lines_big.obj', 'leaves')])
+def test_the_default_form_of_a_sample_net_is_compas_fd_s(tmp_path, name, rule):
+    """relax NET --fix RULE --load ..., no --a: compas_fd's solution of the
+    same net within 1e-9 of its diagonal, in one force call; the reactions
+    balance the loads within 1e-9 of their sum."""
+    path = compas.get(name)
+    start = read_net(path, fixed=rule)
+    load = np.random.default_rng().uniform(-0.3, -0.05)
+    traj = tmp_path / 'r.traj'
+    assert main(['relax', path, '--fix', rule, '--load', '0', '0', str(load), '--quiet',
+                 '--traj', str(traj)]) == 0
+    relaxed = read_net(traj)
+    fixed = start.constraints[0].index.tolist()
+    loads = np.where(np.isin(np.arange(len(start)), fixed)[:, None], 0.0, [0.0, 0.0, load])
+    peer = fd_numpy(vertices=start.positions.tolist(), fixed=fixed,
+                    edges=start.calc.springs.tolist(),
+                    forcedensities=[1.0] * len(start.calc.springs), loads=loads.tolist())
+    diagonal = np.linalg.norm(np.ptp(np.asarray(peer.vertices), axis=0))
+    assert np.abs(relaxed.positions - np.asarray(peer.vertices)).max() < 1e-9 * diagonal
+    result = form_result(relaxed)
+    assert np.allclose(result.reaction_sum, -loads.sum(axis=0), rtol=0,
+                       atol=1e-9 * np.abs(loads).sum())

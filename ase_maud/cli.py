@@ -463,10 +463,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_net_options(p)
     loads = p.add_mutually_exclusive_group()
     loads.add_argument('--load', nargs=3, type=_ruled('loads'), metavar=('X', 'Y', 'Z'),
-                   help='a constant load (force units) on every free point, e.g. '
-                   "self-weight --load 0 0 -0.1; replaces the file's or scene's loads "
-                   '(default: those of NET_FILE: COMPAS px, py, pz, or a trajectory\'s; '
-                   'the scene\'s)')
+                       help='a constant load (force units) on every free point, e.g. '
+                       "self-weight --load 0 0 -0.1; replaces the file's or scene's loads "
+                       '(default: those of NET_FILE: COMPAS px, py, pz, or a trajectory\'s; '
+                       'the scene\'s)')
     loads.add_argument('--loads', metavar='LOADS_CSV',
                        help='per-point loads from a CSV table with the header i,px,py,pz '
                        '(0-based point index, force units; points not listed: none), '
@@ -515,9 +515,10 @@ def build_parser() -> argparse.ArgumentParser:
         commands, 'show', COMMANDS['show'],
         'Draw the net of FILE (any file relax reads; of a trajectory, frame '
         '--frame): springs coloured by their force Q q L (or length) with a '
-        'colour bar, supports (fixed points) as black squares and loaded points '
-        'as triangles, named in a legend; the residual forces as red arrows at '
-        'the scale the legend states, none when the net is converged (max |f| '
+        'colour bar, supports (fixed points) as black squares (and free points as '
+        'dots on nets of at most 400 points), named in a legend; the loads as orange '
+        'and the residual forces as red arrows at the scales the legend states, no '
+        'residual arrows when the net is converged (max |f| '
         'at most --fmax). In the plane for dim 2, else an orthographic 3D view '
         'from --view. --gif animates every frame of a trajectory (at most 60, '
         'evenly picked) at one colour and arrow scale.',

@@ -13,6 +13,8 @@ the relative error :func:`noise`. Other calculators are left alone.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any, Protocol, runtime_checkable
 
 #: The force error a run asks for, as a fraction of the larger of the
@@ -28,12 +30,14 @@ class ToleranceAware(Protocol):
 
     ``last_force_scale``: the largest repulsive force of the last call (force
     units; None before a call); ``last_tolerance``: the force error the
-    results held promise, relative to it (0.0 exact); ``set_tolerance(tol)``
-    sets the relative force error of the next calls.
+    results held promise, relative to it (0.0 exact); ``tolerance``: the
+    relative force error asked of the next calls, which ``set_tolerance(tol)``
+    sets.
     """
 
     last_force_scale: float | None
     last_tolerance: float | None
+    tolerance: float
 
     def set_tolerance(self, tol: float) -> None: ...
 
@@ -65,3 +69,18 @@ def noise(calc: Any) -> float:
     if is_aware(calc):
         return calc.last_tolerance or 0.0
     return 0.0
+
+
+@contextmanager
+def kept(calc: Any) -> Iterator[None]:
+    """Within: a run may ask a :class:`ToleranceAware` ``calc`` for other
+    accuracies (:func:`ask`); after: its own tolerance is back, so that the
+    calculator's settings stay the user's (any other ``calc`` is left alone)."""
+    if not is_aware(calc):
+        yield
+        return
+    before = calc.tolerance
+    try:
+        yield
+    finally:
+        calc.set_tolerance(before)

@@ -51,7 +51,7 @@ from scipy.sparse.linalg import LinearOperator, eigsh, lobpcg, splu
 from scipy.spatial import cKDTree
 
 from . import physics
-from .stiffness import free_dofs, rigid_body_modes
+from .dofs import free_dofs, rigid_body_modes
 from .topology import mean_spring_length
 
 #: Eigenvalues with ``|lambda| <= RTOL * max|lambda|`` count as zero.

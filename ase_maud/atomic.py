@@ -43,6 +43,24 @@ def remove_leftovers(path: str | os.PathLike) -> list[Path]:
     return removed
 
 
+def temporary_beside(path: str | os.PathLike) -> Path:
+    """A new empty file in the folder of ``path``, with its suffix, that
+    :func:`remove_leftovers` knows, with the permissions ``path`` has (the
+    usual ones if it does not exist): where a new version of ``path`` is
+    written before ``os.replace`` moves it into place."""
+    path = Path(path)
+    prefix, suffix = _temporary_pattern(path)
+    handle, name = tempfile.mkstemp(dir=path.parent, prefix=prefix, suffix=suffix)
+    os.close(handle)
+    try:
+        mode = stat.S_IMODE(path.stat().st_mode) if path.exists() else 0o666 & ~_UMASK
+        os.chmod(name, mode)   # mkstemp's are 0o600
+    except BaseException:
+        os.unlink(name)
+        raise
+    return Path(name)
+
+
 def replace_with(path: str | os.PathLike, write: Callable[[Path], None],
                  sync: bool = True) -> None:
     """Replace ``path`` by what ``write(temporary)`` writes to a temporary
@@ -50,14 +68,8 @@ def replace_with(path: str | os.PathLike, write: Callable[[Path], None],
     format by it); flushed to disk first if ``sync``. The old file stays
     untouched until the new one is complete; a failure removes the temporary
     file and is raised."""
-    path = Path(path)
-    prefix, suffix = _temporary_pattern(path)
-    handle, name = tempfile.mkstemp(dir=path.parent, prefix=prefix, suffix=suffix)
-    os.close(handle)
-    temporary = Path(name)
+    temporary = temporary_beside(path)
     try:
-        mode = stat.S_IMODE(path.stat().st_mode) if path.exists() else 0o666 & ~_UMASK
-        os.chmod(temporary, mode)   # mkstemp's are 0o600
         write(temporary)
         if sync:
             with open(temporary, 'rb+') as fd:

@@ -217,6 +217,12 @@ class MaudCalculator(Calculator):
             return changed
         return super().set(**kwargs)
 
+    @property
+    def tolerance(self) -> float:
+        """``tol``: the force error allowed of the next calls
+        (:class:`ase_maud.accuracy.ToleranceAware`)."""
+        return self.parameters['tol']
+
     def set_tolerance(self, tol: float) -> None:
         """Set ``tol`` for the next calls (:class:`ase_maud.accuracy.ToleranceAware`):
         :meth:`set` with ``tol`` alone, without its checks of the other
@@ -271,6 +277,30 @@ class MaudCalculator(Calculator):
             changes.append('pbc')
         return changes
 
+    def _hold(self, atoms: Atoms) -> None:
+        """Keep what :meth:`check_state` compares next time (ASE's
+        ``Calculator.calculate`` keeps ``atoms.copy()``, and ASE's
+        ``get_property`` has made one already): the copy held is updated in
+        place when no more than the positions changed, and made anew
+        otherwise."""
+        old = self.atoms
+        if (old is None or len(old) != len(atoms)
+                or len(old.constraints) != len(atoms.constraints)
+                or set(self.check_state(atoms)) - {'positions'}):
+            self.atoms = atoms.copy()
+        else:
+            old.arrays['positions'][:] = atoms.arrays['positions']
+
+    def compute(self, atoms: Atoms, properties: Sequence[str]) -> dict[str, Any]:
+        """The ``properties`` of ``atoms`` computed now, in one call (what
+        ``get_property`` does after a move, without its change detection and
+        copy of the atoms): for an optimizer that moves the positions itself.
+        Returns :attr:`results`."""
+        with self._lock:
+            self.results = {}
+            self.calculate(atoms, properties, ['positions'])
+            return self.results
+
     def check_atoms(self, atoms: Atoms) -> np.ndarray:
         """Validate ``atoms`` for this potential; return its positions.
 
@@ -307,28 +337,43 @@ class MaudCalculator(Calculator):
     def calculate(self, atoms: Atoms | None = None,
                   properties: Sequence[str] = ('energy',),
                   system_changes: Sequence[str] = all_changes) -> None:
-        super().calculate(atoms, properties, system_changes)
+        if atoms is not None:
+            self._hold(atoms)
         positions = self.check_atoms(self.atoms)
         potential = self.potential
         dim, a, Q = potential.dim, potential.a, potential.Q
         want_blocks = 'stiffness' in properties
+        want_hessian = 'hessian' in properties
+        if want_hessian:
+            self.check_hessian_size(len(positions))
         if potential.repulsive:
             scaled = potential.reduced(positions)
-            (e_rep, f_rep, block6), choice = backends.evaluate(
-                self.parameters, scaled, dim, want_blocks)
+            if want_hessian:   # energy, forces and Hessian in one pass, exact
+                e_rep, f_rep, h_rep = backends.repulsion_hessian(
+                    scaled, dim, self.parameters['backend'])
+                block6 = _diagonal_blocks(h_rep, dim) if want_blocks else None
+                choice = backends.exact_choice(self.parameters['backend'])
+            else:
+                (e_rep, f_rep, block6), choice = backends.evaluate(
+                    self.parameters, scaled, dim, want_blocks)
             if not (np.isfinite(e_rep) and np.isfinite(f_rep).all() and (
                     block6 is None or np.isfinite(block6).all())):
                 raise_on_closest(scaled, a)
-            e_spr, f_spr = physics.spring_terms(scaled, self.springs, potential.stiffnesses)
             backend, tolerance = choice.backend.name, choice.tolerance
-        else:   # a = 0: springs and loads alone, in the user's units (x' = x)
+            e_unit, f_unit = potential.energy_unit, potential.force_unit
+        else:   # a = 0: springs and loads alone, in the user's units (x' = x), times Q
+            n = dim * len(positions)
             scaled, e_rep, f_rep, backend, tolerance = positions, 0.0, 0.0, 'none', 0.0
-            e_spr, f_spr = physics.spring_terms(positions, self.springs,
-                                                potential.stiffnesses)
-        e_load, f_load = physics.load_terms(positions, potential.loads)
-        # at a = 0 the springs' terms are in the user's units: scaled by Q alone
-        e_unit, f_unit = ((potential.energy_unit, potential.force_unit)
-                          if potential.repulsive else (Q, Q))
+            h_rep = np.zeros((n, n)) if want_hessian else None
+            e_unit = f_unit = Q
+        e_spr, f_spr = potential.spring_terms(scaled)
+        with np.errstate(over='ignore', invalid='ignore'):   # said below
+            e_load, f_load = physics.load_terms(positions, potential.loads)
+        if not np.isfinite(e_load):
+            raise ValueError(f'the energy of the loads, -sum p.x, overflows float64 (loads '
+                             f'up to {np.abs(potential.loads).max():.3g} force units, '
+                             f'positions up to {np.abs(positions).max():.3g}): choose '
+                             'units nearer the scene')
         results = {'energy': e_unit * (e_rep + e_spr) + e_load,
                    'forces': f_unit * (f_rep + f_spr) + f_load}
         if want_blocks:
@@ -337,9 +382,8 @@ class MaudCalculator(Calculator):
             blocks += physics.spring_nodal_blocks(self.springs, len(positions),
                                                   potential.stiffnesses, dim)
             results['stiffness'] = Q * blocks
-        if 'hessian' in properties:
-            self.check_hessian_size(len(scaled))
-            results['hessian'] = potential.hessian(positions)
+        if want_hessian:
+            results['hessian'] = potential.whole_hessian(h_rep)
         bad = [name for name, value in results.items()
                if not np.all(np.isfinite(value))]
         if bad:
@@ -413,6 +457,16 @@ class MaudCalculator(Calculator):
             return topology.describe_net_load(total)
         components = self.unbounded_components(atoms) if minimum else []
         return topology.describe_unbounded(components) if components else None
+
+
+def _diagonal_blocks(hessian: np.ndarray, dim: int) -> np.ndarray:
+    """The (N, 6) xx, yy, zz, xy, xz, yz entries of the nodal blocks on the
+    diagonal of a (dim N, dim N) ``hessian`` (zeros beyond ``dim``)."""
+    n = len(hessian) // dim
+    blocks = np.zeros((n, 3, 3))
+    index = np.arange(n)
+    blocks[:, :dim, :dim] = hessian.reshape(n, dim, n, dim)[index, :, index, :]
+    return backends.blocks_to_voigt(blocks)
 
 
 def raise_on_closest(scaled: np.ndarray, a: float) -> None:

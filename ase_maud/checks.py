@@ -113,6 +113,10 @@ RULES: dict[str, Rule] = {
                       lambda v: v >= 0, whole=True, none=True),
     'fmm_eps': Rule('a number in (0, 1), the requested relative precision',
                     lambda v: 0 < v < 1),
+    # the landscape (ase_maud.landscape)
+    'modes': Rule('a whole number >= 1 (the lowest modes climbed, each both ways)',
+                  lambda v: v >= 1, whole=True),
+    'distance_atol': Rule('a finite number >= 0 (length units)', lambda v: v >= 0),
     # the command line's own
     'count': Rule('a whole number >= 1', lambda v: v >= 1, whole=True),
     'seed': Rule('a whole number >= 0', lambda v: v >= 0, whole=True),
@@ -199,18 +203,3 @@ def check_writable(name: str, value: str | os.PathLike, directory: bool = False)
         raise ValueError(f'{text}: the directory {str(parent)!r} is not writable')
     return path
 
-
-def check_distinct(inputs: dict[str, Any], outputs: dict[str, Any]) -> None:
-    """A ValueError naming both options if a file of ``outputs`` (option
-    name: path or None) is a file of ``inputs`` or of another output: a
-    command must not write over what it reads, nor write one file twice."""
-    seen: dict[Path, str] = {}
-    for group, items in (('reads', inputs), ('writes', outputs)):
-        for name, value in items.items():
-            if value is None or not isinstance(value, (str, os.PathLike)):
-                continue
-            path = Path(value).resolve()
-            if path in seen and group == 'writes':
-                raise ValueError(f'{name} {str(value)!r} is the file of {seen[path]}; '
-                                 'give each output a file of its own')
-            seen.setdefault(path, name)

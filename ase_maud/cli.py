@@ -27,8 +27,10 @@ Exit status: 0 done (converged, stationary); 1 not converged within
 ``--steps`` (relax) or not stationary (classify); 2 an error, said in one line
 ``ase-maud: error: ...`` on stderr: a bad argument (argparse's own), a file
 that cannot be read or written, malformed input, or a run that cannot go on
-(:class:`~ase_maud.MaudError`). Every file a command writes is checked before
-any work (:func:`check_outputs`).
+(:class:`~ase_maud.MaudError`); 130 interrupted (Ctrl-C), in one line. Every
+file a command writes is checked before any work (:func:`check_outputs`),
+an output that names an input or another output refused
+(:mod:`ase_maud.paths`).
 """
 
 from __future__ import annotations
@@ -103,6 +105,7 @@ def relax(args: argparse.Namespace) -> int:
     from .forcedensity import solve_force_density
     from .io import mean_spring_length, net_format, read_net, set_tables, write_net
     from .optimizer import Maud
+    from .paths import StagedTrajectory
     from .results import describe_result, form_result, form_warnings, write_forces_csv
     from .scenes import build
     from .topology import free_point_loads
@@ -130,12 +133,19 @@ def relax(args: argparse.Namespace) -> int:
     progress = (sys.stderr.isatty() if args.progress is None else args.progress) \
         and not args.quiet and args.log != '-'
     logfile = args.log or (None if progress or args.quiet else '-')
-    with CallRecorder(atoms.calc) as recorder, \
+    with CallRecorder(atoms.calc) as recorder, StagedTrajectory(args.traj) as staged, \
             Maud(atoms, model=args.model, method=args.method, logfile=logfile,
-                 trajectory=args.traj) as opt:
+                 trajectory=staged.trajectory) as opt:
+        opt.attach(staged.keep)   # the trajectory replaces --traj at its first frame
         bar = _progress_bar(opt, atoms, args.fmax, args.steps) if progress else None
         try:
             converged = opt.run(fmax=args.fmax, steps=args.steps)
+        except KeyboardInterrupt:
+            raise KeyboardInterrupt(
+                f'interrupted at step {opt.nsteps}; ' + (
+                    f'trajectory {args.traj} holds the steps so far' if staged.kept
+                    else f'{args.traj} left as it was')
+                + (', --out not written' if args.out else '')) from None
         finally:
             if bar is not None:
                 bar.close()
@@ -160,6 +170,7 @@ def relax(args: argparse.Namespace) -> int:
 
 def show(args: argparse.Namespace) -> int:
     """``ase-maud show``: exit status 0."""
+    from .atomic import replace_with
     from .io import read_frames, read_net
     from .pictures import save_animation, save_picture
 
@@ -167,11 +178,13 @@ def show(args: argparse.Namespace) -> int:
     style = {'colour': args.color, 'view': args.view, 'ftol': _judging_fmax(args)[0]}
     if args.gif:
         frames = read_frames(args.file, **_net_options(args))
-        count = save_animation(frames, out, fps=args.fps, **style)
-        print(f'wrote {out} ({count} of {len(frames)} frames)')
+        count = []
+        replace_with(out, lambda temporary: count.append(
+            save_animation(frames, temporary, fps=args.fps, **style)))
+        print(f'wrote {out} ({count[0]} of {len(frames)} frames)')
     else:
-        save_picture(read_net(args.file, index=args.frame, **_net_options(args)), out,
-                     **style)
+        atoms = read_net(args.file, index=args.frame, **_net_options(args))
+        replace_with(out, lambda temporary: save_picture(atoms, temporary, **style))
         print(f'wrote {out}')
     return 0
 
@@ -234,6 +247,7 @@ def saddles(args: argparse.Namespace) -> int:
     failed)."""
     import json
 
+    from .atomic import replace_text, replace_with
     from .io import read_net
     from .landscape import landscape
     from .optimizer import Maud
@@ -253,8 +267,9 @@ def saddles(args: argparse.Namespace) -> int:
     print(f'{len(energies)} minima (lowest {min(energies):.10g}), {len(barriers)} saddles, '
           f'{found.failed} failed climbs or descents; {args.out} and '
           f'{_graph_json(args)}')
-    save_disconnectivity(energies, barriers, found.joins, args.out)
-    Path(_graph_json(args)).write_text(json.dumps(found.todict()))
+    replace_with(args.out, lambda temporary: save_disconnectivity(
+        energies, barriers, found.joins, temporary))
+    replace_text(_graph_json(args), json.dumps(found.todict()))
     return 1 if found.failed else 0
 
 
@@ -321,9 +336,11 @@ def _picture_path(args: argparse.Namespace) -> str:
 
 def check_outputs(args: argparse.Namespace) -> None:
     """Every file the command of ``args`` will write, checked before any
-    work: a ValueError naming the option and what is wrong."""
-    from .checks import check_distinct, check_writable
+    work: a ValueError naming the option and what is wrong, or an output
+    that names an input or another output (:mod:`ase_maud.paths`)."""
+    from .checks import check_writable
     from .io import check_net_path
+    from .paths import check_distinct, check_own_json
 
     if args.command == 'relax':
         check_writable('--traj', args.traj)
@@ -333,10 +350,6 @@ def check_outputs(args: argparse.Namespace) -> None:
             check_net_path('--out', args.out)
         if args.forces:
             check_writable('--forces', args.forces)
-        check_distinct({'NET_FILE': args.net, '--edges': args.edges, '--fix': args.fixed,
-                        '--loads': args.loads, '--q': args.q},
-                       {'--traj': args.traj, '--out': args.out, '--forces': args.forces,
-                        '--log': None if args.log == '-' else args.log})
     elif args.command == 'show':
         from matplotlib.figure import Figure
 
@@ -349,8 +362,39 @@ def check_outputs(args: argparse.Namespace) -> None:
     elif args.command == 'saddles':
         check_writable('--out', args.out)
         check_writable('--out', _graph_json(args))
+        from .landscape import GRAPH_KEYS
+        check_own_json(f'--out {args.out!r} (its graph JSON)', _graph_json(args),
+                       GRAPH_KEYS, 'ase-maud saddles')
     elif args.command in ('bench', 'backends'):
         check_writable('--out', args.out, directory=True)
+    check_distinct(*_files(args))
+
+
+def _files(args: argparse.Namespace) -> tuple[list, list]:
+    """The (argument, file) pairs the command of ``args`` reads and writes
+    (:func:`ase_maud.paths.check_distinct`): the net, its edge list (given,
+    or the one beside a point file), its --fix file and relax's --loads and
+    --q tables; --traj, --log, --out and the edge list or graph JSON written
+    beside it, relax's --forces, --output."""
+    from .io import FIX_RULES, edges_path, net_format
+
+    net = getattr(args, 'net', None) or getattr(args, 'file', None)
+    inputs = [] if net is None else [
+        ('FILE' if args.command != 'relax' else 'NET_FILE', net),
+        ('--edges', args.edges or (edges_path(net) if net_format(net) == 'ase' else None)),
+        ('--fix', None if args.fixed in (None, *FIX_RULES) else args.fixed)]
+    outputs = []
+    if args.command == 'relax':
+        inputs += [('--loads', args.loads), ('--q', args.q)]
+        outputs = [('--traj', args.traj), ('--log', None if args.log == '-' else args.log),
+                   ('--out', args.out), ('--forces', args.forces)]
+        if args.out and net_format(args.out) == 'ase':
+            outputs.append(("--out's edge list", edges_path(args.out)))
+    elif args.command == 'show':
+        outputs = [('--output', _picture_path(args))]
+    elif args.command == 'saddles':
+        outputs = [('--out', args.out), ("--out's graph JSON", _graph_json(args))]
+    return inputs, outputs
 
 
 def _one_line(error: BaseException) -> str:
@@ -707,3 +751,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, OSError, MaudError) as error:
         print(f'{parser.prog}: error: {_one_line(error)}', file=sys.stderr)
         return 2
+    except KeyboardInterrupt as error:   # every output is whole: replaced when complete
+        print(f'{parser.prog}: {_one_line(error) if str(error) else "interrupted"}',
+              file=sys.stderr)
+        return 130

@@ -76,7 +76,7 @@ from .formats.compas import compas_text, read_compas, read_compas_forces
 from .formats.mesh import MESH_FORMATS, read_mesh
 from .formats.obj import MERGE_TOLERANCE, merge_coincident, obj_text, read_obj
 from .formats.tables import read_loads_csv, read_q_csv
-from .formats.text import coordinates, read_edges, read_indices
+from .formats.text import XYZ_SUFFIXES, check_xyz_counts, coordinates, read_edges, read_indices
 from .results import FormResult
 from .scenes import keep_on_plane
 from .topology import (
@@ -151,7 +151,7 @@ def check_net_path(name: str, path: PathLike) -> Path:
     if net_format(path) == 'mesh':
         raise ValueError(f'{name} {str(path)!r}: a net is written as .obj, .json, .traj, '
                          f'.xyz or another format ASE writes, not {path.suffix}')
-    if net_format(path) == 'ase' and path.suffix.lower() not in ('.xyz', '.extxyz'):
+    if net_format(path) == 'ase' and path.suffix.lower() not in XYZ_SUFFIXES:
         try:
             known = ase.io.formats.ioformats[ase.io.formats.filetype(path, read=False)]
         except (KeyError, ase.io.formats.UnknownFileTypeError):
@@ -239,7 +239,11 @@ def _read(path, edges, fixed, a, Q, dim, index, load=None):
         raise ValueError(f'{path} is a directory, not a net file')
     kind = net_format(path)
     faces = []
+    if not isinstance(index, slice):
+        index = _whole_index(index)
     if kind in ('obj', 'json', 'mesh'):
+        if not isinstance(index, slice):
+            _check_frame(path, index, 1)
         positions, springs, faces, anchors = {'obj': read_obj, 'json': read_compas,
                                               'mesh': read_mesh}[kind](path)
         frames = [Atoms(positions=positions, pbc=False)]
@@ -331,16 +335,49 @@ def stored_parameters(frame: Atoms) -> dict[str, Any]:
             if k in MaudCalculator.default_parameters}
 
 
+def _whole_index(index):
+    """A frame index as an int, or a ValueError naming it."""
+    whole = as_whole(index)
+    if whole is None or isinstance(index, float):
+        raise ValueError(f'index must be a whole number (a frame, 0-based; -1 the last), '
+                         f'got {index!r}')
+    return whole
+
+
+def _check_frame(path, index, count):
+    """ValueError naming ``path`` and its ``count`` frames unless frame
+    ``index`` is one of them (``-count <= index < count``)."""
+    if not -count <= index < count:
+        held = ('one frame (index 0 or -1)' if count == 1 else
+                f'{count} frames (0 to {count - 1}, or -1 to -{count})')
+        raise ValueError(f'{path}: no frame {index}: the file holds {held}')
+
+
 def _read_ase(path, index):
-    """Frames of an ASE-readable file, and the MaudCalculator parameters its
+    """Frames of an ASE-readable file (``index``: an int, checked against
+    the file's frames, or a slice), and the MaudCalculator parameters its
     (first) frame stores, if any."""
+    if Path(path).suffix.lower() in XYZ_SUFFIXES:
+        check_xyz_counts(path)   # ASE allocates what a file declares
     try:
-        frames = ase.io.read(path, index)
+        if isinstance(index, slice):
+            frames = ase.io.read(path, index)
+        elif net_format(path) == 'traj':   # counted without reading the frames
+            from ase.io.trajectory import Trajectory
+            with Trajectory(path) as trajectory:
+                count = len(trajectory)
+                frames = [trajectory[index]] if -count <= index < count else []
+        else:
+            frames = ase.io.read(path, ':')
+            count = len(frames)
+            frames = [frames[index]] if -count <= index < count else []
     except FileNotFoundError:
         raise
     except Exception as error:   # ASE's readers raise many kinds
         raise ValueError(f'{path}: ASE cannot read it ({type(error).__name__}: '
                          f'{error}); a net is read from {READ_FORMATS}') from error
+    if not isinstance(index, slice):
+        _check_frame(path, index, count)
     frames = frames if isinstance(frames, list) else [frames]
     if not frames:
         raise ValueError(f'{path}: no frame at index {index}')
@@ -360,6 +397,9 @@ def _fixed_indices(indices, natoms):
             raise ValueError(f'fixed point {given!r} is not a whole number (0-based index)')
         if not 0 <= i < natoms:
             raise ValueError(f'fixed point {i} out of range ({natoms} points, 0-based)')
+    if len(set(checked)) < len(checked):
+        twice = next(i for n, i in enumerate(checked) if i in checked[:n])
+        raise ValueError(f'fixed point {twice} is given twice')
     return checked
 
 
@@ -390,6 +430,11 @@ def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None,
     """
     path = Path(path)
     kind = net_format(path)
+    if not isinstance(atoms.calc, MaudCalculator):
+        raise ValueError(f'cannot write {path.name}: the net needs its MaudCalculator '
+                         '(the springs, a, Q), and the atoms have ' + (
+                             'no calculator' if atoms.calc is None else
+                             f'a {type(atoms.calc).__name__}'))
     if like is not None and net_format(like) != kind:
         raise ValueError(f'cannot write {path.name} like {Path(like).name}: '
                          'they are of different formats')
@@ -402,7 +447,7 @@ def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None,
     elif kind == 'traj':
         replace_with(path, lambda temporary: ase.io.write(temporary, atoms, format='traj'))
     else:
-        if path.suffix.lower() in ('.xyz', '.extxyz'):
+        if path.suffix.lower() in XYZ_SUFFIXES:
             replace_text(path, _extxyz_text(atoms))
         else:
             replace_with(path, lambda temporary: ase.io.write(temporary, atoms))

@@ -32,6 +32,7 @@ from scipy.spatial.distance import pdist
 
 from .analysis import classify, displace_along_mode
 from .bench.runner import fresh_copy
+from .checks import check_all
 from .monitor import MaudError
 from .optimizer import Maud
 
@@ -39,6 +40,10 @@ from .optimizer import Maud
 #: distances in length units (for scenes relaxed to fmax 1e-6 ``Q a``, whose
 #: energies agree to ~1e-12 and distances to ~1e-7 a).
 ENERGY_RTOL, DISTANCE_ATOL = 1e-8, 1e-4
+
+#: The keys of :meth:`Landscape.todict`, in order (``ase-maud saddles``
+#: replaces a JSON file of these keys only).
+GRAPH_KEYS = ('minima', 'saddles', 'joins', 'barriers', 'failed')
 
 
 def same_point(a: Atoms, b: Atoms, energy_rtol: float = ENERGY_RTOL,
@@ -72,9 +77,10 @@ class Landscape:
         def points(atoms_list):
             return [{'energy': a.get_potential_energy(), 'positions': a.positions.tolist()}
                     for a in atoms_list]
-        return {'minima': points(self.minima), 'saddles': points(self.saddles),
-                'joins': [list(pair) for pair in self.joins],
-                'barriers': [list(pair) for pair in self.barriers()], 'failed': self.failed}
+        return dict(zip(GRAPH_KEYS, (points(self.minima), points(self.saddles),
+                                     [list(pair) for pair in self.joins],
+                                     [list(pair) for pair in self.barriers()],
+                                     self.failed), strict=True))
 
     def barriers(self) -> list[tuple[float, float]]:
         """For each saddle, its energy above each of the two minima it joins
@@ -93,7 +99,13 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
     relaxed, all to ``fmax`` in at most ``steps`` steps; points compared by
     :func:`same_point` with ``energy_rtol`` and ``distance_atol``. The climbs
     and descents run on the workers of ``client`` (a
-    ``dask.distributed.Client``) if given, else in this process."""
+    ``dask.distributed.Client``) if given, else in this process. Each
+    argument is checked first (:data:`~ase_maud.checks.RULES`): a ValueError
+    names a bad one."""
+    checked = check_all(modes=modes, fmax=fmax, steps=steps, energy_rtol=energy_rtol,
+                        distance_atol=distance_atol)
+    modes, fmax, steps = checked['modes'], checked['fmax'], checked['steps']
+    energy_rtol, distance_atol = checked['energy_rtol'], checked['distance_atol']
     start = fresh_copy(atoms)
     point = classify(start, ftol=np.inf)   # its fmax is tested here
     if point.verdict != 'minimum' or point.fmax > fmax:

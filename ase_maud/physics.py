@@ -116,10 +116,22 @@ def spring_terms(positions: np.ndarray, springs: np.ndarray,
     """
     d = positions[springs[:, 0]] - positions[springs[:, 1]]
     force = spring_force(d, Q)
-    forces = np.zeros_like(positions)
-    np.add.at(forces, springs[:, 0], force)
-    np.add.at(forces, springs[:, 1], -force)
+    n = len(positions)
+    forces = np.stack([np.bincount(springs[:, 0], force[:, k], n)
+                       - np.bincount(springs[:, 1], force[:, k], n)
+                       for k in range(positions.shape[1])], axis=1)
     return float(spring_energy(d, Q).sum()), forces
+
+
+def spring_incidence(springs: np.ndarray, natoms: int) -> sp.csr_matrix:
+    """The spring graph's incidence matrix, (K, natoms): row ``s`` of spring
+    ``(i, j)`` holds +1 at ``i`` and -1 at ``j``, so that its product with
+    the positions gives every spring's ``d = r_i - r_j`` (exactly: one
+    subtraction each)."""
+    pairs = np.asarray(springs, dtype=int).reshape(-1, 2)
+    rows = np.repeat(np.arange(len(pairs)), 2)
+    data = np.tile([1.0, -1.0], len(pairs))
+    return sp.csr_matrix((data, (rows, pairs.ravel())), shape=(len(pairs), natoms))
 
 
 def spring_nodal_blocks(springs: np.ndarray, natoms: int, Q: float | np.ndarray,

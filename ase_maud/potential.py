@@ -144,6 +144,18 @@ class MaudPotential:
         return self._kept(('laplacian', natoms), lambda: physics.spring_laplacian(
             self._springs_within(natoms), natoms, self.stiffnesses))
 
+    def spring_terms(self, scaled: np.ndarray) -> tuple[float, np.ndarray]:
+        """Energy and forces (N, 3) of the springs at ``scaled`` positions
+        (units of ``a``), at ``a = Q = 1``: :func:`.physics.spring_terms`'s
+        law, ``Q q L**2 / 2`` and ``-Q q d``, summed by the spring graph's
+        incidence matrix (kept once per N: two sparse products a call)."""
+        n = len(scaled)
+        incidence, transpose = self._kept(('incidence', n), lambda: _with_transpose(
+            physics.spring_incidence(self._springs_within(n), n)))
+        d = incidence @ scaled
+        pull = d * (self.q[:, None] if self.q is not None else 1.0)
+        return 0.5 * float(np.einsum('ij,ij->', d, pull)), -(transpose @ pull)
+
     def spring_hessian(self, natoms: int) -> sp.csr_matrix:
         """The springs' exact, constant Hessian ``Q (L_q (x) I_dim)``
         (:meth:`spring_laplacian`), shape (dim N, dim N), coordinates point
@@ -162,17 +174,26 @@ class MaudPotential:
 
     # -- the whole Hessian --------------------------------------------------
 
-    def hessian(self, positions: np.ndarray) -> np.ndarray:
+    def hessian(self, positions: np.ndarray, backend: str = 'auto') -> np.ndarray:
         """The dense Hessian ``d2E/dr dr``, shape (dim N, dim N), units of
         ``Q``: ``-B_ij`` off the diagonal, the nodal block ``K_ii = sum_j
-        B_ij`` on it (:mod:`.physics`); the repulsion's part by the
-        registry's Hessian backend (:func:`.backends.repulsion_hessian`)."""
+        B_ij`` on it (:mod:`.physics`); the repulsion's part by ``backend``
+        (:func:`.backends.repulsion_hessian`)."""
         n = self.dim * len(positions)
-        hess = (self.Q * backends.repulsion_hessian(self.reduced(positions), self.dim)
-                if self.repulsive else np.zeros((n, n)))
-        springs = self.spring_hessian(len(positions)).tocoo()
-        np.add.at(hess, (springs.row, springs.col), springs.data)
-        return hess
+        unit = (backends.repulsion_hessian(self.reduced(positions), self.dim, backend)[2]
+                if self.repulsive else np.zeros((n, n)))   # a = 0: the springs alone
+        return self.whole_hessian(unit)
+
+    def whole_hessian(self, repulsion: np.ndarray) -> np.ndarray:
+        """The dense Hessian from the unit repulsion's (dim N, dim N): ``Q``
+        times it, plus the springs' (whose entries are kept in a flat index
+        once per N, not converted at every call); ``repulsion`` is overwritten."""
+        n = len(repulsion) // self.dim
+        flat, data = self._kept(('hessian entries', n), lambda: _flat_entries(
+            self.spring_hessian(n), len(repulsion)))
+        repulsion *= self.Q
+        repulsion.ravel()[flat] += data
+        return repulsion
 
     def hvp(self, positions: np.ndarray, v: ArrayLike) -> np.ndarray:
         """``H v`` without forming ``H``: ``(H v)_i = sum_j B_ij (v_i - v_j)``.
@@ -193,3 +214,16 @@ class MaudPotential:
         hv += (self.spring_hessian(n) @ block.reshape(len(block), -1).T
                ).T.reshape(hv.shape)
         return hv.reshape(v.shape)
+
+
+def _with_transpose(matrix: sp.csr_matrix) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """``matrix`` and its transpose, both in rows (csr) for fast products."""
+    return matrix, sp.csr_matrix(matrix.T)
+
+
+def _flat_entries(matrix: sp.csr_matrix, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The flat indices into a dense (size, size) array of ``matrix``'s
+    stored entries (each (row, column) once), and their values."""
+    coo = matrix.tocoo()
+    coo.sum_duplicates()
+    return coo.row.astype(np.int64) * size + coo.col, coo.data

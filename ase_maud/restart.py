@@ -43,11 +43,11 @@ from ase import Atoms
 
 from .atomic import remove_leftovers, replace_text
 from .checks import as_number
-from .method import MaudState, Point
+from .strategy import MaudState, Point
 from .topology import fixed_atoms
 
 #: The version of the layout; a file of another one is refused by name.
-FORMAT = 'maud-restart-5'
+FORMAT = 'maud-restart-6'
 #: Rows per state slot before a saddle search's modes: positions, the last
 #: point, its forces.
 STATE_ROWS = 3
@@ -63,7 +63,7 @@ class RestartFile:
     """Reads and writes the restart files of one run (module docstring);
     ``path`` is the JSON file, ``path + '.arrays'`` the rows; ``modes``: the
     modes the run keeps (a saddle search's
-    :meth:`~ase_maud.method.MaudMethod.kept_modes`; None for other targets),
+    :attr:`~ase_maud.strategy.Saddle.kept_modes`; None for other targets),
     which fixes the size of a state slot."""
 
     def __init__(self, path: str | os.PathLike, modes: int | None = None):

@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike
 
 #: The largest index an int64 holds (a larger one would wrap around).
 INDEX_MAX = np.iinfo(np.int64).max
+
+
+def _is_pair(row: Any) -> bool:
+    """Whether ``row`` is a sequence of two scalars."""
+    try:
+        return np.asarray(row).shape == (2,)
+    except ValueError:
+        return False
 
 
 def check_springs(springs: ArrayLike | None,
@@ -18,7 +28,13 @@ def check_springs(springs: ArrayLike | None,
     point to itself, and a duplicate (the same pair listed twice, in either
     order: a pair is sprung or not, as in the specification).
     """
-    raw = np.asarray(springs if springs is not None else [])
+    try:
+        raw = np.asarray(springs if springs is not None else [])
+    except ValueError:   # numpy's 'inhomogeneous shape': rows of different lengths
+        rows = list(springs)
+        odd = next((s for s, row in enumerate(rows) if not _is_pair(row)), 0)
+        raise ValueError(f'springs must be pairs of point indices, shape (K, 2); spring '
+                         f'{odd} is {rows[odd]!r}') from None
     if raw.size == 0:
         return np.zeros((0, 2), dtype=int)
     if raw.ndim != 2 or raw.shape[1] != 2:

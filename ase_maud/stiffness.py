@@ -1,6 +1,6 @@
 """Stiffness models: the ``K`` that the Maud step ``dr = gamma K^-1 f`` divides by.
 
-A model answers one question for the step rule (:mod:`ase_maud.method`): at
+A model answers one question for the step (:mod:`ase_maud.strategy`): at
 the current positions, solve ``K d = f`` for the move ``d`` (lengths) from
 the forces ``f`` (ASE sign, ``-dE/dr``; ``K`` in force per length).
 :meth:`StiffnessModel.at` reads what it needs from the calculator and returns
@@ -46,7 +46,7 @@ A ``dim=2`` scene works with 2x2 blocks and never moves ``z``.
 A model is stateless but for caches: what it learns in a run (the secant
 curvature) is handed back to the step rule (:meth:`StiffnessModel.observe`),
 which keeps it in its state and passes it to :meth:`StiffnessModel.at`. The
-step rule's defaults for each model are in :data:`ase_maud.method.STEP_DEFAULTS`.
+step rule's defaults for each model are in :data:`ase_maud.strategy.STEP_DEFAULTS`.
 """
 
 from __future__ import annotations
@@ -59,10 +59,10 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 from ase import Atoms
-from ase.constraints import FixAtoms, FixCartesian, FixedLine, FixedPlane
 from scipy.sparse.linalg import LinearOperator, cg, splu
 
 from .checks import check
+from .dofs import PROJECTIONS, allowed_basis, free_dofs, internal_basis, rigid_body_modes
 from .neighbours import NearestDistances
 from .topology import spring_components
 
@@ -88,12 +88,46 @@ SPRINGS_RTOL = 1e-6
 
 
 class Solver(ABC):
-    """A stiffness ``K`` frozen at one configuration."""
+    """A stiffness ``K`` frozen at one configuration: a local model."""
 
     @abstractmethod
     def solve(self, forces: np.ndarray) -> np.ndarray:
         """The move ``d`` with ``K d = forces``, shape (N, 3), zero on the
         degrees of freedom FixAtoms and FixCartesian hold and on ``z`` in 2D."""
+
+
+class DampedSolver(Solver):
+    """A local model a trust region can damp (:func:`ase_maud.search.trust_region`):
+    ``definite`` (whether ``K`` is positive definite), ``scale`` (a bound on
+    the size of its eigenvalues, force per length), ``K v`` and the damped
+    solve ``(K + mu I)^-1 f``."""
+
+    definite: bool
+    scale: float
+
+    @abstractmethod
+    def dot(self, move: np.ndarray) -> np.ndarray:
+        """``K v`` (N, 3) for a move (N, 3)."""
+
+    @abstractmethod
+    def damped(self, forces: np.ndarray, mu: float) -> np.ndarray | None:
+        """``(K + mu I)^-1 f`` (N, 3), or None if ``K + mu I`` is not definite."""
+
+
+class ModeSolver(Solver):
+    """A local model with eigenpairs on the internal moves, for a saddle
+    search (:class:`ase_maud.strategy.Saddle`)."""
+
+    @abstractmethod
+    def eigenpairs(self, count: int, guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Eigenvalues (ascending, signed, force per length) and their modes
+        as orthonormal moves (k, N, 3): every one for a model whose class has
+        :attr:`StiffnessModel.complete_modes`, else the lowest ``count``,
+        started from the moves ``guess`` (k, N, 3) if given."""
+
+    @abstractmethod
+    def curvature(self, move: np.ndarray) -> np.ndarray:
+        """``H v`` (N, 3) on the internal moves."""
 
 
 class StiffnessModel(ABC):
@@ -109,6 +143,9 @@ class StiffnessModel(ABC):
     name: str = ''
     prop: str | None = None
     default_floor = 1e-2
+    #: For ``target='saddle'``: whether the model's solver gives every
+    #: eigenpair (else the lowest ones, :class:`ModeSolver`).
+    complete_modes = False
 
     def __init__(self, target: str = 'minimum', floor: float | None = None):
         self.target = check('target', target) or 'minimum'
@@ -119,6 +156,10 @@ class StiffnessModel(ABC):
     def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
         """The model at ``atoms``' current positions, with what it has learnt
         in the run so far (:meth:`observe`)."""
+
+    def todict(self) -> dict[str, Any]:
+        """The model's settings, for an optimizer's ``todict``."""
+        return {'model': self.name, 'floor': self.floor}
 
     def needs(self, atoms: Atoms) -> str | None:
         """The calculator property :meth:`at` will ask for at ``atoms``'
@@ -143,69 +184,6 @@ class StiffnessModel(ABC):
         if self.target == 'stationary':
             safe = np.where(values < 0, -safe, safe)
         return safe
-
-
-def free_dofs(atoms: Atoms, dim: int) -> np.ndarray:
-    """Boolean (N, dim) mask of the degrees of freedom that FixAtoms and
-    FixCartesian leave free (other constraints are not coordinate masks and
-    are left to ASE)."""
-    free = np.ones((len(atoms), 3))
-    for constraint in atoms.constraints:
-        if isinstance(constraint, (FixAtoms, FixCartesian)):
-            constraint.adjust_forces(atoms, free)
-    return free[:, :dim] != 0
-
-
-def rigid_body_modes(positions: np.ndarray, free: np.ndarray, dim: int,
-                     rcond: float = 1e-8) -> np.ndarray:
-    """Orthonormal rigid-body modes on the free degrees of freedom.
-
-    The translations and rotations about the centroid that leave every fixed
-    degree of freedom at rest, restricted to the free ones: an array of
-    shape (free.sum(), m), m <= 6 (3D) or 3 (2D). A rotation that moves the
-    points less than ``rcond`` times the most moving one does not count: a
-    collinear scene (to that precision) loses the rotation about its line.
-    """
-    x = positions[:, :dim] - positions[:, :dim].mean(axis=0)
-    if dim == 3:
-        rotations = np.array([np.cross(e, x).ravel() for e in np.eye(3)])
-    else:
-        rotations = np.column_stack([-x[:, 1], x[:, 0]]).reshape(1, -1)
-    sizes = np.linalg.norm(rotations, axis=1)
-    rotations = rotations[sizes > rcond * sizes.max()]
-    rotations /= max(sizes.max(), np.finfo(float).tiny)
-    translations = np.kron(np.ones(len(x)), np.eye(dim)) / np.sqrt(len(x))
-    modes = np.vstack([translations, rotations]).T
-    flat = free.ravel()
-    if (~flat).any():
-        modes = modes @ scipy.linalg.null_space(modes[~flat], rcond=rcond)
-    return scipy.linalg.orth(modes[flat], rcond=rcond)
-
-
-#: The constraints that project each atom's move onto a line, a plane or
-#: nothing: the exact model represents them exactly (:func:`allowed_basis`).
-PROJECTIONS = (FixAtoms, FixCartesian, FixedPlane, FixedLine)
-
-
-def allowed_basis(atoms: Atoms, dim: int) -> np.ndarray:
-    """Orthonormal columns (dim N, m) spanning the moves that FixAtoms,
-    FixCartesian, FixedPlane and FixedLine allow (each is a projection of
-    every atom's move onto a line, a plane or nothing); other constraints
-    are left to ASE."""
-    projector = np.zeros((len(atoms), 3, 3))  # P_i, column k = P_i e_k
-    for k in range(3):
-        unit = np.zeros((len(atoms), 3))
-        unit[:, k] = 1.0
-        for constraint in atoms.constraints:
-            if isinstance(constraint, PROJECTIONS):
-                constraint.adjust_forces(atoms, unit)
-        projector[:, :, k] = unit
-    values, vectors = np.linalg.eigh(projector[:, :dim, :dim])
-    atom, column = np.nonzero(values > 0.5)   # eigenvalues are 0 or 1
-    basis = np.zeros((dim * len(atoms), len(atom)))
-    for j, (i, c) in enumerate(zip(atom, column, strict=True)):
-        basis[dim * i:dim * (i + 1), j] = vectors[i, :, c]
-    return basis
 
 
 class _DofSolver(Solver):
@@ -301,6 +279,9 @@ class NodalModel(StiffnessModel):
         super().__init__(target, floor)
         self.method = check('method', method)
 
+    def todict(self) -> dict[str, Any]:
+        return {**super().todict(), 'method': self.method}
+
     def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
         blocks = atoms.calc.get_property('stiffness', atoms)
         free = free_dofs(atoms, blocks.shape[1])
@@ -353,25 +334,35 @@ class ExactModel(StiffnessModel):
 
     For ``'minimum'`` it is factorised by Cholesky, shifted by ``floor``
     times its largest absolute row sum (a bound on its largest eigenvalue),
-    when that succeeds: the Newton step costs no eigen-decomposition. Where
-    the shifted Hessian is indefinite, or for ``'stationary'``, or when a
-    trust-region step needs ``(K + mu I)^-1``, it is eigen-decomposed and its
-    eigenvalues made safe (:meth:`StiffnessModel._absolute`). ``floor`` is
-    relative to the largest absolute eigenvalue of the whole matrix (default
-    1e-8: soft collective modes must keep their own curvature; rigid-body
-    modes, where the forces have no component, are floored).
+    when that succeeds: the Newton step costs no eigen-decomposition
+    (:class:`_CholeskySolver`). Where the shifted Hessian is indefinite, or
+    for ``'stationary'``, it is eigen-decomposed and its eigenvalues made
+    safe (:meth:`StiffnessModel._absolute`: absolute values for
+    ``'minimum'``, saddle-free Newton; signs kept for ``'stationary'``);
+    ``floor`` is relative to the largest absolute eigenvalue of the whole
+    matrix (default 1e-8: soft collective modes must keep their own
+    curvature; rigid-body modes, where the forces have no component, are
+    floored). For ``'saddle'`` it gives every eigenpair on the internal
+    moves. (A Cholesky-only treatment of the indefinite case, Gershgorin
+    shifts or a modified LDL^T, was measured and took more steps:
+    docs/optimizer.md.)
     """
 
     name = 'exact'
     prop = 'hessian'
     default_floor = 1e-8
+    complete_modes = True
 
     def __init__(self, target: str = 'minimum', floor: float | None = None):
         super().__init__(target, floor)
         self._basis: tuple[Any, np.ndarray | None] | None = None
 
     def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
-        hessian = atoms.calc.get_property('hessian', atoms)
+        return self.local(atoms.calc.get_property('hessian', atoms), atoms)
+
+    def local(self, hessian: np.ndarray, atoms: Atoms) -> Solver:
+        """The model of the dense ``hessian`` (dim N, dim N) at ``atoms``'
+        positions (its constraints say which moves are allowed)."""
         if not np.isfinite(hessian).all():
             raise np.linalg.LinAlgError('the Hessian is not finite')
         dim = hessian.shape[0] // len(atoms)
@@ -381,17 +372,11 @@ class ExactModel(StiffnessModel):
         if self.target == 'saddle':
             internal = internal_basis(atoms.positions, dim, basis)
             return _EigenSolver(internal.T @ hessian @ internal, internal, free,
-                                np.asarray).decomposed()
+                                np.asarray)
         eigen = _EigenSolver(matrix, basis, free, self._absolute)
         if self.target == 'minimum':
-            shift = self.floor * np.abs(matrix).sum(axis=1).max(initial=0.0)
-            try:
-                factor = scipy.linalg.cho_factor(
-                    matrix + shift * np.eye(len(matrix)), check_finite=False)
-            except np.linalg.LinAlgError:
-                return eigen.decomposed()
-            return _CholeskySolver(factor, eigen)
-        return eigen.decomposed()
+            return _CholeskySolver.of(matrix, basis, free, self.floor) or eigen
+        return eigen
 
     def basis(self, atoms: Atoms, dim: int) -> np.ndarray | None:
         """:func:`allowed_basis`, kept while the constraints are the same;
@@ -404,114 +389,116 @@ class ExactModel(StiffnessModel):
         return self._basis[1]
 
 
-def internal_basis(positions: np.ndarray, dim: int,
-                   basis: np.ndarray | None) -> np.ndarray:
-    """Orthonormal columns (dim N, m) spanning the moves ``basis`` allows
-    (:func:`allowed_basis`; None: every move) that are orthogonal to the
-    rigid-body motions it allows (:func:`rigid_body_modes`: the translations
-    and rotations of a free scene, none once three non-collinear points are
-    held): the internal moves, on which the Hessian has no zero modes of
-    symmetry."""
-    rigid = rigid_body_modes(positions, np.ones((len(positions), dim), bool), dim)
-    if basis is None:
-        return scipy.linalg.null_space(rigid.T)
-    outside = rigid - basis @ (basis.T @ rigid)
-    kept = rigid @ scipy.linalg.null_space(outside, rcond=1e-8)
-    if kept.shape[1] == 0:
-        return basis
-    return basis @ scipy.linalg.null_space(scipy.linalg.orth(basis.T @ kept).T)
+class _DenseSolver(_DofSolver):
+    """A dense ``matrix`` on the columns of ``basis`` (None: every
+    coordinate): moves in and out of that basis, and ``K v``."""
+
+    def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray):
+        super().__init__(free)
+        self.matrix, self.basis = matrix, basis
+
+    def _into(self, rhs: np.ndarray) -> np.ndarray:
+        return rhs if self.basis is None else self.basis.T @ rhs
+
+    def _out(self, v: np.ndarray) -> np.ndarray:
+        return v if self.basis is None else self.basis @ v
+
+    def _moves(self, v: np.ndarray) -> np.ndarray:
+        """Free components (n,) or (n, k) as moves (N, 3) or (k, N, 3)."""
+        flat = self._out(v)
+        out = np.zeros((*flat.shape[1:], len(self.free), 3))
+        out[..., :self.dim][..., self.free] = flat.T
+        return out
+
+    def _gather(self, move: np.ndarray) -> np.ndarray:
+        return np.asarray(move, dtype=float).reshape(-1, 3)[:, :self.dim][self.free]
+
+    def dot(self, move: np.ndarray) -> np.ndarray:
+        return self._moves(self.matrix @ self._into(self._gather(move)))
 
 
-class _EigenSolver(_DofSolver):
-    """``K^-1`` from its eigen-decomposition (``matrix`` on the columns of
-    ``basis``, or on every coordinate if it is None), its eigenvalues made
-    safe by ``absolute``; also the damped ``(K + mu I)^-1`` of trust-region
-    steps, for many ``mu`` at once (:meth:`shifted_solve`). The
-    decomposition is made when first needed."""
+class _CholeskySolver(_DenseSolver, DampedSolver):
+    """``K^-1`` by the Cholesky factor of ``K + s I``, ``s`` = ``floor``
+    times the largest absolute row sum (a bound on the size of the
+    eigenvalues, :attr:`scale`): no eigen-decomposition. Made by
+    :meth:`of` where that shifted matrix is definite."""
+
+    definite = True
+
+    def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray,
+                 scale: float, factor: Any):
+        super().__init__(matrix, basis, free)
+        self.scale, self.factor = scale, factor
+
+    @classmethod
+    def of(cls, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray,
+           floor: float) -> _CholeskySolver | None:
+        """The solver of ``matrix``, or None if it is not definite."""
+        scale = float(np.abs(matrix).sum(axis=1).max(initial=0.0))
+        factor = _cholesky(matrix, floor * scale)
+        return None if factor is None else cls(matrix, basis, free, scale, factor)
+
+    def _solve(self, rhs):
+        return self._out(scipy.linalg.cho_solve(self.factor, self._into(rhs),
+                                                check_finite=False))
+
+    def damped(self, forces: np.ndarray, mu: float) -> np.ndarray | None:
+        factor = _cholesky(self.matrix, mu)
+        if factor is None:
+            return None
+        return self._moves(scipy.linalg.cho_solve(
+            factor, self._into(self._gather(forces)), check_finite=False))
+
+
+def _cholesky(matrix: np.ndarray, shift: float) -> Any:
+    """The Cholesky factor of ``matrix + shift I``, or None if not definite."""
+    try:
+        return scipy.linalg.cho_factor(matrix + shift * np.eye(len(matrix)),
+                                       check_finite=False)
+    except np.linalg.LinAlgError:
+        return None
+
+
+class _EigenSolver(_DenseSolver, DampedSolver, ModeSolver):
+    """``K^-1`` from its eigen-decomposition, its eigenvalues made safe by
+    ``absolute`` (signed and floored for ``'stationary'``; as they are for
+    ``'saddle'``, whose :meth:`eigenpairs` are every one); also the damped
+    ``(K + mu I)^-1`` of trust-region steps (each eigenvalue moved ``mu``
+    away from zero). The decomposition is made when first needed."""
+
+    definite = False
 
     def __init__(self, matrix, basis, free, absolute):
-        super().__init__(free)
-        self.matrix, self.basis, self.absolute = matrix, basis, absolute
+        super().__init__(matrix, basis, free)
+        self.absolute = absolute
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
 
-    def decomposed(self) -> _EigenSolver:
-        """This solver, with its eigen-decomposition made."""
+    def _decomposed(self) -> tuple[np.ndarray, np.ndarray]:
         if self._pairs is None:
             values, vectors = scipy.linalg.eigh(self.matrix, check_finite=False,
                                                 driver='evd')
-            if self.basis is not None:
-                vectors = self.basis @ vectors
             self._pairs = self.absolute(values), vectors
-        return self
+        return self._pairs
 
     @property
-    def values(self) -> np.ndarray:
-        return self.decomposed()._pairs[0]
+    def scale(self) -> float:
+        return float(np.abs(self._decomposed()[0]).max(initial=0.0))
 
-    def modes(self) -> tuple[np.ndarray, np.ndarray]:
-        """The eigenvalues (ascending for ``'saddle'``, whose are left
-        signed and unfloored; force per length) and the eigenvectors as moves,
-        shape (m, N, 3), orthonormal."""
-        values, vectors = self.decomposed()._pairs
-        out = np.zeros((len(values), len(self.free), 3))
-        out[:, :, :self.dim] = vectors.T.reshape(len(values), -1, self.dim)
-        return values, out
+    def eigenpairs(self, count: int = 0, guess: np.ndarray | None = None):
+        values, vectors = self._decomposed()
+        return values, self._moves(vectors)
+
+    def curvature(self, move: np.ndarray) -> np.ndarray:
+        return self.dot(move)
 
     def _solve(self, rhs):
-        values, vectors = self.decomposed()._pairs
-        return vectors @ ((vectors.T @ rhs) / values)
+        values, vectors = self._decomposed()
+        return self._out(vectors @ ((vectors.T @ self._into(rhs)) / values))
 
-    def shifted_solve(self, forces: np.ndarray) -> Any:
-        """``shifts -> moves``: the moves ``(K + mu I)^-1 f`` (each eigenvalue
-        moved ``mu >= 0`` away from zero: shorter moves, turned towards the
-        forces), one per ``mu`` in ``shifts``, shape (len(shifts), N, 3); the
-        forces are projected on the eigenvectors once, here."""
-        values, vectors = self.decomposed()._pairs
-        rhs = np.asarray(forces, dtype=float).reshape(-1, 3)[:, :self.dim][self.free]
-        coefficients = vectors.T @ rhs
-
-        def moves(shifts: np.ndarray) -> np.ndarray:
-            damped = values + np.sign(values) * np.asarray(shifts, dtype=float)[:, None]
-            out = np.zeros((len(damped), len(self.free), 3))
-            out[:, :, :self.dim][:, self.free] = (coefficients / damped) @ vectors.T
-            return out
-        return moves
-
-
-class _CholeskySolver(_DofSolver):
-    """``K^-1`` by a Cholesky factor of the (shifted) Hessian, and ``K v``
-    (:meth:`dot`, for a trust-region step along the dogleg path); damped
-    solves go to ``eigen``, decomposed then."""
-
-    def __init__(self, factor, eigen: _EigenSolver):
-        super().__init__(eigen.free)
-        self.factor, self.eigen = factor, eigen
-
-    def dot(self, move: np.ndarray) -> np.ndarray:
-        """``K v`` for a move (N, 3), shape (N, 3)."""
-        eigen = self.eigen
-        v = np.asarray(move, dtype=float).reshape(-1, 3)[:, :self.dim].ravel()
-        if eigen.basis is not None:
-            v = eigen.basis @ (eigen.matrix @ (eigen.basis.T @ v))
-        else:
-            v = eigen.matrix @ v
-        out = np.zeros((len(self.free), 3))
-        out[:, :self.dim] = v.reshape(-1, self.dim)
-        return out
-
-    def _solve(self, rhs):
-        if self.eigen.basis is None:
-            return scipy.linalg.cho_solve(self.factor, rhs, check_finite=False)
-        basis = self.eigen.basis
-        return basis @ scipy.linalg.cho_solve(self.factor, basis.T @ rhs,
-                                              check_finite=False)
-
-    @property
-    def values(self) -> np.ndarray:
-        return self.eigen.values
-
-    def shifted_solve(self, forces: np.ndarray) -> Any:
-        return self.eigen.shifted_solve(forces)
+    def damped(self, forces: np.ndarray, mu: float) -> np.ndarray:
+        values, vectors = self._decomposed()
+        coefficients = vectors.T @ self._into(self._gather(forces))
+        return self._moves(vectors @ (coefficients / (values + np.sign(values) * mu)))
 
 
 # -- global sparse -------------------------------------------------------------
@@ -673,7 +660,7 @@ class SpringsModel(StiffnessModel):
     spring component that holds no fixed point (it could translate as a
     whole). The repulsion's
     stiffness elsewhere, and its coupling, is left to the L-BFGS memory of
-    the step rule (:data:`ase_maud.method.STEP_DEFAULTS`).
+    the step rule (:data:`ase_maud.strategy.STEP_DEFAULTS`).
     """
 
     name = 'springs'
@@ -733,12 +720,14 @@ MODES_RTOL = 1e-4
 MODES_MAXITER, MODES_WARM_MAXITER = 100, 20
 
 
-class _LowestModes(Solver):
+class _LowestModes(ModeSolver):
     """``P^-1`` of the springs model, the Hessian on the internal moves
     (:meth:`curvature`, Hessian-vector products through
     :func:`ase_maud.analysis.hessian_operator`, rigid-body motions projected
-    out) and its lowest eigenpairs (:meth:`lowest`, LOBPCG preconditioned by
-    ``P^-1``): what a large saddle search follows (:mod:`ase_maud.method`)."""
+    out) and its lowest eigenpairs (:meth:`eigenpairs`, LOBPCG preconditioned
+    by ``P^-1``; a dense eigen-decomposition of the products where the
+    scene is too small for LOBPCG): what a large saddle search follows
+    (:class:`ase_maud.strategy.Saddle`)."""
 
     def __init__(self, inner: Solver, atoms: Atoms, free: np.ndarray):
         from .analysis import hessian_operator
@@ -764,16 +753,24 @@ class _LowestModes(Solver):
         coordinates, without rigid-body components."""
         return self._spread(self.operator @ self._gather(move[None]))[0]
 
-    def lowest(self, count: int, guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    def eigenpairs(self, count: int, guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """The ``count`` lowest eigenvalues (ascending) and their modes
         (count, N, 3), started from the moves ``guess`` (k, N, 3) if given."""
         from scipy.sparse.linalg import lobpcg
+
+        size = self.operator.shape[0]
+        if size <= 5 * (count + self.rigid.shape[1]):   # too few for LOBPCG
+            internal = (scipy.linalg.null_space(self.rigid.T) if self.rigid.size
+                        else np.eye(size))
+            matrix = internal.T @ (self.operator @ internal)
+            values, vectors = scipy.linalg.eigh(0.5 * (matrix + matrix.T))
+            return values[:count], self._spread(internal @ vectors[:, :count])
 
         def precondition(v):
             return self._gather(np.array([self.solve(m) for m in
                                           self._spread(v.reshape(len(v), -1))]))
 
-        start = np.random.default_rng(0).standard_normal((self.operator.shape[0], count))
+        start = np.random.default_rng(0).standard_normal((size, count))
         if guess is not None:
             start[:, :len(guess)] = self._gather(guess)
         diagonal = precondition(np.eye(len(start), 1)).max()   # a scale of 1 / P

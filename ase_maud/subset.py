@@ -11,15 +11,13 @@ the atoms left out) and the move back to the filter's atoms.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms
 from ase.filters import Filter
 
 from .neighbours import NearestDistances
-from .stiffness import Solver
+from .stiffness import DampedSolver, ModeSolver, Solver
 
 
 class SubsetView:
@@ -44,7 +42,7 @@ class SubsetView:
         return self.view
 
     def solver(self, whole: Solver) -> SubsetSolver:
-        return SubsetSolver(whole, self.index, len(self.atoms))
+        return subset_solver(whole, self.index, len(self.atoms))
 
     def nearest(self) -> SubsetNearest:
         return SubsetNearest(self)
@@ -69,9 +67,7 @@ class SubsetNearest(NearestDistances):
 
 
 class SubsetSolver(Solver):
-    """``whole``'s move for forces on the ``index`` atoms of ``natoms``; the
-    optional parts of a solver the step uses where ``whole`` has them
-    (``dot``, ``shifted_solve``, ``values``) pass through, mapped alike."""
+    """``whole``'s move for forces on the ``index`` atoms of ``natoms``."""
 
     def __init__(self, whole: Solver, index: np.ndarray, natoms: int):
         self.whole, self.index, self.natoms = whole, index, natoms
@@ -85,13 +81,48 @@ class SubsetSolver(Solver):
     def solve(self, forces: np.ndarray) -> np.ndarray:
         return self.whole.solve(self._scene(forces))[self.index]
 
-    def __getattr__(self, name: str) -> Any:
-        inner = getattr(self.whole, name)   # AttributeError if whole has none
-        if name == 'dot':
-            return lambda move: inner(self._scene(move))[self.index]
-        if name == 'shifted_solve':
-            def shifted_solve(forces: np.ndarray) -> Any:
-                moves = inner(self._scene(forces))
-                return lambda shifts: moves(shifts)[:, self.index]
-            return shifted_solve
-        return inner
+
+class _SubsetDamped(SubsetSolver, DampedSolver):
+    """A :class:`SubsetSolver` of a :class:`~ase_maud.stiffness.DampedSolver`."""
+
+    @property
+    def definite(self) -> bool:
+        return self.whole.definite
+
+    @property
+    def scale(self) -> float:
+        return self.whole.scale
+
+    def dot(self, move: np.ndarray) -> np.ndarray:
+        return self.whole.dot(self._scene(move))[self.index]
+
+    def damped(self, forces: np.ndarray, mu: float) -> np.ndarray | None:
+        move = self.whole.damped(self._scene(forces), mu)
+        return None if move is None else move[self.index]
+
+
+class _SubsetModes(SubsetSolver, ModeSolver):
+    """A :class:`SubsetSolver` of a :class:`~ase_maud.stiffness.ModeSolver`
+    (its modes are zero on the atoms the filter leaves out, which it holds)."""
+
+    def eigenpairs(self, count: int, guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        scene = None if guess is None else np.array([self._scene(g) for g in guess])
+        values, modes = self.whole.eigenpairs(count, scene)
+        return values, modes[:, self.index]
+
+    def curvature(self, move: np.ndarray) -> np.ndarray:
+        return self.whole.curvature(self._scene(move))[self.index]
+
+
+class _SubsetEigen(_SubsetDamped, _SubsetModes):
+    """A :class:`SubsetSolver` of a solver with both interfaces."""
+
+
+def subset_solver(whole: Solver, index: np.ndarray, natoms: int) -> SubsetSolver:
+    """``whole`` seen through a filter's ``index`` atoms, with the same
+    interfaces (:class:`~ase_maud.stiffness.DampedSolver`,
+    :class:`~ase_maud.stiffness.ModeSolver`, both, or neither)."""
+    kinds = {(True, True): _SubsetEigen, (True, False): _SubsetDamped,
+             (False, True): _SubsetModes, (False, False): SubsetSolver}
+    return kinds[isinstance(whole, DampedSolver), isinstance(whole, ModeSolver)](
+        whole, index, natoms)

@@ -159,8 +159,10 @@ def net_load(atoms: Atoms, loads: np.ndarray | None, dim: int = 3) -> np.ndarray
         return None
     free = ~held_directions(atoms).any(axis=0)
     free[dim:] = False
-    total = np.where(free, loads.sum(axis=0), 0.0)
-    if np.all(np.abs(total) <= NET_LOAD_RTOL * np.abs(loads).sum(axis=0)):
+    with np.errstate(over='ignore'):   # loads summing beyond float64: the calculator says
+        total = np.where(free, loads.sum(axis=0), 0.0)
+        scale = np.abs(loads).sum(axis=0)
+    if np.all(np.abs(total) <= NET_LOAD_RTOL * scale):
         return None
     return total
 

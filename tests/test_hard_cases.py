@@ -17,6 +17,7 @@ from ase_maud import (
     StagnationError,
     hardcases,
 )
+from ase_maud.dofs import free_dofs
 from ase_maud.hardcases import (
     CLOSE,
     HARD_CASES,
@@ -35,7 +36,6 @@ from ase_maud.hardcases import (
     tangled_net,
 )
 from ase_maud.scenes import all_pairs, build, net3d
-from ase_maud.stiffness import free_dofs
 from ase_maud.topology import fixed_atoms
 
 

@@ -1,5 +1,7 @@
-"""The step rule alone (MaudMethod, StepRule, MaudState) on quadratics with
-a fake solver, and the run monitor: no calculator, no ASE optimizer."""
+"""The step strategies alone (Minimise, StepRule, MaudState), their
+directions (ase_maud.descent) and searches (ase_maud.search) on quadratics
+with known answers and a matrix model, and the run monitor: no calculator,
+no ASE optimizer."""
 
 import io
 from dataclasses import replace
@@ -8,20 +10,18 @@ import numpy as np
 import pytest
 from ase.io.jsonio import read_json, write_json
 
-from ase_maud.method import (
+from ase_maud.descent import (
     MIN_PAIR_COSINE,
     NEWTON_RTOL,
-    STEP_DEFAULTS,
-    MaudMethod,
-    MaudState,
-    Point,
-    _mode_steps,
-    _truncated_newton,
-    step_rule,
+    lbfgs,
+    mode_steps,
+    truncated_newton,
 )
 from ase_maud.monitor import ENERGY_PROGRESS, DivergenceError, RunMonitor, StagnationError
 from ase_maud.neighbours import NearestDistances
-from ase_maud.stiffness import Solver, StiffnessModel
+from ase_maud.search import raised, trust_region
+from ase_maud.stiffness import MODELS, DampedSolver, StiffnessModel
+from ase_maud.strategy import STEP_DEFAULTS, MaudState, Point, compose, step_rule
 
 
 class Quadratic:
@@ -43,14 +43,27 @@ class Quadratic:
         return (self.b - self.A @ x.ravel()).reshape(-1, 3)
 
 
-class MatrixSolver(Solver):
-    """``K^-1 f`` for a dense K over all 3n coordinates."""
+class MatrixSolver(DampedSolver):
+    """``K^-1 f`` for a dense K over all 3n coordinates, and its damped
+    solves (what the exact model's trust region uses)."""
 
     def __init__(self, K):
         self.K = K
+        values = np.linalg.eigvalsh(K)
+        self.definite = bool(values.min() > 0)
+        self.scale = float(np.abs(values).max())
 
     def solve(self, forces):
         return np.linalg.solve(self.K, np.ravel(forces)).reshape(-1, 3)
+
+    def dot(self, move):
+        return (self.K @ np.ravel(move)).reshape(-1, 3)
+
+    def damped(self, forces, mu):
+        shifted = self.K + mu * np.eye(len(self.K))
+        if np.linalg.eigvalsh(shifted).min() <= 0:
+            return None
+        return np.linalg.solve(shifted, np.ravel(forces)).reshape(-1, 3)
 
 
 class FakeModel(StiffnessModel):
@@ -61,11 +74,19 @@ class FakeModel(StiffnessModel):
 
 
 def method(target='minimum', model='exact', maxstep_nn=None, **keywords):
-    """The step rule of ``model`` on a fake model; no nearest-distance bound
-    unless ``maxstep_nn`` is given."""
-    fake = FakeModel(target)
-    rule = replace(step_rule(model, fake.target, **keywords), maxstep_nn=maxstep_nn)
-    return MaudMethod(fake, rule, NearestDistances())
+    """The strategy of ``model`` (a name of ``MODELS``, never called: the
+    tests hand the local model down); no nearest-distance bound unless
+    ``maxstep_nn`` is given."""
+    stiffness = MODELS[model](target=target)
+    rule = replace(step_rule(stiffness, **keywords), maxstep_nn=maxstep_nn)
+    return compose(stiffness, rule, NearestDistances())
+
+
+def uphill(rule, state, x, merit, forces, noise):
+    """Whether the step from ``state.last`` to ``x`` raised the merit."""
+    last = state.last
+    return raised(last.merit, last.noise, last.forces, x - last.x, merit, forces, noise,
+                  energy=rule.model.target == 'minimum')
 
 
 def start(seed, quadratic):
@@ -120,7 +141,7 @@ def test_an_uphill_step_is_taken_back_with_half_the_gamma():
                      lambda at: too_soft)
     x1 = x0 + move
     rule.moved(state, x1)
-    assert rule.uphill(state, x1, quadratic.energy(x1), quadratic.forces(x1), 0.0)
+    assert uphill(rule, state, x1, quadratic.energy(x1), quadratic.forces(x1), 0.0)
     again = rule.step(state, x1, quadratic.energy(x1), quadratic.forces(x1), 0.0,
                       lambda at: pytest.fail('the solver of the start is kept'))
     assert state.last.x is not x1 and np.array_equal(state.last.x, x0)
@@ -146,7 +167,7 @@ def test_a_line_search_cut_shortens_a_move_the_bound_clipped(seed):
     assert np.linalg.norm(move, axis=1).max() == pytest.approx(size)   # clipped
     x1 = x0 + move
     rule.moved(state, x1)
-    assert rule.uphill(state, x1, quadratic.energy(x1), quadratic.forces(x1), 0.0)
+    assert uphill(rule, state, x1, quadratic.energy(x1), quadratic.forces(x1), 0.0)
     again = rule.step(state, x1, quadratic.energy(x1), quadratic.forces(x1), 0.0,
                       lambda at: pytest.fail('the solver of the start is kept'))
     assert 0.1 <= state.gamma <= 0.5
@@ -163,8 +184,8 @@ def test_energies_within_their_noise_are_decided_by_the_forces():
     # a merit that looks higher, within a noise of 1e-3, but downhill by the
     # trapezoid rule of the forces: accepted
     looks_higher = quadratic.energy(x1) + 1e-6 * abs(quadratic.energy(x1))
-    assert not rule.uphill(state, x1, looks_higher, quadratic.forces(x1), 1e-3)
-    assert rule.uphill(state, x1, looks_higher, quadratic.forces(x1), 1e-9)
+    assert not uphill(rule, state, x1, looks_higher, quadratic.forces(x1), 1e-3)
+    assert uphill(rule, state, x1, looks_higher, quadratic.forces(x1), 1e-9)
 
 
 def test_nearly_degenerate_secant_pairs_are_not_kept():
@@ -192,9 +213,10 @@ def test_a_direction_that_is_not_downhill_clears_the_memory():
     # a pair of negative curvature, as rounding could leave: the two-loop
     # recursion then points uphill
     state.pairs = [(forces.copy(), -4.0 * forces)]
-    direction = rule._direction(state)
+    assert not np.vdot(lbfgs(state.solver.solve, forces, state.pairs), forces) > 0
+    move = rule._move(state)
     assert state.pairs == []
-    np.testing.assert_array_equal(direction, forces)
+    np.testing.assert_array_equal(move, state.gamma * forces)
 
 
 @pytest.mark.parametrize('seed', [0, 1])
@@ -227,12 +249,12 @@ def test_momentum_restarts_on_an_overshoot():
 
 
 def test_step_rule_merges_defaults_model_and_keywords():
-    rule = step_rule('global', gamma_max=0.8, memory=None)
+    rule = step_rule(MODELS['global'](), gamma_max=0.8, memory=None)
     assert rule.gamma_max == 0.8
-    assert rule.memory == STEP_DEFAULTS['global']['memory']
+    assert rule.memory == STEP_DEFAULTS[MODELS['global']]['memory']
     assert rule.gamma_growth == STEP_DEFAULTS['common']['gamma_growth']
-    assert step_rule('global', target='stationary').memory == 0
-    assert step_rule('no such model').beta_max == STEP_DEFAULTS['nodal']['beta_max']
+    assert step_rule(MODELS['global'](target='stationary')).memory == 0
+    assert step_rule(FakeModel()).beta_max == STEP_DEFAULTS[MODELS['nodal']]['beta_max']
 
 
 def test_state_survives_json():
@@ -328,7 +350,7 @@ def test_mode_steps_are_newton_where_the_curvature_serves_else_the_whole_reach(s
     rng = np.random.default_rng(seed)
     b, g = rng.normal(size=40), rng.normal(size=40)
     reach = rng.uniform(0.1, 3.0, size=40)
-    s = _mode_steps(b, g, reach, uphill)
+    s = mode_steps(b, g, reach, uphill)
     right = b < 0 if uphill else b > 0
     newton = right & (np.abs(g / b) <= reach)
     assert newton.any() and (~newton).any()
@@ -343,7 +365,7 @@ def test_mode_steps_at_zero_curvature_or_gradient_are_finite():
     b, reach = np.array([0.0, -2.0, 1.0, 0.0]), np.ones(4)
     for g in (np.zeros(4), np.array([1.0, 0.0, 1e-300, -1e-14])):
         for uphill in (True, False):
-            assert np.isfinite(_mode_steps(b, g, reach, uphill)).all()
+            assert np.isfinite(mode_steps(b, g, reach, uphill)).all()
 
 
 def _newton_problem(seed, n=12, negative=0):
@@ -365,7 +387,7 @@ def test_truncated_newton_solves_within_a_wide_region(seed):
     """With room enough, the move solves ``H d = f`` to ``NEWTON_RTOL``, and
     the ``H d`` returned is ``H`` times the move."""
     hessian, dot, precondition, forces = _newton_problem(seed)
-    move, curved = _truncated_newton(dot, precondition, forces, np.full(len(forces), 1e9))
+    move, curved = truncated_newton(dot, precondition, forces, np.full(len(forces), 1e9))
     np.testing.assert_allclose(curved.ravel(), hessian @ move.ravel(), atol=1e-10)
     residual = np.linalg.norm(forces - curved) / np.linalg.norm(forces)
     assert residual <= NEWTON_RTOL
@@ -379,9 +401,88 @@ def test_truncated_newton_stays_within_each_bound_and_descends(seed, negative):
     ``-f.d + d.H d / 2``; ``H d`` is still ``H`` times the move."""
     hessian, dot, precondition, forces = _newton_problem(seed, negative=negative)
     limit = np.random.default_rng(seed).uniform(0.01, 0.05, len(forces))
-    move, curved = _truncated_newton(dot, precondition, forces, limit)
+    move, curved = truncated_newton(dot, precondition, forces, limit)
     lengths = np.linalg.norm(move, axis=1)
     assert np.all(lengths <= limit * (1 + 1e-12))
     assert np.isclose(lengths / limit, 1.0, rtol=1e-9).any()
     np.testing.assert_allclose(curved.ravel(), hessian @ move.ravel(), atol=1e-10)
     assert -np.vdot(forces, move) + 0.5 * np.vdot(move, curved) < 0
+
+
+# -- the trust region (search.trust_region) ---------------------------------------
+
+def _quadratic_model(seed, n=8, negative=0):
+    """A random symmetric K on (n, 3) moves (``negative`` eigenvalues below
+    0) as a MatrixSolver, and forces."""
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.standard_normal((3 * n, 3 * n)))
+    values = np.geomspace(0.05, 20.0, 3 * n)
+    values[:negative] *= -1
+    return MatrixSolver(q @ np.diag(values) @ q.T), rng.standard_normal((n, 3)), values
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_trust_region_keeps_a_newton_move_that_fits(seed):
+    model, forces, _ = _quadratic_model(seed)
+    newton = model.solve(forces)
+    limit = np.full(len(forces), 2.0 * np.linalg.norm(newton, axis=1).max())
+    assert trust_region(model, forces, newton, 1.0, limit) is newton
+
+
+@pytest.mark.parametrize('seed', range(4))
+@pytest.mark.parametrize('gamma', [1.0, 0.5])
+def test_dogleg_of_a_definite_model_reaches_the_limit_downhill(seed, gamma):
+    """A Newton move too long for the limits is cut on the dogleg path: its
+    ``gamma`` times touches a limit and stays within every one, and the
+    quadratic model ``-f.d + d.K d / 2`` falls."""
+    model, forces, _ = _quadratic_model(seed)
+    newton = model.solve(forces)
+    limit = np.random.default_rng(seed).uniform(0.05, 0.2, len(forces)) * np.linalg.norm(
+        newton, axis=1).max()
+    move = trust_region(model, forces, newton, gamma, limit)
+    ratio = gamma * np.linalg.norm(move, axis=1) / limit
+    assert ratio.max() == pytest.approx(1.0, rel=1e-9)
+    assert -np.vdot(forces, move) + 0.5 * np.vdot(move, model.dot(move)) < 0
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_damping_of_an_indefinite_model_is_the_smallest_that_fits(seed):
+    """An indefinite model is damped to ``(K + mu I)^-1 f`` with ``K + mu I``
+    definite, the move within the limits, and no ``mu`` 1 % smaller that
+    fits (the bisections pin ``mu`` to 0.2 %)."""
+    model, forces, values = _quadratic_model(seed, negative=3)
+    model.definite = False
+    newton = model.solve(forces)
+    limit = np.full(len(forces), 0.3)
+    move = trust_region(model, forces, newton, 1.0, limit)
+    assert np.linalg.norm(move, axis=1).max() <= 0.3 * (1 + 1e-12)
+    flat = move.ravel()
+    mu = np.vdot(forces.ravel() - model.K @ flat, flat) / np.vdot(flat, flat)
+    assert mu > -values.min()
+    np.testing.assert_allclose((model.K + mu * np.eye(len(flat))) @ flat, forces.ravel(),
+                               rtol=1e-8, atol=1e-10)
+    smaller = model.damped(forces, 0.99 * mu)
+    assert smaller is None or np.linalg.norm(smaller, axis=1).max() > 0.3
+
+
+def test_exact_models_solver_is_cholesky_where_definite_and_eigen_where_not():
+    """The exact model's local model declares which: a definite Hessian gets
+    the Cholesky solver (dogleg), an indefinite one the saddle-free eigen
+    solver (damped), and both solve ``|K| d = f``."""
+    from ase_maud.scenes import build
+    from ase_maud.stiffness import ExactModel
+    model = ExactModel()
+    minimum = build('dimer')
+    minimum.set_distance(0, 1, 1.0)   # the dimer's minimum, L = a
+    definite = model.at(minimum)
+    assert isinstance(definite, DampedSolver) and definite.definite
+    squeezed = build('all_pairs', 6, seed=1)
+    indefinite = model.at(squeezed)
+    assert not indefinite.definite
+    hessian = squeezed.calc.get_hessian(squeezed)
+    values, vectors = np.linalg.eigh(hessian)
+    forces = np.random.default_rng(0).standard_normal((len(squeezed), 3))
+    move = indefinite.solve(forces).ravel()
+    safe = np.maximum(np.abs(values), model.floor * np.abs(values).max())
+    np.testing.assert_allclose(move, vectors @ ((vectors.T @ forces.ravel()) / safe),
+                               rtol=1e-7, atol=1e-9)

@@ -164,3 +164,24 @@ def test_pair_chunks_give_every_pair_once(n, chunk):
     got = np.concatenate(pairs) if pairs else np.zeros((0, 2), int)
     expected = np.array(list(itertools.combinations(range(n), 2)))
     np.testing.assert_array_equal(got, expected.reshape(-1, 2))
+
+
+@pytest.mark.parametrize('seed', range(3))
+@pytest.mark.parametrize('dim', [2, 3])
+def test_the_potentials_spring_sums_are_the_pair_law(seed, dim):
+    """``MaudPotential.spring_terms`` (incidence products) equals the pair law
+    summed spring by spring (:func:`physics.spring_terms`), with and without
+    force densities."""
+    rng = np.random.default_rng(seed)
+    n = 9
+    positions = rng.normal(size=(n, 3))
+    if dim == 2:
+        positions[:, 2] = 0.0
+    springs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)
+                        if rng.random() < 0.4])
+    for q in (None, rng.uniform(0.2, 3.0, len(springs))):
+        potential = MaudPotential(springs, dim=dim, q=q)
+        energy, forces = potential.spring_terms(positions)
+        expected = physics.spring_terms(positions, springs, 1.0 if q is None else q)
+        assert energy == pytest.approx(expected[0], rel=1e-13)
+        np.testing.assert_allclose(forces, expected[1], rtol=1e-12, atol=1e-13)

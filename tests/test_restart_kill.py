@@ -1,19 +1,22 @@
-"""A relaxation killed with SIGKILL at random moments and resumed from its
-files ends where the uninterrupted run ends ("kill -9 loses no data").
+"""A relaxation killed with SIGKILL at seeded random steps and resumed from
+its files ends where the uninterrupted run ends ("kill -9 loses no data").
 
-The run (``hanging_net(8)``, 42 steps, about 1 s) goes in a subprocess with
-a restart file and a trajectory; the parent kills it at seeded random moments,
-checks that the trajectory reads back with only complete, finite frames, and
-resumes with ``Maud.resume`` or by hand (the last frame, the restart file and
-the trajectory appended to: docs/hard_cases.md). Threads are pinned to one everywhere, so the
-resumed run repeats the uninterrupted one's steps exactly.
+The run (``hanging_net(8)``, 42 steps) goes in a subprocess with a restart
+file and a trajectory. After each step's frame it reports the step on a pipe
+and waits for the parent's word to go on, so the parent kills it at a step
+it chose, whatever the machine's load: at that point (between the frame and
+the restart file), or just after its word (somewhere in the next step). The
+parent checks that the trajectory reads back with only complete, finite
+frames, and resumes with ``Maud.resume`` or by hand (the last frame, the
+restart file and the trajectory appended to: docs/hard_cases.md). Threads
+are pinned to one everywhere, so the resumed run repeats the uninterrupted
+one's steps exactly.
 """
 
 import os
 import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -34,53 +37,61 @@ from ase_maud import Maud
 from ase_maud.trajectory import last_frame
 from ase_maud.scenes import build
 Maud(build({SCENE[0]!r}, {SCENE[1]}, seed={SEED}), logfile=None).run(steps=2)  # warm
+import sys
 atoms = build({SCENE[0]!r}, {SCENE[1]}, seed={SEED})
 with Maud(atoms, restart='maud.json', trajectory='maud.traj', logfile=None) as opt:
-    print('ready', flush=True)
+    def report():   # after the frame, before the restart file
+        print(opt.nsteps, flush=True)
+        sys.stdin.readline()
+    opt.attach(report)
     opt.run(fmax={FMAX})
 """
 
 
 def uninterrupted():
-    """The run without files, and its wall time after a warm-up (the
-    kernels loaded or compiled)."""
-    Maud(build(*SCENE, seed=SEED), logfile=None).run(steps=2)
+    """The run without files, and its number of steps."""
     atoms = build(*SCENE, seed=SEED)
-    start = time.perf_counter()
     with Maud(atoms, logfile=None) as opt:
         assert opt.run(fmax=FMAX)
-    return atoms, opt.nsteps, time.perf_counter() - start
+    return atoms, opt.nsteps
 
 
-def killed_run(directory, delay):
-    """Start the run in ``directory``, SIGKILL it ``delay`` s after it starts
-    stepping; whether it was still running when killed."""
+def killed_run(directory, step, in_next):
+    """Start the run in ``directory`` and SIGKILL it once it reports
+    ``step``: there, or (``in_next``) just after telling it to go on, in the
+    next step. Whether it was killed (not ended on its own)."""
     env = {**os.environ, **PINNED}
     child = subprocess.Popen([sys.executable, '-c', CHILD], cwd=directory, env=env,
-                             stdout=subprocess.PIPE, text=True)
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
-        assert child.stdout.readline().strip() == 'ready'
-        time.sleep(delay)
-        running = child.poll() is None
-        child.send_signal(signal.SIGKILL)
+        for line in child.stdout:
+            if int(line) == step:
+                if in_next:
+                    child.stdin.write('\n')
+                    child.stdin.flush()
+                child.send_signal(signal.SIGKILL)
+                break
+            child.stdin.write('\n')
+            child.stdin.flush()
     finally:
         child.wait()
+        child.stdin.close()
         child.stdout.close()
-    return running
+    return child.returncode == -signal.SIGKILL
 
 
 def test_killed_runs_resume_to_the_same_minimum(tmp_path, monkeypatch):
     for name, value in PINNED.items():
         monkeypatch.setenv(name, value)
-    reference, steps, seconds = uninterrupted()
+    reference, steps = uninterrupted()
     energy = reference.get_potential_energy()
     a = reference.calc.parameters['a']
-    delays = np.random.default_rng(12).uniform(0.0, 1.2 * seconds, 5)
-    kills = 0
-    for k, delay in enumerate(sorted(delays)):
+    at = np.sort(np.random.default_rng(12).choice(steps - 1, 5, replace=False))
+    for k, step in enumerate(at):
         directory = tmp_path / f'kill{k}'
         directory.mkdir()
-        kills += killed_run(directory, delay)
+        assert killed_run(directory, int(step), in_next=k >= 2), f'step {step}'
+
         traj = directory / 'maud.traj'
         if traj.exists() and traj.stat().st_size:
             frames = read(traj, ':')   # every frame counted is complete
@@ -105,4 +116,3 @@ def test_killed_runs_resume_to_the_same_minimum(tmp_path, monkeypatch):
         # One frame per step, and at most one written twice (a kill between
         # the frame and the restart file that follows it).
         assert steps + 1 <= len(frames) <= steps + 2
-    assert kills >= 3, f'only {kills} of {len(delays)} runs were killed while running'

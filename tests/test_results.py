@@ -213,9 +213,9 @@ def test_relax_refuses_forces_over_an_input_or_output(tmp_path, capsys):
     write_net(source, atoms)
     text = source.read_text()
     for argv, message in (
-            (['--forces', str(source)], "--forces '" + str(source) + "' is the file of NET_FILE"),
+            (['--forces', str(source)], "--forces '" + str(source) + "' is the file NET_FILE"),
             (['--forces', str(tmp_path / 'o.json'), '--out', str(tmp_path / 'o.json')],
-             'is the file of --out')):
+             'are one file')):
         assert main(['relax', str(source), '--quiet', '--traj', str(tmp_path / 'r.traj'),
                      *argv]) == 2
         assert message in capsys.readouterr().err

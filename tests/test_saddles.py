@@ -15,10 +15,10 @@ from ase.optimize.optimize import Optimizer
 from ase_maud import Maud, MaudError, WrongIndexError
 from ase_maud.analysis import classify, displace_along_mode
 from ase_maud.bench.runner import fresh_copy
-from ase_maud.method import LOWEST_MODES
-from ase_maud.restart import STATE_ROWS, RestartFile
+from ase_maud.restart import FORMAT, STATE_ROWS, RestartFile
 from ase_maud.scenes import build
 from ase_maud.stiffness import ExactModel
+from ase_maud.strategy import LOWEST_MODES
 
 pytest.importorskip('sella')
 
@@ -197,7 +197,7 @@ def test_mode_picks_the_mode_climbed(seed, how):
     along one) is the mode the first step climbs."""
     atoms = build('all_pairs2d', 9, seed=seed)
     Maud(atoms, logfile=None).run(fmax=1e-9, steps=3000)
-    modes = ExactModel('saddle').at(atoms).modes()[1]
+    modes = ExactModel('saddle').at(atoms).eigenpairs(0, None)[1]
     mode = 3 if how == 'index' else -2.0 * modes[3]
     opt = Maud(atoms, target='saddle', mode=mode, logfile=None)
     opt.run(fmax=FMAX, steps=1)
@@ -400,7 +400,7 @@ MODES_DAMAGES = {
     'the layout before the modes': (
         _set('format', 'maud-restart-3'), {'order': 2},
         r"was not written by this version of Maud \(format 'maud-restart-3', this "
-        r"version reads 'maud-restart-5'\); delete it and its arrays file"),
+        rf"version reads '{FORMAT}'\); delete it and its arrays file"),
 }
 
 

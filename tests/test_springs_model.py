@@ -10,10 +10,12 @@ from ase.constraints import FixAtoms, FixCartesian
 import ase_maud.stiffness as stiffness
 from ase_maud import Maud, MaudCalculator
 from ase_maud.analysis import classify
-from ase_maud.method import MIN_PAIR_COSINE, MaudMethod
+from ase_maud.descent import MIN_PAIR_COSINE
+from ase_maud.dofs import free_dofs
 from ase_maud.potential import MaudPotential
 from ase_maud.scenes import build
-from ase_maud.stiffness import SpringsModel, choose_model, free_dofs
+from ase_maud.stiffness import SpringsModel, choose_model
+from ase_maud.strategy import Minimise
 
 
 def net(seed, side=7, a=1.0, dim=3, partial=False, weighted=False):
@@ -126,7 +128,7 @@ def test_a_nearly_degenerate_pair_in_the_memory_does_no_harm(seed, monkeypatch):
     # converges on a minimum (the Hessian says so).
     assert 9e-7 < MIN_PAIR_COSINE
     atoms = net(seed, side=9)
-    step = MaudMethod.step
+    step = Minimise.step
     injected = []
 
     def poisoned_step(self, state, x, merit, forces, noise, solver_at):
@@ -138,7 +140,7 @@ def test_a_nearly_degenerate_pair_in_the_memory_does_no_harm(seed, monkeypatch):
             injected.append(np.vdot(s, y) / np.linalg.norm(s) / np.linalg.norm(y))
         return step(self, state, x, merit, forces, noise, solver_at)
 
-    monkeypatch.setattr(MaudMethod, 'step', poisoned_step)
+    monkeypatch.setattr(Minimise, 'step', poisoned_step)
     with Maud(atoms, model='springs', logfile=None) as opt:
         assert opt.run(fmax=1e-7, steps=2000)
     assert injected and 0 < injected[0] < 1e-6

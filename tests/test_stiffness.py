@@ -295,7 +295,7 @@ def test_internal_basis_leaves_out_the_rigid_motions_the_constraints_allow(
     np.testing.assert_allclose(basis.T @ basis, np.eye(basis.shape[1]), atol=1e-12)
     np.testing.assert_allclose(allowed @ (allowed.T @ basis), basis, atol=1e-12)
     # the saddle model's spectrum is classify's (rigid modes removed there too)
-    values, modes = ExactModel('saddle').at(atoms).modes()
+    values, modes = ExactModel('saddle').at(atoms).eigenpairs(0, None)
     np.testing.assert_allclose(values, classify(atoms, ftol=np.inf).eigenvalues, rtol=1e-9,
                                atol=1e-9 * np.abs(values).max())
     hessian = atoms.calc.get_hessian(atoms)
@@ -328,7 +328,7 @@ def test_springs_saddle_model_gives_the_lowest_eigenpairs(seed, scene, size, hel
         atoms.set_constraint(FixAtoms(held))
     Maud(atoms, logfile=None).run(fmax=1e-3, steps=300)
     model = choose_model(atoms, 'springs', target='saddle')
-    values, modes = model.at(atoms).lowest(3, None)
+    values, modes = model.at(atoms).eigenpairs(3, None)
     dense = classify(atoms, ftol=np.inf)
     # to MODES_RTOL's residual: eigenvalues to ~its square, modes to ~it over the gap;
     # the block's last pair converges last, so the two lowest are checked

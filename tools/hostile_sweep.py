@@ -420,17 +420,142 @@ def command_line(directory: Path):
              ['relax', 'absent.obj'], ['relax', '--fix', 'nothing-such'],
              ['relax', '--scene', 'ring', '--load', '0', 'x', '0']]
 
-    def case(argv):
-        error = io.StringIO()
-        with contextlib.redirect_stderr(error), contextlib.redirect_stdout(io.StringIO()):
-            try:
-                status = main_cli(argv)
-            except SystemExit as stop:   # argparse's own errors
-                status = stop.code
-        if status == 2 and error.getvalue().count('\n') == 1:
-            raise ValueError(error.getvalue().strip())
+    return [(lambda a=a: refused(a)) for a in argvs]
+
+
+def status_line(argv):
+    """``ase-maud argv``'s exit status and what it wrote on stderr."""
+    error = io.StringIO()
+    with contextlib.redirect_stderr(error), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            status = main_cli([str(a) for a in argv])
+        except SystemExit as stop:   # argparse's own errors
+            status = stop.code
+    return status, error.getvalue()
+
+
+def refused(argv):
+    """A ValueError of ``ase-maud argv``'s one-line error if it exits with
+    status 2 and one line; else False (a defect)."""
+    status, error = status_line(argv)
+    if status == 2 and error.count('\n') == 1:
+        raise ValueError(error.strip())
+    return False
+
+
+def outputs_over_inputs(directory: Path):
+    """Outputs that name an input or another output (the command line and
+    Maud's files), and a run refused before its first step: a one-line
+    ValueError, every file byte for byte as it was."""
+    def case(argv, *kept, seed=0):
+        folder = directory / f'clash{abs(hash(str(argv)))}'
+        folder.mkdir(exist_ok=True)
+        net = folder / 'net.obj'
+        write_net(net, build('hanging_net', 4, seed=seed))
+        (folder / 'fixed.txt').write_text('0\n3\n')
+        write_net(folder / 'p.xyz', build('ring', 6, seed=seed))
+        write_net(folder / 'net.json', build('hanging_net', 4, seed=seed))   # the user's
+        before = {name: (folder / name).read_bytes() for name in kept}
+        with contextlib.chdir(folder):
+            status, error = status_line(argv)
+        if any((folder / name).read_bytes() != data for name, data in before.items()):
+            return False   # data lost
+        if status == 2 and error.count('\n') == 1:
+            raise ValueError(error.strip())
+        return False   # a raw error, or written over
+
+    def previous_trajectory_kept():
+        folder = directory / 'previous'
+        folder.mkdir(exist_ok=True)
+        with contextlib.chdir(folder):
+            status_line(['relax', '--scene', 'ring', '--size', '6', '--quiet'])
+            before = Path('maud.traj').read_bytes()
+            write_net('free.obj', build('net3d', 3, seed=2))   # nothing fixed: it drifts
+            status, _ = status_line(['relax', 'free.obj', '--load', '0', '0', '-1', '--quiet'])
+            return status == 2 and Path('maud.traj').read_bytes() == before
+
+    def maud_files(files):
+        with contextlib.suppress(FileNotFoundError):
+            for name in files.values():
+                (directory / name).unlink()
+        with contextlib.chdir(directory):
+            Maud(build('ring', 6), **files)
         return False
-    return [(lambda a=a: case(a)) for a in argvs]
+    argvs = [(['relax', 'net.obj', '--fix', 'fixed.txt', '--traj', 'net.obj'], 'net.obj'),
+             (['relax', 'net.obj', '--fix', 'fixed.txt', '--log', 'fixed.txt'], 'fixed.txt'),
+             (['relax', 'p.xyz', '--traj', 'p.edges.txt'], 'p.edges.txt', 'p.xyz'),
+             (['relax', 'p.xyz', '--edges', 'p.edges.txt', '--log', './p.edges.txt'],
+              'p.edges.txt'),
+             (['relax', 'p.xyz', '--out', 'p.extxyz'], 'p.edges.txt'),
+             (['relax', 'net.obj', '--fix', 'fixed.txt', '--out', 'net.obj'], 'net.obj'),
+             (['relax', 'net.obj', '--fix', 'fixed.txt', '--traj', 'r.obj', '--out', 'r.obj'],
+              'net.obj'),
+             (['relax', '--scene', 'ring', '--out', 'maud.traj'],),
+             (['show', 'net.obj', '--fix', 'fixed.txt', '-o', 'net.obj'], 'net.obj'),
+             (['saddles', 'p.xyz', '--out', 'net.png', '--edges', 'p.edges.txt'],
+              'net.json')]
+    files = [dict(restart='m.json', logfile='m.json'), dict(restart='m.json',
+             trajectory='./m.json'), dict(logfile='m.traj', trajectory='m.traj'),
+             dict(restart='m.json', trajectory='m.json.arrays')]
+    return ([(lambda a=a: case(*a)) for a in argvs] + [previous_trajectory_kept]
+            + [(lambda f=f: maud_files(f)) for f in files])
+
+
+def arguments_where_they_enter(directory: Path):
+    """Frames past the end, landscape's tolerances, an edge listed both ways
+    with two q, write_net without a MaudCalculator, an XYZ declaring more
+    atoms than it holds, a continued OBJ vertex, a 400-digit coordinate,
+    ragged springs, a repeated fixed point, loads beyond float64: a
+    ValueError naming them."""
+    from ase.io.trajectory import Trajectory
+
+    from ase_maud.landscape import landscape
+    traj = directory / 'four.traj'
+    atoms = build('ring', 6, seed=3)
+    atoms.get_potential_energy()
+    with Trajectory(traj, 'w') as frames:
+        for _ in range(4):
+            frames.write(atoms)
+
+    def text(name, content):
+        path = directory / name
+        path.write_text(content)
+        return path
+
+    def graph(q, r):
+        node = {str(n): {'x': float(n), 'y': 0.0, 'z': 0.0, 'is_anchor': n != 1}
+                for n in range(3)}
+        return json.dumps({'dtype': 'compas.datastructures/Graph', 'data': {
+            'node': node, 'edge': {'0': {'1': {'q': q}}, '1': {'0': {'q': r}, '2': {}}}}})
+    huge = graph(1, 1).replace('"x": 1.0', '"x": 1' + '0' * 400)
+    def loads_beyond_float64():
+        atoms = build('ring', 8, seed=4)
+        atoms.calc.set(loads=np.full((8, 3), 1e308) * [1, 1, 0])
+        atoms.get_potential_energy()
+
+    def with_emt(atoms):
+        atoms.calc = EMT()
+        return atoms
+    cases = [lambda: read_net(traj, index=-999), lambda: read_net(traj, index=4),
+             lambda: refused(['classify', traj, '--frame', '5']),
+             lambda: read_net(text('one.obj', 'v 0 0 0\nv 1 0 0\nl 1 2\n'), index=5)]
+    minimum = build('ring', 6, seed=5)
+    Maud(minimum, logfile=None).run(fmax=1e-7)
+    cases += [(lambda k=k, v=v: landscape(minimum, fmax=1e-6, **{k: v}))
+              for k, v in (('energy_rtol', -1), ('distance_atol', np.nan), ('modes', -1),
+                           ('modes', 2.5))]
+    cases += [lambda: read_net(text('both.json', graph(2, 5))),
+              lambda: write_net(directory / 'bare.obj', build('ring', 5)[:3]),
+              lambda: write_net(directory / 'emt.obj', with_emt(Icosahedron('Cu', 2))),
+              lambda: read_net(text('big.xyz', '100000000\n\nH 0 0 0\nH 1 0 0\n')),
+              lambda: read_net(text('later.xyz', '2\n\nH 0 0 0\nH 1 0 0\n10000000\n\n')),
+              lambda: read_net(text('cont.obj', 'v 0 0 0\nv 1 0 \\\n0\nl 1 2\n')),
+              lambda: read_net(text('huge.json', huge)),
+              lambda: MaudCalculator(springs=[[0, 1], [1, 2, 3]]),
+              lambda: read_net(text('twice.obj', 'v 0 0 0\nv 1 0 0\nv 2 0 0\nl 1 2 3\n'),
+                               fixed=text('twice.txt', '0 2\n2\n')),
+              loads_beyond_float64]
+    return [(lambda c=c: c() and False) for c in cases]
 
 
 def misspelt_keywords():
@@ -567,6 +692,10 @@ def main() -> None:
                    ('runs that cannot end: a creep, a drift', runs_that_cannot_end()),
                    ('malformed net files, spring indices', hostile_files(directory)),
                    ('command-line arguments', command_line(directory)),
+                   ('outputs over inputs or each other, a run refused before its first '
+                    'step', outputs_over_inputs(directory)),
+                   ('arguments where they enter: frames, tolerances, sizes, q twice, ...',
+                    arguments_where_they_enter(directory)),
                    ('misspelt calculator keywords', misspelt_keywords()),
                    ('temporary files of killed writers', leftovers(directory)),
                    ('ASE filters: a subset x models, cell filters', ase_filters()),

@@ -34,8 +34,9 @@ from scipy.spatial import cKDTree
 
 from ase_maud import Maud, physics
 from ase_maud.bench.runner import calls_and_cpu
+from ase_maud.dofs import free_dofs
 from ase_maud.scenes import LARGE, build
-from ase_maud.stiffness import Solver, SpringsModel, free_dofs
+from ase_maud.stiffness import Solver, SpringsModel
 
 
 class NearField(SpringsModel):

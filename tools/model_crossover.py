@@ -14,8 +14,8 @@ from pathlib import Path
 
 from ase_maud import Maud
 from ase_maud.bench.runner import calls_and_cpu
+from ase_maud.dofs import free_dofs
 from ase_maud.scenes import build
-from ase_maud.stiffness import free_dofs
 
 SCENES = [('ring', n) for n in (50, 100, 200, 300)] + [
     ('hanging_net', n) for n in (8, 10, 12, 14)] + [

@@ -58,7 +58,8 @@ class Backend:
     are importable). ``hvp``: if the backend has one, the unit repulsion's
     Hessian-vector product ``hvp(positions (N, 3), v (m, N, 3)) -> (m, N, 3)``,
     ``sum_j B_ij (v_i - v_j)``; ``hessian``: if it has one, the unit
-    repulsion's dense Hessian ``hessian(positions (N, 3), dim) -> (dim N, dim N)``.
+    repulsion's energy, forces and dense Hessian in one call,
+    ``hessian(positions (N, 3), dim) -> (energy, forces (N, 3), (dim N, dim N))``.
     """
 
     name: str
@@ -72,7 +73,7 @@ class Backend:
     force_tolerance: Callable[..., float] | None = None
     choose: Callable[..., list[Choice]] | None = None
     hvp: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
-    hessian: Callable[[np.ndarray, int], np.ndarray] | None = None
+    hessian: Callable[[np.ndarray, int], tuple[float, np.ndarray, np.ndarray]] | None = None
 
     @property
     def exact(self) -> bool:

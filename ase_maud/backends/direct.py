@@ -260,24 +260,34 @@ def repulsion_hvp(x: np.ndarray, v: np.ndarray, nchunks: int) -> np.ndarray:
     return out.sum(axis=0)
 
 
-def hessian(positions: np.ndarray, dim: int) -> np.ndarray:
-    """The unit repulsion's dense Hessian (dim N, dim N) at ``positions``
-    (N, 3) by :func:`repulsion_hessian`."""
+def hessian(positions: np.ndarray, dim: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """The unit repulsion's energy, forces (N, 3) and dense Hessian (dim N,
+    dim N) at ``positions`` (N, 3), in one pass over the pairs
+    (:func:`repulsion_hessian`): what a Newton step on a small scene needs."""
     return repulsion_hessian(np.ascontiguousarray(positions, dtype=float), dim)
 
 
-@numba.njit(fastmath=True, cache=True)
-def repulsion_hessian(x: np.ndarray, dim: int) -> np.ndarray:
-    """``-B_ij`` off the diagonal and ``sum_j B_ij`` on it, every pair once,
-    one thread (for the small scenes a dense Hessian is for)."""
+@numba.njit(fastmath=True, error_model='numpy', cache=True)
+def repulsion_hessian(x: np.ndarray, dim: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """Energy ``sum 1 / L``, forces ``sum d / L**3`` and the Hessian: ``-B_ij``
+    off the diagonal and ``sum_j B_ij`` on it; every pair once, one thread
+    (for the small scenes a dense Hessian is for). Coincident points give
+    non-finite results, never an error (the calculator names them)."""
     n = x.shape[0]
     h = np.zeros((n * dim, n * dim))
+    f = np.zeros((n, 3))
+    e = 0.0
     d = np.empty(3)
     for i in range(n):
         for j in range(i + 1, n):
             for k in range(3):
                 d[k] = x[i, k] - x[j, k]
-            inv3, three_inv2 = pair_law(1.0 / np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))
+            inv = 1.0 / np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+            inv3, three_inv2 = pair_law(inv)
+            e += inv
+            for k in range(3):
+                f[i, k] += d[k] * inv3
+                f[j, k] -= d[k] * inv3
             for a in range(dim):
                 for b in range(dim):
                     block = three_inv2 * d[a] * d[b] * inv3
@@ -287,7 +297,7 @@ def repulsion_hessian(x: np.ndarray, dim: int) -> np.ndarray:
                     h[j * dim + a, i * dim + b] = -block
                     h[i * dim + a, i * dim + b] += block
                     h[j * dim + a, j * dim + b] += block
-    return h
+    return e, f, h
 
 
 #: The compiled direct sum (what ``auto`` runs below its crossover).

@@ -40,10 +40,12 @@ def evaluate(positions: np.ndarray, want_blocks: bool = False,
     return float(energy), forces, block6
 
 
-def hessian(positions: np.ndarray, dim: int, chunk_pairs: int = 1_000_000) -> np.ndarray:
-    """The unit repulsion's dense Hessian (dim N, dim N): ``-B_ij`` off the
-    diagonal, the nodal block ``sum_j B_ij`` on it, ``chunk_pairs`` pairs
-    at a time (memory: the output plus O(chunk_pairs))."""
+def hessian(positions: np.ndarray, dim: int,
+            chunk_pairs: int = 1_000_000) -> tuple[float, np.ndarray, np.ndarray]:
+    """The unit repulsion's energy, forces and dense Hessian (dim N, dim N):
+    ``-B_ij`` off the diagonal, the nodal block ``sum_j B_ij`` on it,
+    ``chunk_pairs`` pairs at a time (memory: the output plus O(chunk_pairs))."""
+    energy, forces, _ = evaluate(positions, False, chunk_pairs)
     x = np.asarray(positions, dtype=float)[:, :dim]
     n = len(x)
     hess = np.zeros((n, dim, n, dim))
@@ -52,7 +54,7 @@ def hessian(positions: np.ndarray, dim: int, chunk_pairs: int = 1_000_000) -> np
         hess[i, :, j, :] = hess[j, :, i, :] = -block
     diagonal = np.arange(n)
     hess[diagonal, :, diagonal, :] = -hess.sum(axis=2)   # K_ii = sum_j B_ij
-    return hess.reshape(n * dim, n * dim)
+    return energy, forces, hess.reshape(n * dim, n * dim)
 
 
 #: The numpy reference.

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import check
+from ..checks import as_number, check
 from ..topology import fixed_atoms
 from . import NetData, PathLike
 from .text import check_finite, number_text, original_text
@@ -126,6 +126,9 @@ def read_compas(path: PathLike) -> NetData:
             if not isinstance(value, (int, float)) or isinstance(value, bool):
                 raise ValueError(f'{path}: vertex {key} has no number {axis} '
                                  f'(got {value!r})')
+            if isinstance(value, int) and as_number(value) is None:   # 400 digits
+                raise ValueError(f'{path}: vertex {key} has {axis} = {str(value)[:20]}... '
+                                 f'({len(str(value))} digits), beyond the float64 range')
             xyz.append(float(value))
         positions.append(check_finite(path, f'vertex {key}', xyz))
         flags = [attributes.get(name, defaults.get(name)) for name in ANCHOR_ATTRIBUTES]
@@ -163,10 +166,11 @@ def read_compas(path: PathLike) -> NetData:
 
 
 def _edge_attributes(data: dict[str, Any], keys: dict[str, int]
-                     ) -> dict[tuple[int, int], dict[str, Any]]:
+                     ) -> dict[tuple[int, int], list[dict[str, Any]]]:
     """The attribute dicts of the edges of COMPAS ``data`` (the document's
     own, to read or change), by sorted pair of point indices: a graph's
-    ``edge[u][v]``, a mesh's ``edgedata`` (keys ``"(u, v)"`` or ``"u-v"``)."""
+    ``edge[u][v]``, a mesh's ``edgedata`` (keys ``"(u, v)"`` or ``"u-v"``);
+    more than one where the file lists an edge both ways."""
     if 'face' in data:
         items = []
         for key, attributes in (data.get('edgedata') or {}).items():
@@ -181,7 +185,7 @@ def _edge_attributes(data: dict[str, Any], keys: dict[str, int]
         if len(ends) == 2 and all(str(end) in keys for end in ends) \
                 and isinstance(attributes, dict):
             i, j = (keys[str(end)] for end in ends)
-            found[(min(i, j), max(i, j))] = attributes
+            found.setdefault((min(i, j), max(i, j)), []).append(attributes)
     return found
 
 
@@ -196,18 +200,30 @@ def _compas_value(path, where, name, attributes, defaults, fallback):
         raise ValueError(f'{path}: {where}, attribute {name}: {error}') from None
 
 
+def _edge_q(path, listed, defaults, u, v):
+    """``q`` of the edge ``u``-``v`` (vertex keys) whose attribute dicts are
+    ``listed`` (one per time the file lists it): a ValueError naming the
+    edge and both values if two say different ones."""
+    values = [_compas_value(path, f'edge {u}-{v}', 'q', a, defaults, 1.0) for a in listed]
+    if any(value != values[0] for value in values):
+        raise ValueError(f'{path}: edge {u}-{v} is listed both ways with different q '
+                         f'({values[0]!r} and {next(x for x in values if x != values[0])!r}); '
+                         'give it once, or one q')
+    return values[0]
+
+
 def _compas_forces(path, data, springs):
     """``q`` (K,) and loads (N, 3) a COMPAS document says (1 and 0 where it
     says nothing), and whether it says anything of each."""
     points, vertex_defaults = _compas_points(path, data)
     keys = {str(k): n for n, k in enumerate(points)}
     edge_defaults = data.get('default_edge_attributes', data.get('dea', {})) or {}
-    edges = _edge_attributes(data, keys)
-    q = np.array([_compas_value(path, f'edge {i}-{j}', 'q', edges.get((min(i, j), max(i, j)), {}),
-                                edge_defaults, 1.0) for i, j in springs])
+    edges, names = _edge_attributes(data, keys), list(points)
+    q = np.array([_edge_q(path, edges.get((min(i, j), max(i, j)), [{}]), edge_defaults,
+                          names[i], names[j]) for i, j in springs])
     loads = np.array([[_compas_value(path, f'vertex {key}', name, attributes, vertex_defaults, 0.0)
                        for name in LOAD_ATTRIBUTES] for key, attributes in points.items()])
-    said_q = 'q' in edge_defaults or any('q' in a for a in edges.values())
+    said_q = 'q' in edge_defaults or any('q' in a for both in edges.values() for a in both)
     said_loads = any(name in vertex_defaults or any(name in a for a in points.values())
                      for name in LOAD_ATTRIBUTES)
     return q.reshape(len(springs)), loads.reshape(-1, 3), said_q, said_loads
@@ -313,8 +329,10 @@ def _update_forces(path, data, springs, q, loads) -> bool:
         if (i, j) not in file_edges:
             continue
         if (i, j) not in edges:   # a mesh edge without edgedata
-            edges[(i, j)] = data.setdefault('edgedata', {})[f'({keys[i]}, {keys[j]})'] = {}
-        edges[(i, j)]['q'] = float(q[s])
+            added = data.setdefault('edgedata', {})[f'({keys[i]}, {keys[j]})'] = {}
+            edges[(i, j)] = [added]
+        for attributes in edges[(i, j)]:   # each time the file lists it
+            attributes['q'] = float(q[s])
         changed = True
     return changed
 
@@ -353,9 +371,10 @@ def _set_results(path, data, result) -> None:
         if pair not in edges:
             if not mesh:
                 continue
-            edges[pair] = data.setdefault('edgedata', {})[
-                f'({keys[pair[0]]}, {keys[pair[1]]})'] = {}
-        edges[pair].update(q=density, force=force, length=length)
+            edges[pair] = [data.setdefault('edgedata', {}).setdefault(
+                f'({keys[pair[0]]}, {keys[pair[1]]})', {})]
+        for attributes in edges[pair]:   # each time the file lists it
+            attributes.update(q=density, force=force, length=length)
     for n, reaction in zip(result.supports.tolist(), result.reactions.tolist(),
                            strict=True):
         points[keys[n]].update(zip(REACTION_ATTRIBUTES, reaction, strict=True))

@@ -66,20 +66,21 @@ def merge_coincident(points: np.ndarray,
 
 
 def _statements(path):
-    """(line number, tokens) of an OBJ file's statements; a line that ends
-    in a backslash goes on in the next (numbered as its first line)."""
+    """(line number, tokens, whether continued) of an OBJ file's statements;
+    a line that ends in a backslash goes on in the next (numbered as its
+    first line)."""
     held = None
     for number, tokens in token_lines(path):
         if held is not None:
             number, tokens = held[0], held[1] + tokens
-        held = None
+        continued, held = held is not None, None
         if tokens[-1].endswith('\\'):
             tokens[-1] = tokens[-1][:-1]
             held = (number, [t for t in tokens if t])
         else:
-            yield number, tokens
+            yield number, tokens, continued
     if held is not None and held[1]:
-        yield held
+        yield *held, True
 
 
 def _curve_indices(path, number, rest, curve):
@@ -106,8 +107,12 @@ def _obj_file(path):
     statements."""
     vertices, rows, refs = [], [], []   # refs: (line, element kind, 0-based indices)
     curve = (None, None)   # cstype and deg of the curves that follow
-    for number, tokens in _statements(path):
+    for number, tokens, continued in _statements(path):
         keyword, rest = tokens[0], tokens[1:]
+        if keyword == 'v' and continued:
+            raise ValueError(f"{path} line {number}: a 'v' statement goes on in the next "
+                             "line (ends in '\\'); its coordinates are written back in "
+                             'place, so each must be on one line: join them')
         if keyword == 'v':
             xyz = parse_numbers(path, number, rest[:3], "'v x y z' with numbers", float)
             if len(rest) < 3:

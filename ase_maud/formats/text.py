@@ -4,6 +4,7 @@ errors that name the file and the line; and numbers written back as text."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 
 import numpy as np
@@ -33,6 +34,42 @@ def token_lines(path: PathLike) -> Iterator[tuple[int, list[str]]]:
                     yield number, tokens
     except UnicodeDecodeError:
         raise ValueError(f'{path} line {number + 1} or near it: not UTF-8 text') from None
+
+
+#: Suffixes of (extended) XYZ files: a count of atoms, a comment line, then
+#: a line per atom, frame after frame.
+XYZ_SUFFIXES = ('.xyz', '.extxyz')
+
+#: The fewest bytes an atom line of an XYZ file takes: 'H 0 0 0' and its
+#: line end.
+XYZ_ATOM_BYTES = 8
+
+
+def check_xyz_counts(path: PathLike) -> None:
+    """The atom count each frame of an XYZ file declares, checked against
+    the bytes left after it (:data:`XYZ_ATOM_BYTES` an atom at least), before
+    ASE's reader allocates what it declares (a 50-byte file declaring 10^8
+    atoms holds it for minutes): a ValueError naming the line. A line that
+    is not a count is left to ASE's reader to judge."""
+    size = os.path.getsize(path)
+    number = 0
+    with open(path, 'rb') as f:
+        while (line := f.readline(MAX_LINE + 1)):
+            number += 1
+            if not line.strip():
+                continue
+            try:
+                count = int(line)
+            except ValueError:
+                return
+            room = (size - f.tell()) // XYZ_ATOM_BYTES
+            if count > room:
+                raise ValueError(f'{path} line {number}: declares {count} atoms, but the '
+                                 f'{size - f.tell()} bytes after it hold at most {room}')
+            for _ in range(count + 1):   # its comment line and atoms
+                if not f.readline(MAX_LINE + 1):
+                    return
+                number += 1
 
 
 def check_finite(path, where, values):
@@ -89,13 +126,16 @@ def read_edges(path: PathLike, natoms: int) -> np.ndarray:
 
 def read_indices(path: PathLike, natoms: int) -> list[int]:
     """0-based point indices, one or more per line (``#`` comments allowed);
-    ValueError with the line number on a non-integer or out of range."""
-    indices = []
+    ValueError with the line number on a non-integer, one out of range or
+    one given before."""
+    seen = {}
     for number, tokens in token_lines(path):
         for i in parse_numbers(path, number, tokens, 'integer point indices'):
             check_index(path, number, i, natoms)
-            indices.append(i)
-    return indices
+            if i in seen:
+                raise ValueError(f'{path} line {number}: point {i} repeats line {seen[i]}')
+            seen[i] = number
+    return list(seen)
 
 
 def coordinates(x):

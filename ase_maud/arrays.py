@@ -1,0 +1,116 @@
+"""A Maud run on arrays: the minimiser's loop without ASE's per-step
+plumbing, for a scene no one watches step by step.
+
+ASE's loop asks the optimizable for the forces and the energy several times
+a step, each request a property lookup with its change detection, and moves
+the atoms through their constraints; on a scene of tens of points that is
+most of a step. :func:`run` makes the same steps as ASE's loop with
+:class:`~ase_maud.optimizer.Maud`'s ``step`` (same positions, bit for bit),
+but per step it moves the positions array, asks the calculator once for the
+energy, forces and Hessian together (one pass of its kernel) and hands that
+Hessian to the local model directly (:func:`relax`). It applies where
+:func:`applies` says: plain ``Atoms`` whose only constraints hold
+coordinates (``FixAtoms``, ``FixCartesian``), the exact model seeking a
+minimum, and no trajectory, restart file or attached observer (the log is
+written as ASE writes it). The calculator holds the results of the last
+positions throughout, so a run stopped at any step leaves the atoms and
+their results consistent.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from typing import IO, Any
+
+import numpy as np
+from ase import Atoms
+from ase.constraints import FixAtoms, FixCartesian
+
+from . import accuracy
+from .calculator import MaudCalculator
+from .dofs import free_dofs
+from .monitor import RunMonitor
+from .search import merit_tolerance
+from .stiffness import ExactModel, StiffnessModel
+from .strategy import MaudState, Strategy
+
+
+def applies(atoms: Any, model: StiffnessModel, observed: bool) -> bool:
+    """Whether a run of ``model`` on ``atoms`` (the optimizer's system) can
+    go on arrays: plain Atoms with a MaudCalculator (it computes the results
+    of positions it is handed, :meth:`~ase_maud.MaudCalculator.compute`),
+    held by coordinate masks only, the exact model
+    seeking a minimum, and nothing ``observed`` per step (a trajectory, a
+    restart file, an attached observer)."""
+    return (type(atoms) is Atoms and isinstance(atoms.calc, MaudCalculator)
+            and isinstance(model, ExactModel)
+            and model.target == 'minimum' and not observed
+            and all(isinstance(c, (FixAtoms, FixCartesian)) for c in atoms.constraints))
+
+
+def log_line(logfile: IO | None, name: str, step: int, energy: float, fmax: float) -> None:
+    """The line ASE's ``Optimizer.log`` writes for ``step`` (with its header
+    before step 0)."""
+    if logfile is None:
+        return
+    if step == 0:
+        logfile.write(f'{" " * len(name)}  {"Step":>4} {"Time":>8} {"Energy":>15}  '
+                      f'{"fmax":>12}\n')
+    now = time.localtime()
+    logfile.write(f'{name}:  {step:3d} {now[3]:02d}:{now[4]:02d}:{now[5]:02d} '
+                  f'{energy:15.6f} {fmax:15.6f}\n')
+
+
+def relax(atoms: Atoms, model: ExactModel, strategy: Strategy, state: MaudState,
+          monitor: RunMonitor, fmax: float, gamma0: float, step: Callable[[], int],
+          no_step: Callable[[str], None]) -> Iterator[tuple[float, float]]:
+    """The energy and the largest force at the start, then after each step
+    (taken when the next value is asked for), as ASE's loop would make them.
+    ``fmax`` is the run's (the accuracy asked of the calculator follows it),
+    ``gamma0`` the step factor's start (the monitor's reference), ``step()``
+    the optimizer's step count, ``no_step(why)`` stops the run (it raises)."""
+    calc = atoms.calc
+    held = ~free_dofs(atoms, 3)
+    positions = atoms.arrays['positions']
+    hessian = np.empty(0)
+
+    def evaluate(moved: bool = True) -> tuple[float, np.ndarray]:
+        nonlocal hessian
+        if moved:
+            results = calc.compute(atoms, ['hessian'])
+        else:   # the results held, if they are of these positions
+            calc.get_property('hessian', atoms)
+            results = calc.results
+        forces = results['forces'].copy()
+        forces[held] = 0.0
+        hessian = results['hessian']
+        return results['energy'], forces
+
+    def local_at(x: np.ndarray) -> Any:
+        if not np.array_equal(x, positions):   # a point of an earlier run
+            positions[:] = x
+            evaluate()
+        try:
+            return model.local(hessian, atoms)
+        except np.linalg.LinAlgError as error:
+            no_step(f'the {model.name} stiffness model failed ({error})')
+
+    energy, forces = evaluate(moved=False)
+    fmax_now = float(np.linalg.norm(forces, axis=1).max())
+    while True:
+        yield energy, fmax_now
+        noise = accuracy.noise(calc)
+        move = strategy.step(state, positions.copy(), energy, forces, noise, local_at)
+        here = state.last
+        monitor.check(step(), here.x, here.merit, here.forces, state.gamma, gamma0,
+                      merit_tolerance(here.merit, noise))
+        if not np.isfinite(move).all():
+            no_step(f'the {model.name} stiffness model gave a non-finite move')
+        x = here.x + move
+        x[held] = positions[held]
+        strategy.moved(state, x)
+        positions[:] = x
+        accuracy.ask(calc, fmax, fmax_now)
+        energy, forces = evaluate()
+        fmax_now = float(np.linalg.norm(forces, axis=1).max())

@@ -1,0 +1,121 @@
+"""What a Maud run is made of: what the model sees of the system, the local
+model, the target, the step rule and the strategy, decided once, in one
+place, when the optimizer is made.
+
+The system is an ASE ``Atoms`` (or anything with ``__ase_optimizable__``):
+the model sees the atoms themselves; behind a ``Filter`` (a subset of the
+atoms) the whole scene with the atoms left out held
+(:class:`~ase_maud.subset.SubsetView`); for a band of images (ASE's NEB)
+the band, whose forces are not the gradient of its energy, so the target is
+``'stationary'`` unless one is given; for a cell filter nothing (its rows are
+not points: they get ASE's usual ``maxstep`` instead of the
+nearest-neighbour bound, and no spread is watched).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from ase import Atoms
+from ase.filters import Filter
+
+from .checks import check
+from .dofs import PROJECTIONS
+from .neighbours import NearestDistances
+from .stiffness import StiffnessModel, choose_model
+from .strategy import STEP_DEFAULTS, StepRule, Strategy, compose, step_rule
+from .subset import SubsetView
+
+#: The longest move of a row of a cell filter's coordinates when ``maxstep``
+#: is not given (ASE's BFGS default).
+CELL_MAXSTEP = 0.2
+
+
+@dataclass(frozen=True)
+class Assembly:
+    """A run's parts: the local ``model``, the ``strategy`` over it, the
+    ``subset`` view behind a Filter (or None), whether the coordinates are
+    ``points`` (their spread is watched), and whether the ``target`` was
+    ``chosen`` here (a band of images: said in the log)."""
+
+    model: StiffnessModel
+    strategy: Strategy
+    subset: SubsetView | None
+    points: bool
+    chosen: bool
+
+
+def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
+             steps: dict[str, Any], order: int, mode: Any,
+             **options: Any) -> Assembly:
+    """The :class:`Assembly` of a run on ``atoms`` (module docstring):
+    ``model`` a name (:func:`~ase_maud.stiffness.choose_model`, with
+    ``options``: ``method``, ``floor``, ``kappa0``) or a model; ``steps`` the
+    user's step keywords (checked), ``order`` and ``mode`` a saddle search's."""
+    system = atoms.__ase_optimizable__() if hasattr(
+        atoms, '__ase_optimizable__') else atoms
+    subset = SubsetView(atoms) if type(atoms) is Filter else None
+    images = image_size(system)
+    scene = (subset.current() if subset is not None
+             else getattr(system, 'atoms', None if images is None else atoms))
+    chosen = target is None and not isinstance(model, StiffnessModel)
+    if chosen:   # NEB forces are not the gradient of its energy
+        target = 'minimum' if images is None else 'stationary'
+    nearest = NearestDistances(images) if subset is None else subset.nearest()
+    if isinstance(model, StiffnessModel):
+        if target is not None and check('target', target) != model.target:
+            raise ValueError(f'target={target!r} differs from the target of the '
+                             f'model given ({model.target!r}): leave target out')
+    else:
+        model = choose_model(scene, model, target, nearest=nearest, **options)
+    rule = rule_for(model, scene, images, steps, order)
+    return Assembly(model, compose(model, rule, nearest, check_mode(mode, scene)),
+                    subset, scene is not None, chosen)
+
+
+def check_mode(mode: Any, scene: Atoms | None) -> int | np.ndarray | None:
+    """``mode`` (see :class:`Maud`) checked: None, a whole number >= 0, or a
+    finite move of ``scene``'s N points, shape (N, 3) or (3 N,)."""
+    if mode is None:
+        return None
+    if isinstance(mode, (int, np.integer)) and not isinstance(mode, bool):
+        if mode < 0:
+            raise ValueError(f'mode must be an index >= 0 of the Hessian\'s modes, '
+                             f'got {mode!r}')
+        return int(mode)
+    n = 0 if scene is None else len(scene)
+    try:
+        move = np.asarray(mode, dtype=float)
+    except (TypeError, ValueError):
+        move = None
+    if move is None or move.size != 3 * n or not np.isfinite(move).all():
+        raise ValueError(f'mode must be None, an index of the Hessian\'s modes or a '
+                         f'finite move of the {n} points, shape ({n}, 3); got {mode!r}')
+    return move.reshape(n, 3)
+
+
+def rule_for(model: StiffnessModel, scene: Atoms | None, images: int | None,
+             steps: dict[str, Any], order: int | None = None) -> StepRule:
+    """The step rule of ``model`` (:func:`~ase_maud.strategy.step_rule`, with
+    the user's ``steps`` and the saddle ``order``) for what the model sees: a
+    cell filter's coordinates (``scene`` None) get ASE's usual ``maxstep``
+    instead of the nearest-neighbour bound; atoms under constraints ASE adjusts
+    every move for (SHAKE for a bond length, which fails on a move long against
+    the distances between points) keep the nearest-neighbour bound in every
+    model."""
+    rule = step_rule(model, images, order=order, **steps)
+    if scene is None:
+        return replace(rule, maxstep_nn=None, maxstep=rule.maxstep or CELL_MAXSTEP)
+    if rule.maxstep_nn is None and not all(isinstance(c, PROJECTIONS)
+                                           for c in getattr(scene, 'constraints', ())):
+        return replace(rule, maxstep_nn=STEP_DEFAULTS['common']['maxstep_nn'])
+    return rule
+
+
+def image_size(system: Any) -> int | None:
+    """Points per image if ``system`` optimizes a band of images (ASE's
+    NEB optimizable, which has ``neb``), else None."""
+    neb = getattr(system, 'neb', None)
+    return None if neb is None else len(neb.images[0])

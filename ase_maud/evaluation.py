@@ -1,0 +1,111 @@
+"""What a Maud step is handed by ASE: the energy and gradient, fetched
+together once per positions and checked finite, and where the last step
+left the run.
+
+- :class:`CheckedOptimizable` wraps ASE's optimizable: ASE's loop and the
+  step ask for the energy and gradient several times at the same positions;
+  they are fetched once, and a non-finite value stops the run (a
+  :class:`~ase_maud.monitor.MaudError` naming the step, the atom and the
+  value) with the positions put back where the results were finite.
+- :class:`Handoff`: the positions, calculator and potential at the end of a
+  step, compared at the next run's start (the run starts afresh if any
+  changed).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .monitor import MaudError
+
+
+@dataclass(eq=False)
+class Handoff:
+    """Positions, calculator and potential at the end of a step; equal to
+    another when the positions are equal in every bit and the calculator and
+    potential are the same objects."""
+
+    x: np.ndarray
+    calc: Any
+    potential: Any
+
+    @classmethod
+    def of(cls, x: np.ndarray, atoms: Any) -> Handoff:
+        """The handoff at positions ``x`` of ``atoms`` (None: no calculator)."""
+        calc = getattr(atoms, 'calc', None)
+        return cls(x.copy(), calc, getattr(calc, 'potential', None))
+
+    def __eq__(self, other: object) -> bool:
+        return (isinstance(other, Handoff) and np.array_equal(self.x, other.x)
+                and self.calc is other.calc and self.potential is other.potential)
+
+
+class CheckedOptimizable:
+    """The optimizable with its energy and gradient fetched together, once
+    per positions, and checked finite (everything else passes through).
+
+    ASE's loop and the step ask for both several times at the same
+    positions; they are kept with the positions ``x`` they belong to and
+    fetched again as soon as ``x`` differs in any bit (the calculator's own
+    change detection then decides what to recompute). A non-finite value
+    puts the positions back to the last ones whose results were finite and
+    stops the run with a MaudError naming the step and the value. ASE asks
+    for both before it logs a step or writes its frame, so neither sees it.
+    """
+
+    def __init__(self, inner: Any, steps: Callable[[], int],
+                 stop: Callable[[MaudError], None]):
+        self.inner = inner
+        self.steps, self.stop = steps, stop
+        self.good: tuple[np.ndarray, int] | None = None  # positions, step
+        # x, E, gradient, and the calculator's forces object they came from
+        self.held: tuple[np.ndarray, float, np.ndarray, Any] | None = None
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
+
+    def get_value(self) -> float:
+        return self._results()[1]
+
+    def get_gradient(self) -> np.ndarray:
+        return self._results()[2].copy()
+
+    def _results(self) -> tuple[np.ndarray, float, np.ndarray]:
+        x = self.inner.get_x()
+        if (self.held is not None and np.array_equal(x, self.held[0])
+                and self.held[3] is self._witness()):
+            return self.held[:3]
+        gradient = self.inner.get_gradient()
+        rows = gradient.reshape(-1, 3)
+        bad = np.flatnonzero(~np.isfinite(rows).all(axis=1))
+        if bad.size:
+            force = ', '.join(f'{v:.6g}' for v in 0.0 - rows[bad[0]])
+            self._fail(f'non-finite forces (atom {bad[0]}: [{force}]'
+                       f'{f" and {bad.size - 1} more atoms" if bad.size > 1 else ""})')
+        value = self.inner.get_value()
+        if not np.isfinite(value):
+            self._fail(f'a non-finite energy ({value})')
+        self.good = (x.copy(), self.steps())
+        self.held = (x.copy(), value, gradient, self._witness())
+        return self.held[:3]
+
+    def _witness(self) -> Any:
+        """The calculator's forces object behind the results held: a new
+        calculation or a ``calc.set`` that drops the results (from an
+        observer, say) replaces it, and the results are fetched again."""
+        calc = getattr(getattr(self.inner, 'atoms', None), 'calc', None)
+        results = getattr(calc, 'results', None)
+        return results.get('forces') if isinstance(results, dict) else None
+
+    def _fail(self, what: str) -> None:
+        if self.good is None:
+            where = 'the atoms are at their start positions'
+        else:
+            self.inner.set_x(self.good[0])
+            where = f'positions restored to step {self.good[1]}'
+        self.stop(MaudError(f'the calculator returned {what} at step '
+                            f'{self.steps()}; {where}'))

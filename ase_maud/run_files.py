@@ -1,0 +1,73 @@
+"""The files of a run: the arguments that name them, checked before any
+work, and whether a trajectory or a restart file belongs to the atoms given
+(:func:`~ase_maud.restart.signature`, computed once per calculator and
+constraints by :class:`SceneSignature`)."""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+from ase import Atoms
+
+from .checks import check_writable
+from .paths import check_run_files
+from .restart import difference, signature
+
+
+class SceneSignature:
+    """The :func:`~ase_maud.restart.signature` of a run's atoms, kept while
+    the calculator, its potential, the number of atoms and the constraints
+    are the same objects (empty without atoms: a filter's rows)."""
+
+    def __init__(self) -> None:
+        self._key: tuple | None = None
+        self._held: dict[str, Any] = {}
+
+    def __call__(self, atoms: Atoms | None) -> dict[str, Any]:
+        if atoms is None:
+            return {}
+        calc = atoms.calc
+        key = (id(calc), id(getattr(calc, 'potential', None)), len(atoms),
+               tuple(map(id, atoms.constraints)))
+        if self._key != key:
+            self._key = key
+            self._held = signature(atoms, getattr(calc, 'potential', None))
+        return self._held
+
+
+def other_scene(frame: Atoms, atoms: Atoms) -> str | None:
+    """How a trajectory's ``frame`` and the ``atoms`` given differ (points,
+    fixed points, and with a MaudCalculator its springs, a, Q, dim), or None."""
+    from .calculator import MaudCalculator
+    from .io import stored_parameters
+    if len(frame) != len(atoms):
+        return f'points {len(frame)} in it, {len(atoms)} in the atoms given'
+    potential = getattr(atoms.calc, 'potential', None)
+    stored = stored_parameters(frame)
+    held = signature(frame, MaudCalculator(**stored).potential
+                     if stored and potential is not None else None)
+    return difference(held, signature(atoms, potential))
+
+
+def check_files(restart: Any, logfile: Any, trajectory: Any,
+                 append_trajectory: Any) -> None:
+    """ValueError naming a file argument that could not be written: a type
+    that is not a file name (or open file), a directory, or a name in a
+    directory that does not exist or cannot be written."""
+    for name, value in (('restart', restart), ('logfile', logfile),
+                        ('trajectory', trajectory)):
+        if (value is None or (name != 'restart' and hasattr(value, 'write'))
+                or (name == 'logfile' and isinstance(value, str) and value == '-')):
+            continue
+        if not isinstance(value, (str, os.PathLike)):
+            opened = '' if name == 'restart' else ', an open file'
+            dash = ", '-' (standard output)" if name == 'logfile' else ''
+            raise ValueError(f'{name} must be None, a file name{opened}{dash}, '
+                             f'got {value!r}')
+        check_writable(name, value)
+    check_run_files(restart, logfile, trajectory)
+    if not isinstance(append_trajectory, (bool, np.bool_)):
+        raise ValueError(f'append_trajectory must be True or False, got '
+                         f'{append_trajectory!r}')

@@ -1,0 +1,228 @@
+"""How far a step goes: the acceptance test, the line-search cut, the
+per-point bounds and one trust-region loop (cf. optimistix's search apart
+from its descent).
+
+Moves are (N, 3) arrays of lengths; forces have ASE's sign (``-dE/dr``);
+a merit is the energy (``target='minimum'``) or ``|f|**2``.
+
+- :func:`raised`: whether a step raised the merit, beyond the noise of the
+  energies it compares (rounding, or an approximate calculator's
+  tolerance): energies that agree within it are told apart by the
+  trapezoid estimate ``-(f_old + f) . dx / 2``, which needs forces only.
+- :func:`cubic_cut`: the fraction of a step taken back at the minimum of
+  the cubic through both ends' merits and slopes (a safe line-search cut).
+- :class:`Limits`: the longest move of each point, as a fraction of its
+  distance to its nearest other point, in length units, or as a fraction
+  of the scene's size; :func:`bound` scales a move within them (each point
+  on its own, or the whole move by one factor) and :func:`reach` says how
+  far along a move the first point meets its limit.
+- :func:`trust_region`: a Newton move cut to the limits by the dogleg path
+  (a definite model) or damped to ``(K + mu I)^-1 f`` with the smallest
+  ``mu`` that keeps every point within its limit (Levenberg-Marquardt).
+- :func:`trust_fraction`: a trust fraction grown or cut by the ratio of the
+  energy change to the change a quadratic model predicted.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from .neighbours import NearestDistances
+
+#: How far from 1 the ratio of an energy change to its prediction may be
+#: for a trust fraction to grow (by half), and beyond which it halves.
+TRUST_GOOD, TRUST_BAD = 0.25, 0.75
+
+#: Bisections (in log mu) of the Levenberg-Marquardt damping: each halves
+#: the logarithm of the bracket, so 14 take a bracket of 10**12 to within
+#: 0.2 % of the smallest damping that keeps the limits (fewer cost steps:
+#: docs/optimizer.md).
+DAMPING_BISECTIONS = 14
+
+
+def merit_tolerance(merit: float, noise: float = 1e-12) -> float:
+    """Slack when comparing merits: ``noise`` (relative; 1e-12 is the
+    rounding of energies that sum N**2 terms) times ``|merit|``."""
+    return max(noise, 1e-12) * max(abs(merit), 1e-300)
+
+
+def raised(last_merit: float, last_noise: float, last_forces: np.ndarray,
+           move: np.ndarray, merit: float, forces: np.ndarray, noise: float,
+           energy: bool) -> bool:
+    """Whether the step ``move`` from a point of merit ``last_merit`` (with
+    forces ``last_forces`` and relative error ``last_noise``) to one of
+    ``merit`` and ``forces`` (error ``noise``) raised the merit. An
+    ``energy`` merit within the noise of both is judged by the trapezoid
+    estimate of its change from the forces (module docstring)."""
+    change = merit - last_merit
+    tol = merit_tolerance(last_merit, max(noise, last_noise))
+    if not energy or abs(change) > tol:
+        return change > tol
+    return -0.5 * np.vdot(last_forces + forces, move) > 0
+
+
+def cubic_cut(last_merit: float, last_forces: np.ndarray, move: np.ndarray,
+              merit: float, forces: np.ndarray) -> float:
+    """The fraction of ``move`` (from a point of ``last_merit`` and
+    ``last_forces``, ending at ``merit`` and ``forces``) at the minimum of
+    the cubic through both ends' merits and slopes along it, clipped to
+    [0.1, 0.5] (a safe line-search cut)."""
+    f0, f1 = last_merit, merit
+    g0, g1 = -np.vdot(last_forces, move), -np.vdot(forces, move)
+    d1 = g0 + g1 - 3.0 * (f1 - f0)
+    radicand = d1 * d1 - g0 * g1
+    if radicand < 0 or not np.isfinite(radicand):
+        return 0.5
+    d2 = np.sqrt(radicand)
+    denominator = g1 - g0 + 2.0 * d2
+    if denominator == 0:
+        return 0.5
+    t = 1.0 - (g1 + d2 - d1) / denominator
+    return float(np.clip(t, 0.1, 0.5)) if np.isfinite(t) else 0.5
+
+
+@dataclass(frozen=True)
+class Limits:
+    """The longest move allowed to each point (length units): ``maxstep_nn``
+    times its distance to its nearest other point (``nearest``), at most
+    ``maxstep``, at most ``maxstep_size`` times the scene's size (the
+    largest distance from the centroid); None: no such bound."""
+
+    nearest: NearestDistances
+    maxstep_nn: float | None = None
+    maxstep: float | None = None
+    maxstep_size: float | None = None
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        limit = np.full(len(x), np.inf)
+        if self.maxstep_nn is not None:
+            limit = self.maxstep_nn * self.nearest(x)
+        if self.maxstep is not None:
+            limit = np.minimum(limit, self.maxstep)
+        if self.maxstep_size is not None and len(x) > 1:
+            size = np.linalg.norm(x - x.mean(axis=0), axis=1).max()
+            limit = np.minimum(limit, self.maxstep_size * size)
+        return limit
+
+
+def reach(start: np.ndarray, step: np.ndarray, limit: np.ndarray) -> float:
+    """The largest ``t`` in [0, inf] with every point's ``|start_i + t
+    step_i| <= limit_i`` (``start`` within its limits): the smallest positive
+    root over points of ``|start_i + t step_i|**2 = limit_i**2``."""
+    a = np.einsum('ij,ij->i', step, step)
+    b = np.einsum('ij,ij->i', start, step)
+    c = np.einsum('ij,ij->i', start, start) - limit**2
+    moving = a > 0
+    roots = (-b[moving] + np.sqrt(np.maximum(b[moving]**2 - a[moving] * c[moving], 0.0))
+             ) / a[moving]
+    return float(roots.min(initial=np.inf))
+
+
+def bound(step: np.ndarray, limit: np.ndarray, whole: bool = False) -> np.ndarray:
+    """Scale each point's move down to its allowed length, or (``whole``)
+    the whole move by the one factor that brings every point within its
+    length (a descent direction stays one)."""
+    length = np.linalg.norm(step, axis=1)
+    scale = np.divide(limit, length, out=np.ones_like(length),
+                      where=length > limit)
+    if whole:
+        return step * scale.min(initial=1.0)
+    return step * scale[:, None]
+
+
+def longest(move: np.ndarray, limit: np.ndarray) -> float:
+    """The largest ratio of a point's move to its limit."""
+    return float((np.linalg.norm(move, axis=1) / limit).max(initial=0.0))
+
+
+class Damped(Protocol):
+    """A model that can be damped: what :func:`trust_region` needs.
+
+    ``definite``: whether the model is positive definite (its Newton move
+    then goes along the dogleg path); ``scale``: a bound on the size of its
+    eigenvalues (force per length), from which damping starts.
+    """
+
+    definite: bool
+    scale: float
+
+    def solve(self, forces: np.ndarray) -> np.ndarray:
+        """The Newton move ``K^-1 f`` (N, 3)."""
+
+    def dot(self, move: np.ndarray) -> np.ndarray:
+        """``K v`` (N, 3) for a move (N, 3)."""
+
+    def damped(self, forces: np.ndarray, mu: float) -> np.ndarray | None:
+        """``(K + mu I)^-1 f`` (N, 3), or None if ``K + mu I`` is not definite."""
+
+
+def trust_region(model: Damped, forces: np.ndarray, newton: np.ndarray, gamma: float,
+                 limit: np.ndarray) -> np.ndarray:
+    """The move whose ``gamma`` times keeps every point within ``limit``:
+    ``newton`` (the model's move, or its L-BFGS correction) if it does; else,
+    for a definite model, the longest such move along the dogleg path (from 0
+    to the Cauchy point ``(f.f / f.K f) f``, then to ``newton``); else the
+    damped move ``(K + mu I)^-1 f`` with the smallest ``mu`` found by
+    :data:`DAMPING_BISECTIONS` bisections of ``log mu`` (far from a minimum
+    this turns the step towards the forces instead of shortening it)."""
+    if gamma * longest(newton, limit) <= 1:
+        return newton
+    if model.definite:
+        return _dogleg(model, forces, newton, gamma, limit)
+    return damping(lambda mu: model.damped(forces, mu), gamma, limit, model.scale)
+
+
+def _dogleg(model: Damped, forces: np.ndarray, newton: np.ndarray, gamma: float,
+            limit: np.ndarray) -> np.ndarray:
+    curvature = np.vdot(forces, model.dot(forces))
+    cauchy = forces * (np.vdot(forces, forces) / curvature) if curvature > 0 else None
+    for start, end in ((np.zeros_like(forces), cauchy), (cauchy, newton)):
+        if end is None:
+            return forces * reach(np.zeros_like(forces), gamma * forces, limit)
+        t = reach(gamma * start, gamma * (end - start), limit)
+        if t < 1:
+            return start + t * (end - start)
+    return newton
+
+
+def damping(moves: Callable[[float], np.ndarray | None], gamma: float,
+            limit: np.ndarray, scale: float) -> np.ndarray:
+    """The move ``moves(mu)`` (None where the damped model is not definite)
+    of the smallest damping ``mu`` found whose ``gamma`` times keeps every
+    point within ``limit``: ``mu`` grows tenfold from ``scale`` until it
+    does, then :data:`DAMPING_BISECTIONS` bisections of ``log mu`` between
+    ``1e-12`` of that and it."""
+    high = max(scale, np.finfo(float).tiny)
+    best = moves(high)
+    while best is None or gamma * longest(best, limit) > 1:
+        high *= 10.0
+        best = moves(high)
+    low = high * 1e-12
+    for _ in range(DAMPING_BISECTIONS):
+        mid = np.sqrt(low * high)
+        move = moves(mid)
+        if move is None or gamma * longest(move, limit) > 1:
+            low = mid
+        else:
+            high, best = mid, move
+    return best
+
+
+def trust_fraction(gamma: float, actual: float, predicted: float, gamma_max: float,
+                   slack: float) -> float:
+    """``gamma`` grown by half (at most ``gamma_max``) when the energy change
+    ``actual`` is within :data:`TRUST_GOOD` of the ``predicted`` one, halved
+    beyond :data:`TRUST_BAD`; unchanged when the prediction is within
+    ``slack`` of zero (no ratio to judge by)."""
+    if abs(predicted) <= slack:
+        return gamma
+    ratio = actual / predicted
+    if abs(ratio - 1) <= TRUST_GOOD:
+        return min(1.5 * gamma, gamma_max)
+    if abs(ratio - 1) > TRUST_BAD:
+        return 0.5 * gamma
+    return gamma

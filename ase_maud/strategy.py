@@ -1,0 +1,441 @@
+"""The Maud step as two strategies composed from a local model
+(:mod:`ase_maud.stiffness`), a direction (:mod:`ase_maud.descent`) and a
+search (:mod:`ase_maud.search`); apart from ASE's plumbing (cf. ASE's
+``LBFGSMethod``).
+
+:class:`Minimise` (``target='minimum'`` or ``'stationary'``), the
+specification's step with the whole scene's stiffness ``K``::
+
+    d = K^-1 f                       (with memory > 0: L-BFGS over K^-1)
+    v <- beta v + gamma d;  x <- x + bound(v)
+
+- ``memory`` > 0: the L-BFGS correction over the secant pairs of the last
+  ``memory`` accepted steps (:func:`~ase_maud.descent.lbfgs`); a direction
+  that is not downhill is replaced by ``K^-1 f`` and the memory cleared.
+- Momentum (Day's dynamic relaxation): the previous move carried over with
+  :func:`~ase_maud.descent.momentum_weight`; ``beta_max = 0`` switches it
+  off. A move that points against the new direction (an overshoot) is
+  dropped and gamma shrinks by ``overshoot_shrink`` (a kinetic-damping
+  restart, as in FIRE and Barnes's form finding).
+- A step that raised the merit (the energy for ``'minimum'``, ``|f|**2``
+  for ``'stationary'``; :func:`~ase_maud.search.raised`) is taken back at no
+  extra calculator call: the strategy returns to where the step began
+  (whose forces and local model it kept), cuts gamma (halved, or with
+  ``interpolate`` by :func:`~ase_maud.search.cubic_cut`, gamma then scaling
+  the move after its bound, as a line search) and drops the momentum.
+  Gamma grows by ``gamma_growth`` after each accepted step, up to
+  ``gamma_max``.
+- No point moves further than its limit (:class:`~ase_maud.search.Limits`);
+  each point's move is scaled on its own, or (``bound='whole'``) the whole
+  move by one factor; with ``trust_region`` (a model that can be damped,
+  the exact one) the move is cut by :func:`~ase_maud.search.trust_region`.
+
+:class:`Saddle` (``target='saddle'``), eigenvector following: in the local
+model's eigenbasis (curvatures ``b_i``, gradient components ``g_i``), uphill
+along the ``order`` followed modes and downhill along the rest, each mode
+on its own (:func:`~ase_maud.descent.mode_steps`). With every eigenpair
+(the exact model) that is the whole move; with the lowest ones only (the
+springs model of a large scene, from Hessian-vector products, the followed
+modes and :data:`LOWEST_MODES` more) the rest of the move is the truncated
+Newton move on the forces off them. No step is taken back; the whole move
+is scaled to within ``gamma`` times each point's limit, ``gamma`` being a
+trust fraction (:func:`~ase_maud.search.trust_fraction`) judged by the
+energy change the quadratic model predicted for the move.
+
+The state of a run is a :class:`MaudState` (what a restart file holds); the
+settings are a frozen :class:`StepRule`, made by :func:`step_rule` from
+:data:`STEP_DEFAULTS` (the one table of every model's defaults) and the
+user's keywords; :func:`compose` picks the strategy for a model's target.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .descent import (
+    ModeFollowing,
+    keeps_pair,
+    lbfgs,
+    mode_steps,
+    momentum_weight,
+    off,
+    truncated_newton,
+)
+from .neighbours import NearestDistances
+from .search import (
+    Limits,
+    bound,
+    cubic_cut,
+    merit_tolerance,
+    raised,
+    trust_fraction,
+    trust_region,
+)
+from .stiffness import (
+    ExactModel,
+    GlobalModel,
+    NodalModel,
+    SecantModel,
+    Solver,
+    SpringsModel,
+    StiffnessModel,
+)
+
+#: The step rule's defaults: ``'common'`` for every model, then each model's
+#: own (by its class; a model not listed takes :class:`NodalModel`'s), chosen
+#: by measurement (docs/optimizer.md). The Newton-like models take gamma = 1
+#: with no momentum: the exact one with no memory and a trust-region bound;
+#: the global and springs ones with an L-BFGS memory over their ``P`` and the
+#: whole move scaled by one factor (the springs one by the scene's size only,
+#: gamma back to 1 after every accepted step and a cubic cut on a rise, as a
+#: line search). The nodal and secant models keep Day's momentum, as the
+#: specification has it.
+STEP_DEFAULTS: dict[Any, dict[str, Any]] = {
+    'common': {'gamma': 1.0, 'gamma_growth': 1.1, 'overshoot_shrink': 0.6,
+               'maxstep_nn': 0.45, 'maxstep': None, 'maxstep_size': None,
+               'trust_region': False, 'interpolate': False, 'bound': 'each'},
+    ExactModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 0, 'trust_region': True},
+    GlobalModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 30, 'bound': 'whole'},
+    NodalModel: {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0},
+    SecantModel: {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0},
+    SpringsModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 20, 'maxstep_nn': None,
+                   'maxstep_size': 1.0, 'bound': 'whole', 'gamma_growth': 1e3,
+                   'interpolate': True},
+}
+
+#: A saddle search at less than this fraction of its trust length from the
+#: minimum along a followed mode climbs that mode the way it is followed.
+CLIMB_SIDE = 1e-3
+
+#: Eigenpairs beyond the followed modes that a large saddle search computes
+#: (LOBPCG) and steps along one by one: the next lowest, negative or soft,
+#: which the truncated Newton move off them would otherwise meet (chosen by
+#: measurement, docs/optimizer.md).
+LOWEST_MODES = 3
+
+
+@dataclass(frozen=True)
+class StepRule:
+    """The step rule's settings (see the module docstring); made by
+    :func:`step_rule`."""
+
+    gamma: float
+    gamma_max: float
+    gamma_growth: float
+    overshoot_shrink: float
+    beta_max: float
+    memory: int
+    maxstep_nn: float | None
+    maxstep: float | None
+    maxstep_size: float | None
+    trust_region: bool
+    interpolate: bool
+    bound: str
+    #: Points per image when the positions are a chain of images (ASE's NEB):
+    #: the nearest other point is sought within the same image only (the same
+    #: atom in the next image is not a neighbour). None: one scene.
+    image_size: int | None = None
+    #: ``target='saddle'``: the negative curvatures sought (modes followed uphill).
+    order: int = 0
+
+
+def defaults(model: StiffnessModel) -> dict[str, Any]:
+    """:data:`STEP_DEFAULTS`' common row, then the row of ``model``'s class
+    (or of the nearest listed class it derives from; else
+    :class:`NodalModel`'s)."""
+    row = next((STEP_DEFAULTS[kind] for kind in type(model).__mro__
+                if kind in STEP_DEFAULTS), STEP_DEFAULTS[NodalModel])
+    return {**STEP_DEFAULTS['common'], **row}
+
+
+def step_rule(model: StiffnessModel, image_size: int | None = None,
+              **keywords: Any) -> StepRule:
+    """The step rule of ``model``: its :func:`defaults`, then the
+    ``keywords`` that are not None (the user's; already checked). For
+    ``target='stationary'`` and ``'saddle'`` the memory is 0 (L-BFGS assumes
+    a positive-definite model)."""
+    settings = defaults(model)
+    settings.update({name: value for name, value in keywords.items()
+                     if value is not None})
+    if model.target in ('stationary', 'saddle'):
+        settings['memory'] = 0
+    if model.target == 'saddle' and settings['maxstep_nn'] is None:
+        settings['maxstep_nn'] = STEP_DEFAULTS['common']['maxstep_nn']
+    return StepRule(image_size=image_size, **settings)
+
+
+@dataclass
+class Point:
+    """Where a step began: positions and forces (N, 3), the merit and its
+    relative error (the calculator's tolerance when it was computed)."""
+
+    x: np.ndarray
+    merit: float
+    forces: np.ndarray
+    noise: float = 0.0
+
+    def todict(self) -> dict[str, Any]:
+        return {'x': self.x, 'merit': self.merit, 'forces': self.forces,
+                'noise': self.noise}
+
+    @classmethod
+    def fromdict(cls, d: dict[str, Any]) -> Point:
+        return cls(np.asarray(d['x'], float), float(d['merit']),
+                   np.asarray(d['forces'], float), float(d['noise']))
+
+
+@dataclass
+class MaudState:
+    """What a strategy has learnt in a run; a restart file holds
+    :meth:`todict`.
+
+    ``gamma``: the step factor (a trust fraction for :class:`Saddle`); ``k``:
+    steps since the last momentum restart; ``v``: the last move (after
+    constraints), or None; ``last``: where the last step began; ``pairs``:
+    the L-BFGS memory ``(s, y)``; ``model``: what the stiffness model has
+    learnt (:meth:`StiffnessModel.observe`); ``modes``: a saddle search's
+    modes (:attr:`Saddle.kept_modes`, N, 3): the ``order`` it follows uphill,
+    signed as followed, then (lowest modes only) the other lowest modes of
+    its last step, from which the next step's LOBPCG starts; None before its
+    first step (and for other targets); ``predicted``: the energy change
+    the quadratic model predicted for a saddle search's last move (else
+    None). ``solver``, the local model at ``last.x``, is not saved: after a
+    restart it is built there again if a step taken back needs it.
+    """
+
+    gamma: float
+    k: int = 0
+    v: np.ndarray | None = None
+    last: Point | None = None
+    pairs: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+    model: dict[str, Any] = field(default_factory=dict)
+    solver: Solver | None = None
+    modes: np.ndarray | None = None
+    predicted: float | None = None
+
+    def todict(self) -> dict[str, Any]:
+        return {'gamma': self.gamma, 'k': self.k, 'v': self.v,
+                'last': None if self.last is None else self.last.todict(),
+                'pairs': [list(pair) for pair in self.pairs], 'model': self.model,
+                'modes': self.modes, 'predicted': self.predicted}
+
+    @classmethod
+    def fromdict(cls, d: dict[str, Any]) -> MaudState:
+        return cls(gamma=float(d['gamma']), k=int(d['k']),
+                   v=None if d['v'] is None else np.asarray(d['v'], float),
+                   last=None if d['last'] is None else Point.fromdict(d['last']),
+                   pairs=[(np.asarray(s, float), np.asarray(y, float))
+                          for s, y in d['pairs']],
+                   model=dict(d['model']),
+                   modes=None if d.get('modes') is None else np.asarray(d['modes'], float),
+                   predicted=d.get('predicted'))
+
+
+#: ``local_at(x)``: the local model (a :class:`~ase_maud.stiffness.Solver`)
+#: built at positions ``x`` (N, 3), when a step needs it.
+LocalAt = Callable[[np.ndarray], Solver]
+
+
+@dataclass(frozen=True)
+class Strategy:
+    """What both strategies are: a local ``model``, the step ``rule`` and the
+    per-point ``limits``. Per step the optimizer calls ``step`` (which
+    returns the move from ``state.last``, built with the local model that
+    ``local_at(x)`` gives), then :meth:`moved` with the positions the
+    constraints allowed."""
+
+    model: StiffnessModel
+    rule: StepRule
+    limits: Limits
+
+    def start(self) -> MaudState:
+        """The state before the first step."""
+        return MaudState(gamma=self.rule.gamma)
+
+    def moved(self, state: MaudState, x_new: np.ndarray) -> None:
+        """Record the move the constraints allowed, from ``state.last``."""
+        state.v = x_new - state.last.x
+
+
+@dataclass(frozen=True)
+class Minimise(Strategy):
+    """Newton-like descent with a search; see the module docstring. The
+    step decides whether the last step raised the merit, learns from it or
+    takes it back."""
+
+    #: Rows of :attr:`MaudState.modes` a restart file keeps: None (no modes).
+    kept_modes = None
+
+    def step(self, state: MaudState, x: np.ndarray, merit: float, forces: np.ndarray,
+             noise: float, local_at: LocalAt) -> np.ndarray:
+        """The move (N, 3) from ``state.last`` after an evaluation at ``x``
+        (merit, forces and the merit's relative error ``noise``); ``state.last``
+        becomes where the move starts (``x``, or the last point if the step
+        to ``x`` is taken back)."""
+        last = state.last
+        if last is not None and raised(last.merit, last.noise, last.forces, x - last.x,
+                                       merit, forces, noise,
+                                       energy=self.model.target == 'minimum'):
+            if state.solver is None:   # resumed: the model where the step began
+                state.solver = local_at(last.x)
+            self._revert(state, merit, forces)
+        else:
+            self._accept(state, x, forces)
+            state.last = Point(x.copy(), merit, forces.copy(), noise)
+            state.solver = local_at(x)
+        return self._move(state)
+
+    def index_reached(self, state: MaudState, local: Solver) -> bool:
+        """A minimiser converges wherever the forces vanish."""
+        return True
+
+    def _revert(self, state: MaudState, merit: float, forces: np.ndarray) -> None:
+        """Go back to where the last step began, with a smaller gamma."""
+        factor = 0.5
+        if self.rule.interpolate and state.v is not None:
+            last = state.last
+            factor = cubic_cut(last.merit, last.forces, state.v, merit, forces)
+        state.gamma *= factor
+        state.v = None
+        state.k = 0
+
+    def _accept(self, state: MaudState, x: np.ndarray, forces: np.ndarray) -> None:
+        """Learn from the accepted step that ended at ``x``."""
+        if state.last is None:
+            return
+        s, y = x - state.last.x, state.last.forces - forces
+        state.model = self.model.observe(s, y, state.model)
+        state.gamma = min(state.gamma * self.rule.gamma_growth, self.rule.gamma_max)
+        if self.rule.memory and keeps_pair(s, y):
+            state.pairs = [*state.pairs, (s, y)][-self.rule.memory:]
+
+    def _move(self, state: MaudState) -> np.ndarray:
+        """The bounded move from ``state.last`` (with ``state.solver``)."""
+        here, rule, solver = state.last, self.rule, state.solver
+        direction = lbfgs(solver.solve, here.forces, state.pairs)
+        if (state.pairs and self.model.target != 'stationary'
+                and not np.vdot(direction, here.forces) > 0):
+            state.pairs = []
+            direction = solver.solve(here.forces)
+        limit = self.limits(here.x)
+        if rule.trust_region:
+            direction = trust_region(solver, here.forces, direction, state.gamma, limit)
+        if (rule.beta_max > 0 and state.v is not None
+                and np.vdot(state.v, direction) < 0):
+            state.gamma *= rule.overshoot_shrink  # overshoot: restart
+            state.v = None
+            state.k = 0
+        whole = rule.bound == 'whole'
+        if rule.interpolate:   # a line search: gamma cuts the bounded move
+            direction = bound(direction, limit, whole)
+        direction = direction * state.gamma
+        if state.v is not None and rule.beta_max > 0:
+            direction += momentum_weight(state.k, rule.beta_max) * state.v
+        state.k += 1
+        return bound(direction, limit, whole)
+
+
+@dataclass(frozen=True)
+class Saddle(Strategy):
+    """Eigenvector following to a stationary point with ``rule.order``
+    negative curvatures; see the module docstring. The local model gives
+    every eigenpair (``complete``: the exact model) or the lowest ones
+    (:meth:`~ase_maud.stiffness.ModeSolver.eigenpairs`)."""
+
+    following: ModeFollowing
+
+    @property
+    def complete(self) -> bool:
+        """Whether the local model gives every eigenpair."""
+        return self.model.complete_modes
+
+    @property
+    def kept_modes(self) -> int:
+        """Rows of :attr:`MaudState.modes` a restart file keeps: ``order``,
+        and with the lowest modes only :data:`LOWEST_MODES` more."""
+        return self.rule.order + (0 if self.complete else LOWEST_MODES)
+
+    def step(self, state: MaudState, x: np.ndarray, merit: float, forces: np.ndarray,
+             noise: float, local_at: LocalAt) -> np.ndarray:
+        """The move (N, 3) from ``x`` (every step is accepted: no merit
+        decides a climb); the trust fraction learns from the last one."""
+        last = state.last
+        if last is not None:
+            s, y = x - last.x, last.forces - forces
+            state.model = self.model.observe(s, y, state.model)
+            if state.predicted is not None:
+                actual = -np.vdot(last.forces - 0.5 * y, s)   # the trapezoid rule
+                slack = merit_tolerance(np.vdot(last.forces, last.forces) ** 0.5
+                                        * np.linalg.norm(s))
+                state.gamma = trust_fraction(state.gamma, actual, state.predicted,
+                                             self.rule.gamma_max, slack)
+        state.last = Point(x.copy(), merit, forces.copy(), noise)
+        state.solver = local_at(x)
+        return self._move(state)
+
+    def index_reached(self, state: MaudState, local: Solver) -> bool:
+        """Whether the local model at a point where the forces vanish has
+        exactly ``order`` negative curvatures (beyond
+        :data:`ase_maud.analysis.RTOL` of the largest): the minimum a search
+        starts from is left, not reported."""
+        from .analysis import RTOL
+        order = self.rule.order
+        guess = None if state.modes is None else state.modes[:order + 1]
+        values = local.eigenpairs(order + 1, guess)[0]
+        return int(np.sum(values < -RTOL * np.abs(values).max(initial=0.0))) == order
+
+    def _move(self, state: MaudState) -> np.ndarray:
+        solver, forces = state.solver, state.last.forces
+        values, modes = solver.eigenpairs(self.kept_modes, state.modes)
+        up, followed = self.following.pick(state.modes, values, modes)
+        modes = modes.copy()
+        modes[up] = followed
+        down = np.setdiff1d(np.arange(len(values)), up)
+        gradient = -np.einsum('kij,ij->k', modes, forces)
+        limit = state.gamma * self.limits(state.last.x)
+        # within CLIMB_SIDE of the trust length of a followed mode's minimum,
+        # either side is uphill: climb along the mode as followed
+        b, climb = values[up], gradient[up]
+        side = (b > 0) & (np.abs(climb) < CLIMB_SIDE * b * limit.min())
+        climb = np.where(side, np.maximum(np.abs(climb), np.finfo(float).eps * b), climb)
+        reach = (limit / np.maximum(np.linalg.norm(modes, axis=2), 1e-300)).min(axis=1)
+        steps = np.zeros(len(values))
+        steps[up] = mode_steps(b, climb, reach[up], uphill=True)
+        steps[down] = mode_steps(values[down], gradient[down], reach[down], uphill=False)
+        move = np.einsum('k,kij->ij', steps, modes)
+        if self.complete:
+            state.modes = modes[up]
+            bounded = bound(move, limit, whole=True)
+            along = np.einsum('kij,ij->k', modes, bounded)
+            state.predicted = float(-np.vdot(forces, bounded)
+                                    + 0.5 * np.dot(values, along**2))
+            return bounded
+        state.modes = modes[np.concatenate([up, down])]   # the next LOBPCG's start
+        rest = off(forces, modes)
+        descent, curved = truncated_newton(lambda d: off(solver.curvature(d), modes),
+                                           lambda r: off(solver.solve(r), modes),
+                                           rest, limit)
+        bounded = bound(move + descent, limit, whole=True)
+        t = np.linalg.norm(bounded) / max(np.linalg.norm(move + descent), 1e-300)
+        # the quadratic model's energy change: the lowest modes' curvatures,
+        # and the Hessian off them (curved = H descent)
+        state.predicted = float(t * np.dot(gradient, steps)
+                                + 0.5 * t * t * np.dot(values, steps**2)
+                                - t * np.vdot(rest, descent)
+                                + 0.5 * t * t * np.vdot(descent, curved))
+        return bounded
+
+
+def compose(model: StiffnessModel, rule: StepRule, nearest: NearestDistances,
+            mode: int | np.ndarray | None = None) -> Strategy:
+    """The strategy for ``model``'s target: :class:`Saddle` for ``'saddle'``
+    (following ``mode``, see :class:`~ase_maud.descent.ModeFollowing`), else
+    :class:`Minimise`; ``nearest`` gives the limits' neighbour distances."""
+    limits = Limits(nearest, rule.maxstep_nn, rule.maxstep, rule.maxstep_size)
+    if model.target == 'saddle':
+        return Saddle(model, rule, limits, ModeFollowing(rule.order, mode))
+    return Minimise(model, rule, limits)

@@ -1,0 +1,89 @@
+"""A run on arrays (ase_maud.arrays) makes the steps ASE's loop makes, bit for
+bit; and a run leaves the calculator's settings as the user set them."""
+
+import io
+
+import numpy as np
+import pytest
+from ase.constraints import FixAtoms, FixCartesian
+
+from ase_maud import Maud
+from ase_maud.bench.runner import CallRecorder
+from ase_maud.scenes import build
+
+SCENES = [('all_pairs', 12), ('hanging_net', 5), ('tree', 20), ('all_pairs2d', 14),
+          ('wheel', 12)]
+
+
+def _steps_of_log(log):
+    """The log without its clock column (the time of day of each step)."""
+    return [line[:10] + line[19:] for line in log.getvalue().splitlines()]
+
+
+@pytest.mark.parametrize('scene', SCENES, ids=lambda s: f'{s[0]}:{s[1]}')
+@pytest.mark.parametrize('seed', [11, 12])
+def test_a_run_on_arrays_is_the_watched_run_bit_for_bit(scene, seed):
+    """Without an observer Maud runs on arrays; with one (a no-op callback)
+    through ASE's loop: the positions, energy, step count, log and number of
+    calculator calls are the same."""
+    name, size = scene
+    runs = []
+    for watched in (False, True):
+        atoms = build(name, size, seed=seed)
+        if name == 'all_pairs':   # a held point and a held coordinate too
+            atoms.set_constraint([FixAtoms([0]), FixCartesian(1, [False, True, False])])
+        log = io.StringIO()
+        with CallRecorder(atoms.calc) as recorder:
+            with Maud(atoms, logfile=log) as opt:
+                if watched:
+                    opt.attach(lambda: None)
+                converged = opt.run(fmax=1e-7, steps=400)
+        runs.append((atoms, opt, converged, _steps_of_log(log), len(recorder.samples)))
+    (quiet, fast, done, quiet_log, quiet_calls), (watched, slow, also, log, calls) = runs
+    assert done and also
+    assert fast.nsteps == slow.nsteps and quiet_calls == calls == fast.nsteps + 1
+    np.testing.assert_array_equal(quiet.positions, watched.positions)
+    assert quiet.get_potential_energy() == watched.get_potential_energy()
+    assert quiet_log == log
+
+
+def test_a_run_on_arrays_keeps_held_coordinates_and_stops_at_steps():
+    atoms = build('all_pairs', 16, seed=13)
+    start = atoms.positions.copy()
+    atoms.set_constraint([FixAtoms([2, 5]), FixCartesian(7, [True, False, True])])
+    with Maud(atoms, logfile=None) as opt:
+        assert not opt.run(fmax=1e-12, steps=3)
+    assert opt.nsteps == 3
+    np.testing.assert_array_equal(atoms.positions[[2, 5]], start[[2, 5]])
+    np.testing.assert_array_equal(atoms.positions[7, [0, 2]], start[7, [0, 2]])
+    assert np.abs(atoms.positions - start).max() > 1e-3
+    # the calculator holds the results of the positions the run ended at
+    fresh = atoms.copy()
+    fresh.calc = type(atoms.calc)(**atoms.calc.parameters)
+    np.testing.assert_allclose(atoms.get_forces(), fresh.get_forces(), rtol=1e-12,
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+@pytest.mark.parametrize('watched', [False, True])
+def test_a_run_leaves_the_calculators_tolerance_as_the_user_set_it(seed, watched):
+    """The run asks the calculator for coarser sums far from the answer
+    (``ase_maud.accuracy.ask``); the user's ``tol`` is back when it ends, so a
+    trajectory's or a later run's calculator parameters are the user's."""
+    atoms = build('hanging_net', 30, seed=seed)   # the springs model: not on arrays
+    atoms.calc.set(tol=1e-7)
+    asked = []
+    set_tolerance = atoms.calc.set_tolerance
+
+    def recorded(tol):
+        asked.append(tol)
+        set_tolerance(tol)
+
+    atoms.calc.set_tolerance = recorded
+    with Maud(atoms, logfile=None) as opt:
+        if watched:
+            opt.attach(lambda: None)
+        opt.run(fmax=1e-3, steps=30)
+    assert any(tol != 1e-7 for tol in asked[:-1])   # the run asked for others
+    assert atoms.calc.parameters['tol'] == 1e-7
+    assert atoms.calc.todict()['tol'] == 1e-7

@@ -184,7 +184,8 @@ def show(args: argparse.Namespace) -> int:
         print(f'wrote {out} ({count[0]} of {len(frames)} frames)')
     else:
         atoms = read_net(args.file, index=args.frame, **_net_options(args))
-        replace_with(out, lambda temporary: save_picture(atoms, temporary, **style))
+        replace_with(out, lambda temporary: save_picture(atoms, temporary, **style,
+                                                         labels=args.labels))
         print(f'wrote {out}')
     return 0
 
@@ -581,6 +582,9 @@ def build_parser() -> argparse.ArgumentParser:
                    default='force',
                    help='what colours the springs: their force Q q L, their length, '
                    'or nothing (default: %(default)s)')
+    p.add_argument('--labels', action='store_true',
+                   help="write each spring's force (or length, with --color length) on "
+                   'it; nets of at most 300 springs, not with --gif')
     p.add_argument('--view', choices=('top', 'front', 'side', 'iso'), default='iso',
                    help='side a 3D net is seen from, orthographic: top (down z), front '
                    '(along y), side (along x) or iso (default: %(default)s)')
@@ -742,6 +746,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == 'relax' and args.net is None and (
             args.edges or args.fixed or args.dim):
         parser.error('relax: --edges, --fix and --dim need NET_FILE')
+    if args.command == 'show' and args.gif and args.labels:
+        parser.error('show: --labels writes on one picture, not on a --gif')
     args.argv = words
     try:
         check_outputs(args)

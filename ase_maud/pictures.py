@@ -64,6 +64,8 @@ MAX_ARROWS = 150
 #: Longest load arrow at most this fraction of the picture's largest extent
 #: (loads are context; residual forces get :data:`ARROW`).
 LOAD_ARROW = 0.06
+#: The most springs :func:`label_members` writes a value on.
+MAX_LABELS = 300
 #: Space around the net, a fraction of its largest extent on each side.
 MARGIN = 0.03
 #: A 3D box is at least this fraction of its largest extent along each axis
@@ -269,13 +271,35 @@ def _colour_bar(fig: Figure, ax: Axes, lines: LineCollection, colour: str) -> No
                      label=COLOURS[colour])
 
 
+def label_members(ax: Axes, atoms: Atoms, colour: str = 'force') -> None:
+    """Write each spring's value (:func:`spring_values`: its force ``Q q L``
+    or length, 3 significant digits) at its middle; a ValueError for more
+    than :data:`MAX_LABELS` springs (unreadable) or ``colour`` 'none'."""
+    values = spring_values(atoms, colour)
+    springs = atoms.calc.springs
+    if values is None:
+        raise ValueError("labels show the springs' force or length: colour 'none' has none")
+    if len(springs) > MAX_LABELS:
+        raise ValueError(f'{len(springs)} springs are too many to label (at most '
+                         f'{MAX_LABELS}); draw them coloured, without labels')
+    dim = 3 if ax.name == '3d' else 2
+    middles = atoms.positions[springs].mean(axis=1)[:, :dim]
+    for middle, value in zip(middles, values.tolist(), strict=True):
+        ax.text(*middle, f'{value:.3g}', fontsize=5, ha='center', va='center', zorder=4,
+                bbox={'boxstyle': 'round,pad=0.1', 'fc': 'white', 'ec': 'none',
+                      'alpha': 0.7})
+
+
 def save_picture(atoms: Atoms, path: str | os.PathLike, colour: str = 'force',
                  view: str = 'iso', ftol: float | None = None,
-                 title: str | None = None) -> Figure:
+                 title: str | None = None, labels: bool = False) -> Figure:
     """Draw the net ``atoms`` (:func:`draw`) to an image file, its format
-    by the name; return the figure."""
+    by the name, with each spring's value written on it if ``labels``
+    (:func:`label_members`); return the figure."""
     fig, ax = figure(atoms.calc.dim, view)
     _colour_bar(fig, ax, draw(ax, atoms, colour, ftol=ftol, title=title), colour)
+    if labels:
+        label_members(ax, atoms, colour)
     fig.savefig(path, dpi=picture_dpi(len(atoms)), bbox_inches='tight')
     return fig
 

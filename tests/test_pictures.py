@@ -215,3 +215,16 @@ def test_animation_writes_every_frame(tmp_path):
     frames = [shaken('net2d', seed, amount=amount) for seed, amount in ((0, 0.3), (0, 0.1))]
     assert save_animation(frames, tmp_path / 'run.gif') == 2
     assert (tmp_path / 'run.gif').read_bytes()[:6] == b'GIF89a'
+
+
+@pytest.mark.parametrize('colour', ['force', 'length'])
+def test_labels_give_each_member_its_value(tmp_path, colour):
+    atoms = shaken('hanging_net', int(np.random.default_rng().integers(100)))
+    fig = save_picture(atoms, tmp_path / 'labels.png', colour=colour, labels=True)
+    texts = [t.get_text() for t in fig.axes[0].texts]
+    assert texts == [f'{v:.3g}' for v in spring_values(atoms, colour)]
+    with pytest.raises(ValueError, match="colour 'none' has none"):
+        save_picture(atoms, tmp_path / 'plain.png', colour='none', labels=True)
+    big = build('hanging_net', 20, seed=0)
+    with pytest.raises(ValueError, match=r'springs are too many to label \(at most 300\)'):
+        save_picture(big, tmp_path / 'big.png', labels=True)

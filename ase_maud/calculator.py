@@ -349,10 +349,9 @@ class MaudCalculator(Calculator):
         if potential.repulsive:
             scaled = potential.reduced(positions)
             if want_hessian:   # energy, forces and Hessian in one pass, exact
-                e_rep, f_rep, h_rep = backends.repulsion_hessian(
-                    scaled, dim, self.parameters['backend'])
-                block6 = _diagonal_blocks(h_rep, dim) if want_blocks else None
                 choice = backends.exact_choice(self.parameters['backend'])
+                e_rep, f_rep, h_rep = choice.backend.hessian(scaled, dim)
+                block6 = _diagonal_blocks(h_rep, dim) if want_blocks else None
             else:
                 (e_rep, f_rep, block6), choice = backends.evaluate(
                     self.parameters, scaled, dim, want_blocks)

@@ -222,7 +222,8 @@ class Maud(Optimizer):
         """The run's restart file (one per run: each step writes only what is
         new), with a row per mode a saddle search keeps."""
         if getattr(self, '_restart', None) is None:
-            self._restart = RestartFile(self.restart, self.maud.kept_modes)
+            self._restart = RestartFile(self.restart, self.maud.kept_modes,
+                                        self.model.kept_arrays)
         return self._restart
 
     @classmethod

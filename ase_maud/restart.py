@@ -10,7 +10,9 @@ float64 rows of 3N numbers each:
 - two state slots, used in turn, of three rows (the positions, the last
   point and its forces) and, for a saddle search, one row per mode it keeps
   (``modes`` in ``NAME``: the ``order`` it follows, signed as followed, then
-  on the springs model the other lowest modes of its last step);
+  on the springs model the other lowest modes of its last step), then one
+  row per array the model keeps in what it has learnt (``learnt`` in
+  ``NAME``: the global model's ``built``, where its ``P`` was built);
 - pair slots of two rows (an L-BFGS pair ``s``, ``y``), each pair written
   once, into a slot the committed JSON does not name (at most ``memory + 1``
   slots are ever used).
@@ -66,11 +68,12 @@ class RestartFile:
     :attr:`~ase_maud.strategy.Saddle.kept_modes`; None for other targets),
     which fixes the size of a state slot."""
 
-    def __init__(self, path: str | os.PathLike, modes: int | None = None):
+    def __init__(self, path: str | os.PathLike, modes: int | None = None,
+                 learnt: tuple[str, ...] = ()):
         self.path = Path(path)
         self.arrays = self.path.with_name(self.path.name + '.arrays')
-        self.modes = modes
-        self._slot_rows = STATE_ROWS + (modes or 0)
+        self.modes, self.learnt = modes, tuple(learnt)
+        self._slot_rows = STATE_ROWS + (modes or 0) + len(self.learnt)
         remove_leftovers(self.path)   # of runs killed while replacing it
         self._slot = 1   # the state slot written last
         self._synced = time.monotonic()   # of the last fsync (or of the start)
@@ -95,6 +98,8 @@ class RestartFile:
                                          [x, state.last.x, state.last.forces])
             modes_crc = self._write_rows(handle, first + STATE_ROWS, rows,
                                          [] if self.modes is None else list(state.modes))
+            learnt_crc = self._write_rows(handle, first + STATE_ROWS + (self.modes or 0), rows,
+                                          [state.model[name] for name in self.learnt])
             for s, y in state.pairs:
                 if id(s) not in kept:
                     slot = next(free)
@@ -107,11 +112,13 @@ class RestartFile:
         document = {
             'format': FORMAT, 'rows': rows, 'step': step, 'slot': self._slot,
             'pairs': [kept[id(s)][1] for s, _ in state.pairs],
-            'crc': {'state': state_crc, 'modes': modes_crc,
+            'crc': {'state': state_crc, 'modes': modes_crc, 'learnt': learnt_crc,
                     'pairs': [kept[id(s)][2] for s, _ in state.pairs]},
             'gamma': state.gamma, 'k': state.k, 'moving': state.v is not None,
             'merit': state.last.merit, 'noise': state.last.noise,
-            'model': state.model, 'modes': self.modes, 'predicted': state.predicted,
+            'model': {name: value for name, value in state.model.items()
+                      if name not in self.learnt},
+            'learnt': list(self.learnt), 'modes': self.modes, 'predicted': state.predicted,
             'monitor': _plain(monitor), 'fmax_now': fmax_now, 'scene': scene}
         replace_text(self.path, json.dumps(document), sync)
         if sync:
@@ -136,6 +143,11 @@ class RestartFile:
         if (damaged := _damaged_field(document)) is not None:
             raise ValueError(f'restart file {str(self.path)!r} is damaged: {damaged}; '
                              'delete it and its arrays file')
+        if document['learnt'] != list(self.learnt):
+            raise ValueError(f'restart file {str(self.path)!r} is of another run: '
+                             f"'learnt' {document['learnt']!r} in it, {list(self.learnt)!r} "
+                             "in this run (the arrays its model keeps); give that run's "
+                             'model, or delete it')
         if document['modes'] != self.modes:
             raise ValueError(f'restart file {str(self.path)!r} is of another run: '
                              f"'modes' {document['modes']!r} in it, {self.modes!r} in "
@@ -158,6 +170,9 @@ class RestartFile:
         if modes:
             groups.append(("the saddle search's modes, 'modes'", slot * size + STATE_ROWS,
                            modes, crc['modes']))
+        if self.learnt:
+            groups.append(("the arrays the model keeps, 'learnt'",
+                           slot * size + STATE_ROWS + modes, len(self.learnt), crc['learnt']))
         groups += [(f'pair slot {p}', 2 * size + 2 * p, 2, c)
                    for p, c in zip(pairs, crc['pairs'], strict=True)]
         for what, first, count, expected in groups:
@@ -171,8 +186,10 @@ class RestartFile:
                                  'files')
         x, last_x, forces = (table[slot * size + k].reshape(-1, 3).copy()
                              for k in range(STATE_ROWS))
-        saddle_modes = table[slot * size + STATE_ROWS:(slot + 1) * size].reshape(
-            modes, rows // 3, 3).copy()
+        saddle_modes = table[slot * size + STATE_ROWS:slot * size + STATE_ROWS + modes
+                             ].reshape(modes, rows // 3, 3).copy()
+        kept = {name: table[slot * size + STATE_ROWS + modes + k].reshape(-1, 3).copy()
+                for k, name in enumerate(self.learnt)}
         state = MaudState(
             gamma=float(document['gamma']), k=document['k'],
             v=x - last_x if document['moving'] else None,
@@ -180,7 +197,7 @@ class RestartFile:
             pairs=[(table[2 * size + 2 * p].reshape(-1, 3).copy(),
                     table[2 * size + 2 * p + 1].reshape(-1, 3).copy())
                    for p in pairs],
-            model=dict(document['model']),
+            model={**document['model'], **kept},
             modes=None if self.modes is None else saddle_modes,
             predicted=None if document['predicted'] is None else float(document['predicted']))
         self._slot = slot
@@ -218,8 +235,9 @@ FIELDS: dict[str, tuple[str, Any]] = {
     'slot': ('0 or 1', lambda v: _whole(v) and v <= 1),
     'pairs': ('a list of distinct whole numbers >= 0',
               lambda v: isinstance(v, list) and all(map(_whole, v)) and len(set(v)) == len(v)),
-    'crc': ('{"state": a CRC-32, "modes": a CRC-32, "pairs": one per pair}',
+    'crc': ('{"state": a CRC-32, "modes": a CRC-32, "learnt": a CRC-32, "pairs": one per pair}',
             lambda v: isinstance(v, dict) and _whole(v.get('state')) and _whole(v.get('modes'))
+            and _whole(v.get('learnt'))
             and isinstance(v.get('pairs'), list) and all(map(_whole, v['pairs']))),
     'gamma': ('a positive finite number', _positive),
     'k': ('a whole number >= 0', _whole),
@@ -228,6 +246,8 @@ FIELDS: dict[str, tuple[str, Any]] = {
     'noise': ('a finite number >= 0', lambda v: as_number(v) == 0 or _positive(v)),
     'model': ('an object of positive finite numbers',
               lambda v: isinstance(v, dict) and all(map(_positive, v.values()))),
+    'learnt': ('a list of names (the arrays the model keeps)',
+               lambda v: isinstance(v, list) and all(isinstance(n, str) for n in v)),
     'modes': ('null or a whole number >= 0 (the modes a saddle search keeps)',
               lambda v: v is None or _whole(v)),
     'predicted': ('null or a finite number', lambda v: v is None or as_number(v) is not None),

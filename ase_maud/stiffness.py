@@ -146,6 +146,9 @@ class StiffnessModel(ABC):
     #: For ``target='saddle'``: whether the model's solver gives every
     #: eigenpair (else the lowest ones, :class:`ModeSolver`).
     complete_modes = False
+    #: Arrays (N, 3) the model keeps in what it has learnt (the run's state,
+    #: which a restart file holds, one row each), by name.
+    kept_arrays: tuple[str, ...] = ()
 
     def __init__(self, target: str = 'minimum', floor: float | None = None):
         self.target = check('target', target) or 'minimum'
@@ -525,6 +528,7 @@ class GlobalModel(StiffnessModel):
 
     name = 'global'
     prop = 'stiffness'
+    kept_arrays = ('built',)
 
     def __init__(self, target: str = 'minimum', floor: float | None = None,
                  refresh: float = 0.5, nearest: NearestDistances | None = None):
@@ -546,16 +550,28 @@ class GlobalModel(StiffnessModel):
         return bool(np.any(moved > self.refresh * self.nearest(positions)))
 
     def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
-        if not self._stale(atoms):
-            return self._kept[1]
+        """``P`` kept, or built again where it went stale; ``learnt['built']``
+        (the run's state) says where it was built, so that a resumed run
+        builds it there again and makes the uninterrupted run's steps."""
+        learnt = {} if learnt is None else learnt
+        built = learnt.get('built')
+        if built is not None and (self._kept is None
+                                  or not np.array_equal(self._kept[0], built)):
+            there = atoms.copy()   # a resumed run: P where the run built it
+            there.calc = atoms.calc
+            there.set_positions(built, apply_constraint=False)
+            self._kept = built, self._solver(there)
+        if self._stale(atoms):
+            self._kept = atoms.positions.copy(), self._solver(atoms)
+        learnt['built'] = self._kept[0]
+        return self._kept[1]
+
+    def _solver(self, atoms: Atoms) -> _SparseSolver:
         matrix, free, diagonal = self.assemble(atoms)
         size = matrix.shape[0]
         if size > DENSE_MIN_DOFS and matrix.nnz > DENSE_GRAPH_FRACTION * size**2:
-            solver = _MatrixFreeSolver(matrix, free, diagonal)
-        else:
-            solver = _FactorSolver(matrix, free)
-        self._kept = atoms.positions.copy(), solver
-        return solver
+            return _MatrixFreeSolver(matrix, free, diagonal)
+        return _FactorSolver(matrix, free)
 
     def assemble(self, atoms: Atoms) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
         """``P`` on the free degrees of freedom (csr), the (N, dim) mask of

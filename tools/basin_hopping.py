@@ -12,12 +12,13 @@ numbers: the same hops, applied to the minima each optimiser found. In 2D a
 ``FixCartesian`` on z keeps BasinHopping's displacements (drawn in 3D) in the plane.
 
 Counted (``ase_maud.bench.runner.CallRecorder``): every calculator call, line searches
-included, of the whole run. Reported per run: the number of distinct minima visited (by
-energy, within ``--energy-rtol``), the lowest energy found (``Q a^2``), the calls spent,
-the calls until the run first found its own lowest energy, and until it first found
-the lowest energy of all the runs from that start (``best``, within ``--energy-rtol``;
-``inf`` if never); local relaxations that hit the ``--relax-steps`` cap (BasinHopping then
-takes the energy where they stopped), and any error. The goal: Maud reaches
+included, of the whole run, and its CPU seconds (``time.process_time``). Reported per
+run: the number of distinct minima visited (by energy, within ``--energy-rtol``), the
+lowest energy found (``Q a^2``), the calls spent, the calls until the run first found
+its own lowest energy, and until it first found the lowest energy of all the runs from
+that start (``best``, within ``--energy-rtol``; ``inf`` if never); local relaxations
+that hit the ``--relax-steps`` cap (BasinHopping then takes the energy where they
+stopped), and any error. The goal: Maud reaches
 ``best`` in at most half of BFGS's calls. Run with one thread::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
@@ -30,6 +31,7 @@ import argparse
 import csv
 import math
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -74,6 +76,7 @@ def hop(dim: int, size: int, seed: int, name: str, hops: int, fmax: float, dr: f
     optimizer = capped(OPTIMIZERS[name], relax_steps)
     trace, error = [], ''
     np.random.seed(seed)            # BasinHopping's moves and acceptance
+    cpu = time.process_time()
     with CallRecorder(atoms.calc) as recorder:
         try:
             bh = BasinHopping(atoms, temperature=kt, optimizer=optimizer, fmax=fmax, dr=dr,
@@ -85,8 +88,9 @@ def hop(dim: int, size: int, seed: int, name: str, hops: int, fmax: float, dr: f
             bh.run(hops)
         except Exception as exc:    # a failed run is a result: keep what it found
             error = f'{type(exc).__name__}: {exc}'
+    cpu = time.process_time() - cpu
     return {'dim': dim, 'size': size, 'seed': seed, 'optimiser': name, 'hops': hops,
-            'calls': len(recorder.samples),
+            'calls': len(recorder.samples), 'cpu_s': cpu,
             'lowest_energy': min((e for _, e in trace), default=math.nan),
             'distinct_minima': _distinct([e for _, e in trace], energy_rtol),
             'unconverged_relaxations': optimizer.unconverged, 'error': error,
@@ -125,13 +129,15 @@ def compare(rows: list[dict], energy_rtol: float) -> None:
 
 def markdown(rows: list[dict]) -> str:
     """The rows as a markdown table."""
-    head = ['dim', 'size', 'seed', 'optimiser', 'calls', 'minima visited', 'lowest energy',
+    head = ['dim', 'size', 'seed', 'optimiser', 'calls', 'CPU s', 'minima visited',
+            'lowest energy',
             'best energy', 'calls to own lowest', 'calls to best', 'x BFGS',
             'capped relaxations', 'error']
     lines = ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
     for r in rows:
         cells = [r['dim'], r['size'], r['seed'], r['optimiser'], r['calls'],
-                 r['distinct_minima'], f"{r['lowest_energy']:.8f}", f"{r['best_energy']:.8f}",
+                 f"{r['cpu_s']:.2f}", r['distinct_minima'], f"{r['lowest_energy']:.8f}",
+                 f"{r['best_energy']:.8f}",
                  r['calls_to_own_lowest'], r['calls_to_best'],
                  f"{r['calls_to_best_x_BFGS']:.2f}", r['unconverged_relaxations'],
                  r['error'] or '']

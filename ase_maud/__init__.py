@@ -16,9 +16,11 @@ install. It is set here, before anything imports numba.
 
 from __future__ import annotations
 
+import importlib
 import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 
 def numba_cache_dir() -> Path:
@@ -60,18 +62,42 @@ def kernels_cached() -> bool:
 
 _use_numba_cache_dir()
 
-from .calculator import MaudCalculator  # noqa: E402  (after the cache is set)
-from .lock import FileInUseError  # noqa: E402
-from .monitor import (  # noqa: E402
-    DivergenceError,
-    MaudError,
-    NoEquilibriumError,
-    StagnationError,
-    WrongIndexError,
-)
-from .optimizer import Maud  # noqa: E402
-from .potential import MaudPotential  # noqa: E402
-from .precon import MaudPrecon  # noqa: E402
+#: The public names and the module each lives in: imported on first use
+#: (PEP 562), so that ``ase-maud --help`` and ``import ase_maud`` import
+#: neither numba nor ASE.
+_LAZY = {'MaudCalculator': 'calculator', 'FileInUseError': 'lock',
+         'DivergenceError': 'monitor', 'MaudError': 'monitor',
+         'NoEquilibriumError': 'monitor', 'StagnationError': 'monitor',
+         'WrongIndexError': 'monitor', 'Maud': 'optimizer', 'MaudPotential': 'potential',
+         'MaudPrecon': 'precon'}
+
+if TYPE_CHECKING:
+    from .calculator import MaudCalculator
+    from .lock import FileInUseError
+    from .monitor import (
+        DivergenceError,
+        MaudError,
+        NoEquilibriumError,
+        StagnationError,
+        WrongIndexError,
+    )
+    from .optimizer import Maud
+    from .potential import MaudPotential
+    from .precon import MaudPrecon
+
+
+def __getattr__(name: str) -> Any:
+    """The public class ``name``, imported from its module on first use."""
+    if name not in _LAZY:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+    value = getattr(importlib.import_module(f'.{_LAZY[name]}', __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __all__ = ['MaudCalculator', 'Maud', 'MaudPotential', 'MaudPrecon', 'MaudError',
            'DivergenceError', 'NoEquilibriumError', 'StagnationError', 'WrongIndexError',

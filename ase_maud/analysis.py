@@ -52,6 +52,7 @@ from scipy.spatial import cKDTree
 
 from . import physics
 from .dofs import free_dofs, rigid_body_modes
+from .topology import mean_spring_length
 
 #: Eigenvalues with ``|lambda| <= RTOL * max|lambda|`` count as zero.
 RTOL = 1e-8
@@ -97,11 +98,20 @@ class StationaryPoint:
         return self.n_negative + self.n_zero + self.n_positive
 
 
-def force_tolerance(potential, ftol: float | None = None) -> float:
+def force_tolerance(potential, ftol: float | None = None,
+                    positions: np.ndarray | None = None) -> float:
     """``ftol``, by default :data:`FTOL` ``* Q a`` of the
     :class:`~ase_maud.potential.MaudPotential` ``potential`` (force units):
-    the largest ``|f|`` of a stationary point."""
-    return FTOL * potential.force_unit if ftol is None else ftol
+    the largest ``|f|`` of a stationary point. At ``a = 0`` (no repulsion,
+    no length of its own) ``a`` is replaced by the mean spring length at
+    ``positions`` (N, 3), or 1 without them or without springs."""
+    if ftol is not None:
+        return ftol
+    if potential.repulsive:
+        return FTOL * potential.force_unit
+    if positions is None or not len(potential.springs):
+        return FTOL * potential.Q
+    return FTOL * potential.Q * mean_spring_length(positions, potential.springs)
 
 
 def free_mask(atoms: Atoms, dim: int) -> np.ndarray:
@@ -202,7 +212,7 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
     modes = np.zeros((len(values), len(atoms), 3))
     modes[:, :, :dim][:, free] = vectors.T
     fmax = float(np.linalg.norm(atoms.get_forces(), axis=1).max(initial=0.0))
-    ftol = force_tolerance(potential, ftol)
+    ftol = force_tolerance(potential, ftol, atoms.positions)
     if fmax > ftol:
         warnings.warn(f'not a stationary point: fmax = {fmax:.3g} > '
                       f'{ftol:.3g}; the verdict {verdict!r} describes the '

@@ -56,7 +56,9 @@ class MaudCalculator(Calculator):
         order); a duplicate, a self-spring or an index out of range is a
         ``ValueError`` that names the spring.
     a : float
-        Length in the repulsion ``a**3 Q / L`` (default 1).
+        Length in the repulsion ``a**3 Q / L`` (default 1). ``0`` switches
+        the repulsion off: springs and loads alone, the force-density method
+        (:attr:`last_backend` ``'none'``).
     Q : float
         Spring constant, force per length (default 1).
     q : array-like of shape (K,), optional
@@ -342,18 +344,27 @@ class MaudCalculator(Calculator):
         dim, a, Q = potential.dim, potential.a, potential.Q
         want_blocks = 'stiffness' in properties
         want_hessian = 'hessian' in properties
-        scaled = potential.reduced(positions)
-        if want_hessian:   # energy, forces and Hessian in one pass, exact
-            self.check_hessian_size(len(scaled))
-            choice = backends.exact_choice(self.parameters['backend'])
-            e_rep, f_rep, h_rep = choice.backend.hessian(scaled, dim)
-            block6 = _diagonal_blocks(h_rep, dim) if want_blocks else None
-        else:
-            (e_rep, f_rep, block6), choice = backends.evaluate(
-                self.parameters, scaled, dim, want_blocks)
-        if not (np.isfinite(e_rep) and np.isfinite(f_rep).all() and (
-                block6 is None or np.isfinite(block6).all())):
-            raise_on_closest(scaled, a)
+        if want_hessian:
+            self.check_hessian_size(len(positions))
+        if potential.repulsive:
+            scaled = potential.reduced(positions)
+            if want_hessian:   # energy, forces and Hessian in one pass, exact
+                choice = backends.exact_choice(self.parameters['backend'])
+                e_rep, f_rep, h_rep = choice.backend.hessian(scaled, dim)
+                block6 = _diagonal_blocks(h_rep, dim) if want_blocks else None
+            else:
+                (e_rep, f_rep, block6), choice = backends.evaluate(
+                    self.parameters, scaled, dim, want_blocks)
+            if not (np.isfinite(e_rep) and np.isfinite(f_rep).all() and (
+                    block6 is None or np.isfinite(block6).all())):
+                raise_on_closest(scaled, a)
+            backend, tolerance = choice.backend.name, choice.tolerance
+            e_unit, f_unit = potential.energy_unit, potential.force_unit
+        else:   # a = 0: springs and loads alone, in the user's units (x' = x), times Q
+            n = dim * len(positions)
+            scaled, e_rep, f_rep, backend, tolerance = positions, 0.0, 0.0, 'none', 0.0
+            h_rep = np.zeros((n, n)) if want_hessian else None
+            e_unit = f_unit = Q
         e_spr, f_spr = potential.spring_terms(scaled)
         with np.errstate(over='ignore', invalid='ignore'):   # said below
             e_load, f_load = physics.load_terms(positions, potential.loads)
@@ -362,11 +373,12 @@ class MaudCalculator(Calculator):
                              f'up to {np.abs(potential.loads).max():.3g} force units, '
                              f'positions up to {np.abs(positions).max():.3g}): choose '
                              'units nearer the scene')
-        results = {'energy': potential.energy_unit * (e_rep + e_spr) + e_load,
-                   'forces': potential.force_unit * (f_rep + f_spr) + f_load}
+        results = {'energy': e_unit * (e_rep + e_spr) + e_load,
+                   'forces': f_unit * (f_rep + f_spr) + f_load}
         if want_blocks:
-            blocks = backends.voigt_to_blocks(block6, dim)
-            blocks += physics.spring_nodal_blocks(self.springs, len(scaled),
+            blocks = (backends.voigt_to_blocks(block6, dim) if potential.repulsive
+                      else np.zeros((len(positions), dim, dim)))
+            blocks += physics.spring_nodal_blocks(self.springs, len(positions),
                                                   potential.stiffnesses, dim)
             results['stiffness'] = Q * blocks
         if want_hessian:
@@ -374,7 +386,8 @@ class MaudCalculator(Calculator):
         bad = [name for name, value in results.items()
                if not np.all(np.isfinite(value))]
         if bad:
-            raise_on_closest(scaled, a)   # the Hessian's 1/L**3
+            if potential.repulsive:
+                raise_on_closest(scaled, a)   # the Hessian's 1/L**3
             raise ValueError(f'the {", ".join(bad)} overflow float64 at a = '
                              f'{a!r}, Q = {Q!r} (energies scale as a^2 Q, '
                              'forces as a Q): choose units nearer the scene')
@@ -385,10 +398,11 @@ class MaudCalculator(Calculator):
         # them without reset): only those still held count
         held = self.last_tolerance if self.results else None
         self.results.update(results, free_energy=results['energy'])
-        self.last_backend = choice.backend.name
-        self.last_tolerance = max(held or 0.0, choice.tolerance)
+        self.last_backend = backend
+        self.last_tolerance = max(held or 0.0, tolerance)
         self.last_force_scale = potential.force_unit * float(
-            np.sqrt(np.einsum('ij,ij->i', f_rep, f_rep).max(initial=0.0)))
+            np.sqrt(np.einsum('ij,ij->i', f_rep, f_rep).max(initial=0.0))
+            if potential.repulsive else 0.0)
 
     def get_stiffness(self, atoms: Atoms | None = None) -> np.ndarray:
         """Nodal blocks ``K_mm``, shape (N, dim, dim), units of ``Q``."""

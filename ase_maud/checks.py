@@ -97,7 +97,8 @@ RULES: dict[str, Rule] = {
     'refresh': Rule('a finite number >= 0 (a fraction of the nearest-neighbour '
                     'distance; 0 rebuilds at every step)', lambda v: v >= 0),
     # the calculator
-    'a': Rule('a positive finite number', lambda v: v > 0),
+    'a': Rule('a finite number >= 0 (0: no repulsion, the force-density method)',
+              lambda v: v >= 0),
     'Q': Rule('a positive finite number', lambda v: v > 0),
     'dim': Rule('2 or 3', choices=(2, 3)),
     # the calculator's arrays, each entry (check_each)
@@ -201,3 +202,4 @@ def check_writable(name: str, value: str | os.PathLike, directory: bool = False)
     if not os.access(parent, os.W_OK | os.X_OK):
         raise ValueError(f'{text}: the directory {str(parent)!r} is not writable')
     return path
+

@@ -41,14 +41,15 @@ import sys
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
-from .checks import check, check_writable
-from .monitor import MaudError
-from .threads import pin_threads
-
-#: Errors a command reports in one line, exit status 2: bad input, files that
-#: cannot be read or written, a run that cannot go on.
-EXPECTED_ERRORS = (ValueError, OSError, MaudError)
+#: The commands and what each does, in one line (``ase-maud --help``).
+COMMANDS = {'relax': 'relax a net from a file, or a built-in scene, with Maud',
+            'show': 'draw a net or a trajectory frame (PNG), or animate (GIF)',
+            'classify': 'minimum, saddle of index k, or not stationary',
+            'saddles': 'the saddles around a minimum and the minima they join',
+            'bench': 'force calls and wall time against error, per optimiser',
+            'backends': 'time per call against accuracy of the calculator backends'}
 
 
 def _size(text):
@@ -63,6 +64,8 @@ def _ruled(name: str, parse=float):
     """An argparse type: the text parsed by ``parse``, then checked by
     ``ase_maud.checks.RULES[name]`` (its message on a bad value)."""
     def convert(text):
+        from .checks import check
+
         try:
             return check(name, parse(text))
         except ValueError as error:
@@ -99,9 +102,11 @@ def relax(args: argparse.Namespace) -> int:
     """``ase-maud relax``: exit status 0 if converged, else 1."""
     from . import kernels_cached
     from .bench.runner import CallRecorder
-    from .io import mean_spring_length, net_format, read_net, write_net
+    from .forcedensity import solve_force_density
+    from .io import mean_spring_length, net_format, read_net, set_tables, write_net
     from .optimizer import Maud
     from .paths import StagedTrajectory
+    from .results import describe_result, form_result, form_warnings, write_forces_csv
     from .scenes import build
     from .topology import free_point_loads
 
@@ -114,12 +119,17 @@ def relax(args: argparse.Namespace) -> int:
     else:
         atoms = read_net(args.net, load=args.load, **_net_options(args))
         label = Path(args.net).name
+    set_tables(atoms, loads=args.loads, q=args.q)
     a, springs = atoms.calc.parameters['a'], atoms.calc.parameters.get('springs', ())
     share = (f' ({a / mean_spring_length(atoms.positions, springs):.3g} x the mean spring '
-             'length at the start)') if len(springs) else ''
-    if not kernels_cached():
+             'length at the start)' if a else ' (the force-density equilibrium: no '
+             'repulsion)') if len(springs) else ''
+    if a == 0:
+        solve_force_density(atoms)   # Maud then has nothing left to do
+    elif not kernels_cached():
         print('compiling the kernels (first run only, ~20 s)...', file=sys.stderr,
               flush=True)
+    start = atoms.positions.copy()
     progress = (sys.stderr.isatty() if args.progress is None else args.progress) \
         and not args.quiet and args.log != '-'
     logfile = args.log or (None if progress or args.quiet else '-')
@@ -140,32 +150,22 @@ def relax(args: argparse.Namespace) -> int:
             if bar is not None:
                 bar.close()
     fmax = (atoms.get_forces()**2).sum(axis=1).max() ** 0.5
+    result = form_result(atoms)
     written = f'trajectory {args.traj}'
     if args.out:
         like = args.net if args.net and net_format(args.net) == net_format(args.out) else None
-        written += ', relaxed net ' + ' '.join(map(str, write_net(args.out, atoms, like=like)))
+        written += ', relaxed net ' + ' '.join(map(str, write_net(args.out, atoms, like=like,
+                                                                  result=result)))
+    if args.forces:
+        written += f', forces {write_forces_csv(args.forces, result)}'
     print(f'{"converged" if converged else "NOT converged"}: {label} '
           f'{len(atoms)} points, {opt.nsteps} steps, '
           f'{len(recorder.samples)} force calls, energy '
           f'{atoms.get_potential_energy():.12g}, fmax {fmax:.3g}, a {a:.4g}{share}; '
-          f'{written}')
-    if args.net is not None:
-        _warn_beyond_supports(atoms, a)
+          f'{describe_result(result)}; {written}')
+    for warning in form_warnings(atoms, start, result) if args.net is not None else ():
+        print(f'ase-maud: warning: {warning}', file=sys.stderr)
     return 0 if converged else 1
-
-
-def _warn_beyond_supports(atoms, a: float) -> None:
-    """A warning on stderr, naming --a, if the free points of the relaxed
-    net reach beyond its supports' bounding box by more than a tenth of its
-    diagonal."""
-    from .topology import support_excursion
-
-    beyond, diagonal = support_excursion(atoms)
-    if beyond > diagonal / 10 > 0:
-        print(f'ase-maud: warning: free points reach {beyond:.3g} beyond the bounding box '
-              f'of the fixed points (diagonal {diagonal:.3g}): the repulsion of a = {a:.4g} '
-              'inflates the net; a smaller --a gives a form closer to the springs\' '
-              'own', file=sys.stderr)
 
 
 def show(args: argparse.Namespace) -> int:
@@ -184,7 +184,8 @@ def show(args: argparse.Namespace) -> int:
         print(f'wrote {out} ({count[0]} of {len(frames)} frames)')
     else:
         atoms = read_net(args.file, index=args.frame, **_net_options(args))
-        replace_with(out, lambda temporary: save_picture(atoms, temporary, **style))
+        replace_with(out, lambda temporary: save_picture(atoms, temporary, **style,
+                                                         labels=args.labels))
         print(f'wrote {out}')
     return 0
 
@@ -338,6 +339,7 @@ def check_outputs(args: argparse.Namespace) -> None:
     """Every file the command of ``args`` will write, checked before any
     work: a ValueError naming the option and what is wrong, or an output
     that names an input or another output (:mod:`ase_maud.paths`)."""
+    from .checks import check_writable
     from .io import check_net_path
     from .paths import check_distinct, check_own_json
 
@@ -347,6 +349,8 @@ def check_outputs(args: argparse.Namespace) -> None:
             check_writable('--log', args.log)
         if args.out:
             check_net_path('--out', args.out)
+        if args.forces:
+            check_writable('--forces', args.forces)
     elif args.command == 'show':
         from matplotlib.figure import Figure
 
@@ -370,8 +374,9 @@ def check_outputs(args: argparse.Namespace) -> None:
 def _files(args: argparse.Namespace) -> tuple[list, list]:
     """The (argument, file) pairs the command of ``args`` reads and writes
     (:func:`ase_maud.paths.check_distinct`): the net, its edge list (given,
-    or the one beside a point file) and its --fix file; --traj, --log,
-    --out and the edge list or graph JSON written beside it, --output."""
+    or the one beside a point file), its --fix file and relax's --loads and
+    --q tables; --traj, --log, --out and the edge list or graph JSON written
+    beside it, relax's --forces, --output."""
     from .io import FIX_RULES, edges_path, net_format
 
     net = getattr(args, 'net', None) or getattr(args, 'file', None)
@@ -381,8 +386,9 @@ def _files(args: argparse.Namespace) -> tuple[list, list]:
         ('--fix', None if args.fixed in (None, *FIX_RULES) else args.fixed)]
     outputs = []
     if args.command == 'relax':
+        inputs += [('--loads', args.loads), ('--q', args.q)]
         outputs = [('--traj', args.traj), ('--log', None if args.log == '-' else args.log),
-                   ('--out', args.out)]
+                   ('--out', args.out), ('--forces', args.forces)]
         if args.out and net_format(args.out) == 'ase':
             outputs.append(("--out's edge list", edges_path(args.out)))
     elif args.command == 'show':
@@ -417,12 +423,15 @@ def _add_net_options(parser):
                         "the file's own springs, or NAME.edges.txt beside NAME.xyz)")
     parser.add_argument('--fix', '--fixed', dest='fixed', metavar='RULE_OR_FILE',
                         help="the points held fixed: 'boundary' (a mesh's: on edges of one "
-                        "face), 'leaves' (a network's: on one spring), or a file of 0-based "
+                        "face), 'outer' (its outer rim only, not a hole's), "
+                        "'leaves' (a network's: on one spring), or a file of 0-based "
                         "indices, one or more per line (default: the file's own: "
                         'trajectory constraints, COMPAS is_anchor or is_fixed)')
     parser.add_argument('--a', type=_ruled('a'),
-                        help='length a of the repulsion a^3 Q / L (default: stored in a '
-                        f'trajectory, else {A_PER_MEAN_SPRING:g} x the mean spring length)')
+                        help='length a of the repulsion a^3 Q / L; 0: none, the '
+                        'force-density equilibrium of springs and loads (default: stored '
+                        'in a trajectory, else 0 if the supports hold every spring '
+                        f'component, else {A_PER_MEAN_SPRING:g} x the mean spring length)')
     parser.add_argument('--Q', type=_ruled('Q'),
                         help='spring constant Q (default: stored in a trajectory, else 1)')
     parser.add_argument('--dim', type=int, choices=(2, 3),
@@ -453,14 +462,8 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f'{self.prog}: error: {message}; see {self.prog} --help\n')
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argparse parser of ``ase-maud`` and its commands."""
-    from . import backends as registry
-    from .bench.optimizers import OPTIMIZERS
-    from .checks import RULES
-    from .scenes import SCENES, SUITES
-    from .stiffness import MODELS
-
+def _top_parser() -> tuple[argparse.ArgumentParser, Any]:
+    """The parser of ``ase-maud`` itself and its (empty) subparsers action."""
     parser = _Parser(
         prog='ase-maud', description='The Maud algorithm for points that '
         'repel and are tied by springs: relax a net from a file or a built-in '
@@ -470,13 +473,25 @@ def build_parser() -> argparse.ArgumentParser:
         '  ase-maud relax net.obj --fix boundary --out relaxed.obj\n'
         '  ase-maud show maud.traj --gif\n  ase-maud classify maud.traj\n'
         'Each command has its own --help.')
-    commands = parser.add_subparsers(dest='command', metavar='COMMAND')
+    return parser, parser.add_subparsers(dest='command', metavar='COMMAND')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argparse parser of ``ase-maud`` and its commands."""
+    from . import backends as registry
+    from .bench.optimizers import OPTIMIZERS
+    from .checks import RULES
+    from .scenes import SCENES, SUITES
+    from .stiffness import MODELS
+
+    parser, commands = _top_parser()
 
     p = _command(
-        commands, 'relax', 'relax a net from a file, or a built-in scene, with Maud',
+        commands, 'relax', COMMANDS['relax'],
         'Relax the net of NET_FILE (OBJ: points and face/polyline/curve edges; COMPAS '
-        'mesh or network JSON; an ASE trajectory; or XYZ and any file ASE reads, '
-        'with an edge list) or, without NET_FILE, a built-in scene, with Maud. '
+        'mesh or network JSON; PLY, STL, OFF, VTK, VTU meshes; an ASE trajectory; '
+        'or XYZ and any file ASE reads, with an edge list) or, without NET_FILE, a '
+        'built-in scene, with Maud. '
         'Shows a progress bar with fmax and the energy on a terminal (else '
         'prints ASE\'s log), writes a trajectory for "ase gui" (it keeps the '
         'springs, a, Q and dim: every command here reads it back), the relaxed '
@@ -491,14 +506,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('net', nargs='?', metavar='NET_FILE',
                    help='the net to relax (default: the built-in --scene)')
     _add_net_options(p)
-    p.add_argument('--load', nargs=3, type=_ruled('loads'), metavar=('X', 'Y', 'Z'),
-                   help='a constant load (force units) on every free point, e.g. '
-                   "self-weight --load 0 0 -0.1; replaces the file's or scene's loads "
-                   '(default: those of NET_FILE: COMPAS px, py, pz, or a trajectory\'s; '
-                   'the scene\'s)')
+    loads = p.add_mutually_exclusive_group()
+    loads.add_argument('--load', nargs=3, type=_ruled('loads'), metavar=('X', 'Y', 'Z'),
+                       help='a constant load (force units) on every free point, e.g. '
+                       "self-weight --load 0 0 -0.1; replaces the file's or scene's loads "
+                       '(default: those of NET_FILE: COMPAS px, py, pz, or a trajectory\'s; '
+                       'the scene\'s)')
+    loads.add_argument('--loads', metavar='LOADS_CSV',
+                       help='per-point loads from a CSV table with the header i,px,py,pz '
+                       '(0-based point index, force units; points not listed: none), '
+                       "replacing the file's or scene's")
+    p.add_argument('--q', metavar='Q_CSV',
+                   help='per-edge force densities from a CSV table with the header i,j,q '
+                   '(the two points of a spring, its multiplier of Q; edges not listed '
+                   'keep theirs)')
     p.add_argument('--out', metavar='RELAXED_FILE',
                    help='write the relaxed net here, in the format of its suffix '
                    '(.obj, .json, .traj, .xyz plus NAME.edges.txt, ...)')
+    p.add_argument('--forces', metavar='FORCES_CSV',
+                   help='write the member forces (i, j, force Q q L, length, force '
+                   'density Q q) and the support reactions (rx, ry, rz) as one CSV '
+                   'table with a kind column (ase_maud.results.write_forces_csv)')
     p.add_argument('--scene', default='weighted_net', choices=SCENES,
                    metavar='NAME', help=f'without NET_FILE, of: {", ".join(SCENES)} '
                    '(default: %(default)s)')
@@ -529,12 +557,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=relax)
 
     p = _command(
-        commands, 'show', 'draw a net or a trajectory frame (PNG), or animate (GIF)',
+        commands, 'show', COMMANDS['show'],
         'Draw the net of FILE (any file relax reads; of a trajectory, frame '
         '--frame): springs coloured by their force Q q L (or length) with a '
-        'colour bar, supports (fixed points) as black squares and loaded points '
-        'as triangles, named in a legend; the residual forces as red arrows at '
-        'the scale the legend states, none when the net is converged (max |f| '
+        'colour bar, supports (fixed points) as black squares (and free points as '
+        'dots on nets of at most 400 points), named in a legend; the loads as orange '
+        'and the residual forces as red arrows at the scales the legend states, no '
+        'residual arrows when the net is converged (max |f| '
         'at most --fmax). In the plane for dim 2, else an orthographic 3D view '
         'from --view. --gif animates every frame of a trajectory (at most 60, '
         'evenly picked) at one colour and arrow scale.',
@@ -553,6 +582,9 @@ def build_parser() -> argparse.ArgumentParser:
                    default='force',
                    help='what colours the springs: their force Q q L, their length, '
                    'or nothing (default: %(default)s)')
+    p.add_argument('--labels', action='store_true',
+                   help="write each spring's force (or length, with --color length) on "
+                   'it; nets of at most 300 springs, not with --gif')
     p.add_argument('--view', choices=('top', 'front', 'side', 'iso'), default='iso',
                    help='side a 3D net is seen from, orthographic: top (down z), front '
                    '(along y), side (along x) or iso (default: %(default)s)')
@@ -562,7 +594,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=show)
 
     p = _command(
-        commands, 'classify', 'minimum, saddle of index k, or not stationary',
+        commands, 'classify', COMMANDS['classify'],
         'Classify the net of FILE (of a trajectory, frame --frame) by the '
         'eigenvalues of its Hessian on the free degrees of freedom, rigid-body '
         'modes removed (ase_maud.analysis.classify): minimum, saddle of index k '
@@ -582,7 +614,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=classify)
 
     p = _command(
-        commands, 'saddles', 'the saddles around a minimum and the minima they join',
+        commands, 'saddles', COMMANDS['saddles'],
         'Relax the net of FILE to a minimum (Maud, to --fmax), then climb from it along '
         'each of its --modes lowest Hessian modes, both ways, to index-1 saddles '
         "(Maud(target='saddle')), relax each saddle's two sides to the minima it joins, "
@@ -614,7 +646,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=saddles)
 
     p = _command(
-        commands, 'bench', 'force calls and wall time against error, per optimiser',
+        commands, 'bench', COMMANDS['bench'],
         'Run every optimiser from the same starts (scene, size, '
         'seed), sampling fmax, energy, force calls, wall and CPU time at '
         'every calculator call; the energy error is against the lowest energy '
@@ -663,7 +695,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=bench)
 
     p = _command(
-        commands, 'backends', 'time per call against accuracy of the calculator backends',
+        commands, 'backends', COMMANDS['backends'],
         'Time one energy-and-forces call, and one call with the '
         'nodal stiffness, of every backend on N random points, and its '
         'relative error against the numpy reference. Writes backends.csv, '
@@ -694,22 +726,35 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``ase-maud`` on ``argv`` (default ``sys.argv[1:]``); return the
     exit status (module docstring). Without a command, print the help.
-    :data:`EXPECTED_ERRORS` are said in one line on stderr, status 2."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if args.command is None:
+    Bad input, files that cannot be read or written and runs that cannot go
+    on (ValueError, OSError, :class:`~ase_maud.MaudError`) are said in one
+    line on stderr, status 2. Without a command nothing but argparse is
+    imported (``ase-maud --help`` answers at once)."""
+    words = sys.argv[1:] if argv is None else list(argv)
+    if not COMMANDS.keys() & set(words):
+        parser, commands = _top_parser()
+        for name, text in COMMANDS.items():
+            commands.add_parser(name, help=text)
+        parser.parse_args(words)   # --help, or an error
         parser.print_help()
         return 0
+    from .monitor import MaudError
+    from .threads import pin_threads
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
     if args.command == 'relax' and args.net is None and (
             args.edges or args.fixed or args.dim):
         parser.error('relax: --edges, --fix and --dim need NET_FILE')
-    args.argv = sys.argv[1:] if argv is None else list(argv)
+    if args.command == 'show' and args.gif and args.labels:
+        parser.error('show: --labels writes on one picture, not on a --gif')
+    args.argv = words
     try:
         check_outputs(args)
         if args.threads is not None:
             pin_threads(args.threads, restart=argv is None)
         return args.func(args)
-    except EXPECTED_ERRORS as error:
+    except (ValueError, OSError, MaudError) as error:
         print(f'{parser.prog}: error: {_one_line(error)}', file=sys.stderr)
         return 2
     except KeyboardInterrupt as error:   # every output is whole: replaced when complete

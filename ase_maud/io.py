@@ -28,6 +28,9 @@ Formats, chosen by the file name's suffix:
   defaults, else 1 and 0. Written back as the original structure with
   ``x``, ``y``, ``z`` replaced, and ``q``, ``px``, ``py``, ``pz`` set
   where the net's differ from the file's.
+- ``.ply``, ``.stl``, ``.off``, ``.vtk``, ``.vtu``, meshes read through
+  meshio (:mod:`ase_maud.formats.mesh`): the springs are the faces' edges
+  and the line cells; coincident points merged. Read only.
 - ``.traj``, ASE trajectory: the springs, ``a``, ``Q``, ``dim``, ``q`` and
   ``loads`` come back
   from the calculator parameters that ASE's trajectory stores with every
@@ -67,25 +70,37 @@ from ase.constraints import FixAtoms
 from .atomic import replace_text, replace_with
 from .calculator import MaudCalculator
 from .checks import as_whole, check_writable
+from .forcedensity import unsupported
 from .formats import NetData, PathLike
 from .formats.compas import compas_text, read_compas, read_compas_forces
+from .formats.mesh import MESH_FORMATS, read_mesh
 from .formats.obj import MERGE_TOLERANCE, merge_coincident, obj_text, read_obj
+from .formats.tables import read_loads_csv, read_q_csv
 from .formats.text import XYZ_SUFFIXES, check_xyz_counts, coordinates, read_edges, read_indices
+from .results import FormResult
 from .scenes import keep_on_plane
-from .topology import boundary_vertices, fixed_atoms, free_point_loads, leaf_vertices
+from .topology import (
+    boundary_vertices,
+    fixed_atoms,
+    free_point_loads,
+    leaf_vertices,
+    mean_spring_length,
+    outer_rim,
+)
 
 __all__ = ['A_PER_MEAN_SPRING', 'CALC_NAME', 'FIX_RULES', 'MERGE_TOLERANCE', 'NetData',
+           'READ_FORMATS',
            'check_net_path', 'default_a', 'edges_path', 'mean_spring_length',
            'merge_coincident', 'net_format', 'read_compas', 'read_compas_forces',
            'read_edges', 'read_frames', 'read_indices', 'read_net', 'read_obj',
-           'relaxed_fmax', 'stored_parameters', 'write_net']
+           'relaxed_fmax', 'set_tables', 'stored_parameters', 'write_net']
 
 #: The name under which ASE's trajectory stores a MaudCalculator.
 CALC_NAME = 'maudcalculator'
 
 
 #: The rules ``fixed=`` takes by name (:func:`read_net`).
-FIX_RULES = ('boundary', 'leaves')
+FIX_RULES = ('boundary', 'outer', 'leaves')
 
 
 #: ``a`` of a net read from a file that stores none, as a fraction of its
@@ -93,27 +108,38 @@ FIX_RULES = ('boundary', 'leaves')
 A_PER_MEAN_SPRING = 0.3
 
 
-def mean_spring_length(positions: np.ndarray, springs: np.ndarray) -> float:
-    """The mean length of the springs, in the positions' unit."""
-    i, j = np.asarray(springs, dtype=int).reshape(-1, 2).T
-    return float(np.linalg.norm(positions[i] - positions[j], axis=1).mean())
+def default_a(atoms: Atoms, springs: np.ndarray) -> float:
+    """``a`` of a net that comes without one (its supports set).
 
-
-def default_a(positions: np.ndarray, springs: np.ndarray) -> float:
-    """``a`` of a net that comes without one: :data:`A_PER_MEAN_SPRING`
-    times its mean spring length. The largest fraction of 0.1, 0.2, 0.3,
-    0.4, 0.5, 0.7, 1 with which each of ten compas sample nets (32 to 4900
-    points), its boundary (leaves) fixed, relaxes within the bounding box of
-    its supports (docs/bench/a_rule.md); at 0.4 the largest ones reach out
-    of it (the repulsion of many points adds up), at 1 most balloon.
+    ``0``, the force-density equilibrium of its springs and loads (the
+    repulsion off: none of the out-of-balance of the members and loads is
+    left to it), where the supports make that equilibrium unique
+    (:func:`~ase_maud.forcedensity.unsupported`: a support held in every
+    direction on every spring component). Else the repulsion is what holds
+    the net and sets its spacing: :data:`A_PER_MEAN_SPRING` times its mean
+    spring length, the largest fraction of 0.1, 0.2, 0.3, 0.4, 0.5, 0.7, 1
+    with which each of ten compas sample nets (32 to 4900 points), its
+    boundary (leaves) fixed, relaxes within the bounding box of its supports
+    (docs/bench/a_rule.md).
     """
-    return A_PER_MEAN_SPRING * mean_spring_length(positions, springs)
+    if unsupported(atoms, springs) is None:
+        return 0.0
+    return A_PER_MEAN_SPRING * mean_spring_length(atoms.positions, springs)
 
 
 def net_format(path: PathLike) -> str:
-    """'obj', 'json', 'traj' or 'ase' (any other file ASE reads), by suffix."""
+    """'obj', 'json', 'traj', 'mesh' (:data:`MESH_FORMATS`, read only) or
+    'ase' (any other file ASE reads), by suffix."""
     suffix = Path(path).suffix.lower()
+    if suffix in MESH_FORMATS:
+        return 'mesh'
     return {'.obj': 'obj', '.json': 'json', '.traj': 'traj'}.get(suffix, 'ase')
+
+
+#: The formats a net is read from, in words (a refused file names them).
+READ_FORMATS = ('OBJ (.obj), COMPAS JSON (.json), an ASE trajectory (.traj), meshes '
+                f'through meshio ({", ".join(MESH_FORMATS)}), or extended XYZ (.xyz) and '
+                'any other file ASE reads, with an edge list')
 
 
 def check_net_path(name: str, path: PathLike) -> Path:
@@ -122,6 +148,9 @@ def check_net_path(name: str, path: PathLike) -> Path:
     suffix names a format (one of :func:`net_format`'s, or one ASE writes);
     else a ValueError naming ``name``, the file and what is accepted."""
     path = check_writable(name, path)
+    if net_format(path) == 'mesh':
+        raise ValueError(f'{name} {str(path)!r}: a net is written as .obj, .json, .traj, '
+                         f'.xyz or another format ASE writes, not {path.suffix}')
     if net_format(path) == 'ase' and path.suffix.lower() not in XYZ_SUFFIXES:
         try:
             known = ase.io.formats.ioformats[ase.io.formats.filetype(path, read=False)]
@@ -167,18 +196,20 @@ def read_net(path: PathLike, edges: PathLike | None = None,
     edges : file name, optional
         Edge list (two 0-based indices per line); overrides the springs a
         file holds. Default for point files: ``NAME.edges.txt`` if present.
-    fixed : 'boundary', 'leaves', file name or indices, optional
+    fixed : 'boundary', 'outer', 'leaves', file name or indices, optional
         Points held fixed (:class:`FixAtoms`), replacing the constraints
         read from the file: ``'boundary'``, the boundary of a mesh's faces
-        (:func:`~ase_maud.topology.boundary_vertices`; OBJ and COMPAS
-        meshes); ``'leaves'``, the points on one spring
+        (:func:`~ase_maud.topology.boundary_vertices`; OBJ, COMPAS and
+        mesh files); ``'outer'``, its outer rim alone, not the rims of its
+        holes (:func:`~ase_maud.topology.outer_rim`); ``'leaves'``, the points on one spring
         (:func:`~ase_maud.topology.leaf_vertices`); a file of 0-based
         indices, one or more per line (a ``Path`` is always a file); or the
         indices.
     a, Q : float, optional
         Length and spring constant of the potential. Default ``a``: what a
         trajectory stores (1 if it stores its calculator without ``a``),
-        else :func:`default_a` of the net; ``Q``: what a trajectory
+        else :func:`default_a` of the net (0, the force-density
+        equilibrium, where its supports make it unique); ``Q``: what a trajectory
         stores, else 1.
     dim : 2 or 3, optional
         Default: what a trajectory stores, else 2 if every point has the
@@ -210,11 +241,11 @@ def _read(path, edges, fixed, a, Q, dim, index, load=None):
     faces = []
     if not isinstance(index, slice):
         index = _whole_index(index)
-    if kind in ('obj', 'json'):
+    if kind in ('obj', 'json', 'mesh'):
         if not isinstance(index, slice):
             _check_frame(path, index, 1)
-        positions, springs, faces, anchors = (read_obj(path) if kind == 'obj'
-                                              else read_compas(path))
+        positions, springs, faces, anchors = {'obj': read_obj, 'json': read_compas,
+                                              'mesh': read_mesh}[kind](path)
         frames = [Atoms(positions=positions, pbc=False)]
         if len(anchors):
             frames[0].set_constraint(FixAtoms(indices=anchors))
@@ -233,16 +264,16 @@ def _read(path, edges, fixed, a, Q, dim, index, load=None):
         raise ValueError(f'{path} holds no springs: give an edge list '
                          f'(edges=..., --edges, or {edges_path(path).name} '
                          'beside it)')
-    if a is None and 'a' not in stored:
-        a = default_a(frames[0].positions, stored['springs'])
     given = {'a': a, 'Q': Q, 'dim': dim}
     parameters = {**stored, **{k: v for k, v in given.items() if v is not None}}
     if fixed is not None:
-        indices = _fixed_points(path, fixed, natoms, stored['springs'], faces)
+        indices = _fixed_points(path, fixed, frames[0].positions, stored['springs'], faces)
+        for atoms in frames:
+            atoms.set_constraint(FixAtoms(indices=indices))
+    if 'a' not in parameters:
+        parameters['a'] = default_a(frames[0], stored['springs'])
     for atoms in frames:
         atoms.pbc = False
-        if fixed is not None:
-            atoms.set_constraint(FixAtoms(indices=indices))
         own = dict(parameters)
         if load is not None:
             own['loads'] = free_point_loads(atoms, load)
@@ -255,19 +286,21 @@ def _read(path, edges, fixed, a, Q, dim, index, load=None):
     return frames
 
 
-def _fixed_points(path, fixed, natoms, springs, faces):
+def _fixed_points(path, fixed, positions, springs, faces):
     """The indices ``fixed=`` names (:func:`read_net`), checked."""
+    natoms = len(positions)
     if isinstance(fixed, str) and fixed in FIX_RULES:
-        if fixed == 'boundary' and not faces:
-            raise ValueError(f"{path}: fixed='boundary' needs a mesh's faces and the "
-                             "file has none (OBJ 'f' lines or a COMPAS mesh); "
-                             "'leaves' fixes the ends of a network's lines")
-        indices = (boundary_vertices(faces) if fixed == 'boundary'
-                   else leaf_vertices(natoms, springs))
+        if fixed in ('boundary', 'outer') and not faces:
+            raise ValueError(f"{path}: fixed={fixed!r} needs a mesh's faces and the "
+                             "file has none (OBJ 'f' lines, a COMPAS mesh or a mesh "
+                             "file); 'leaves' fixes the ends of a network's lines")
+        indices = {'boundary': lambda: boundary_vertices(faces),
+                   'outer': lambda: outer_rim(faces, positions),
+                   'leaves': lambda: leaf_vertices(natoms, springs)}[fixed]()
         if not len(indices):
             raise ValueError(f"{path}: fixed={fixed!r} finds no point (" + (
-                'every edge is in two faces: a closed mesh' if fixed == 'boundary'
-                else "no point is on exactly one spring; 'boundary' fixes a mesh's")
+                'no point is on exactly one spring; \'boundary\' fixes a mesh\'s'
+                if fixed == 'leaves' else 'every edge is in two faces: a closed mesh')
                 + '); name the fixed points')
         return indices.tolist()
     if isinstance(fixed, str) and not Path(fixed).exists():
@@ -276,6 +309,20 @@ def _fixed_points(path, fixed, natoms, springs, faces):
     if isinstance(fixed, (str, os.PathLike)):
         return read_indices(fixed, natoms)
     return _fixed_indices(fixed, natoms)
+
+
+def set_tables(atoms: Atoms, loads: PathLike | None = None,
+               q: PathLike | None = None) -> None:
+    """Set the loads and force densities of the net ``atoms`` (with a
+    MaudCalculator) from CSV tables (:mod:`ase_maud.formats.tables`): the
+    loads replace the calculator's, the force densities replace those of
+    the edges listed. None leaves either as it is."""
+    if loads is not None:
+        atoms.calc.set(loads=read_loads_csv(loads, len(atoms)))
+    if q is not None:
+        potential = atoms.calc.potential
+        current = np.broadcast_to(potential.stiffnesses, len(potential.springs))
+        atoms.calc.set(q=read_q_csv(q, potential.springs, current, len(atoms)))
 
 
 def stored_parameters(frame: Atoms) -> dict[str, Any]:
@@ -328,7 +375,7 @@ def _read_ase(path, index):
         raise
     except Exception as error:   # ASE's readers raise many kinds
         raise ValueError(f'{path}: ASE cannot read it ({type(error).__name__}: '
-                         f'{error})') from error
+                         f'{error}); a net is read from {READ_FORMATS}') from error
     if not isinstance(index, slice):
         _check_frame(path, index, count)
     frames = frames if isinstance(frames, list) else [frames]
@@ -356,7 +403,8 @@ def _fixed_indices(indices, natoms):
     return checked
 
 
-def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None) -> list[Path]:
+def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None,
+              result: FormResult | None = None) -> list[Path]:
     """Write the net ``atoms`` (with a MaudCalculator) to ``path``; return
     the files written.
 
@@ -374,7 +422,11 @@ def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None) -> lis
     (``.extxyz``) is extended XYZ with every digit of the coordinates
     (ASE's writer keeps 8 decimals) and the fixed points as ``move_mask``;
     any other format is written by ASE. Both get the edge list at
-    :func:`edges_path`.
+    :func:`edges_path`. COMPAS JSON keeps the supports as ``is_anchor``
+    and, given a ``result`` (:func:`ase_maud.results.form_result` of
+    ``atoms``), holds the member forces and reactions
+    (:func:`~ase_maud.formats.compas.compas_text`); the other formats ignore
+    ``result``.
     """
     path = Path(path)
     kind = net_format(path)
@@ -391,7 +443,7 @@ def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None) -> lis
     if kind == 'obj':
         replace_text(path, obj_text(atoms, like), newline='')
     elif kind == 'json':
-        replace_text(path, compas_text(atoms, like), newline='')
+        replace_text(path, compas_text(atoms, like, result), newline='')
     elif kind == 'traj':
         replace_with(path, lambda temporary: ase.io.write(temporary, atoms, format='traj'))
     else:

@@ -4,21 +4,25 @@ matplotlib writes) or an animated GIF.
 A net is an :class:`ase.Atoms` with a :class:`~ase_maud.MaudCalculator`
 (``calc.springs``, ``calc.dim``). What is drawn:
 
-- springs coloured (:data:`COLOURS`) by their force ``Q q L`` (``q`` the
-  spring's force density, a multiplier of ``Q``, 1 where the calculator has
-  none; force units ``Q a``), by their length ``L``, or plain grey, with a
-  colour bar;
-- supports (points with every coordinate fixed) as black squares, loaded
-  points (a non-zero row of the calculator's ``loads``, where it has loads)
-  as orange triangles, free points as small dots, named in a legend;
-- the residual forces ``f`` of the free points as red arrows at a stated
-  scale: an arrow one length unit long is :func:`arrow_scale` force units
-  (a 1-2-5 number, so that the longest arrow is at most :data:`ARROW` of the
-  picture), said in the legend; none when the net is converged (``max |f|
-  <= ftol``, by default :func:`ase_maud.analysis.force_tolerance`).
+- springs, one line collection, coloured (:data:`COLOURS`) by their force
+  ``Q q L`` (``q`` the spring's force density, a multiplier of ``Q``, 1
+  where the calculator has none; the net's force units), by their length
+  ``L``, or plain grey, with a colour bar; thinner on large nets;
+- supports (points with every coordinate fixed) as black squares, and
+  free points as small dots on nets of at most :data:`SMALL_NET` points
+  (above, the springs alone show the net), named in a legend;
+- the loads of the free points (a non-zero row of the calculator's
+  ``loads``) as orange arrows, and the residual forces ``f`` of the free
+  points as red arrows, each at a stated scale: an arrow one length unit
+  long is :func:`arrow_scale` force units (a 1-2-5 number, so that the
+  longest arrow is at most :data:`ARROW` of the picture), said in the
+  legend; at most :data:`MAX_ARROWS` of each; no residual arrows when the
+  net is converged (``max |f| <= ftol``, by default
+  :func:`ase_maud.analysis.force_tolerance`).
 
 ``dim=2`` nets are drawn in their plane; others in an orthographic 3D view
-from a side of :data:`VIEWS` with equal scales on the three axes. Figures are
+from a side of :data:`VIEWS` with equal scales on the three axes, the box
+tight around the net (:data:`MARGIN`, :data:`THINNEST`). Figures are
 made without pyplot (:class:`matplotlib.figure.Figure`, rendered by Agg): no
 display needed and no global backend changed.
 """
@@ -37,6 +41,7 @@ from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from .analysis import force_tolerance
@@ -46,8 +51,26 @@ from .topology import fixed_atoms
 #: Longest force arrow at most this fraction of the picture's largest extent.
 ARROW = 0.15
 #: What the springs' colour shows: colour bar label, or None (plain grey).
-COLOURS = {'force': 'spring force Q q L (Q a)', 'length': 'spring length L',
-           'none': None}
+#: Force and length are in the net's own units (those of its coordinates and
+#: of ``Q``), whatever ``a``.
+COLOURS = {'force': 'member force Q q L (force units)',
+           'length': 'spring length L (length units)', 'none': None}
+#: Nets of up to this many points get a marker at every point; larger ones
+#: at their supports only, smaller (the springs show the net).
+SMALL_NET = 400
+#: At most this many arrows of one kind (loads, residual forces) are drawn:
+#: beyond it, those of points spread evenly, said in the legend.
+MAX_ARROWS = 150
+#: Longest load arrow at most this fraction of the picture's largest extent
+#: (loads are context; residual forces get :data:`ARROW`).
+LOAD_ARROW = 0.06
+#: The most springs :func:`label_members` writes a value on.
+MAX_LABELS = 300
+#: Space around the net, a fraction of its largest extent on each side.
+MARGIN = 0.03
+#: A 3D box is at least this fraction of its largest extent along each axis
+#: (a flat net keeps a visible thickness).
+THINNEST = 0.05
 #: 3D views, as matplotlib's (elevation, azimuth) in degrees: top looks down
 #: z (x right, y up), front along +y (x right, z up), side along -x (y right,
 #: z up), iso from (1, -1, 1)-ish.
@@ -118,11 +141,12 @@ def _norm(values: Sequence[np.ndarray]) -> Normalize:
 
 
 def _limits(frames: Sequence[Atoms]) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper corners of a cube around every frame's points."""
+    """Lower and upper corners of a box tight around every frame's points,
+    with a margin of :data:`MARGIN` of their largest extent on each side."""
     points = np.concatenate([atoms.positions for atoms in frames])
     low, high = points.min(axis=0), points.max(axis=0)
-    centre, half = (low + high) / 2, max((high - low).max() / 2, 1e-12) * 1.1
-    return centre - half, centre + half
+    margin = MARGIN * max((high - low).max(), 1e-12)
+    return low - margin, high + margin
 
 
 def figure(dim: int, view: str = 'iso') -> tuple[Figure, Axes]:
@@ -130,7 +154,7 @@ def figure(dim: int, view: str = 'iso') -> tuple[Figure, Axes]:
     seen from ``view`` (:data:`VIEWS`)."""
     if view not in VIEWS:
         raise ValueError(f'view must be one of {", ".join(VIEWS)}, got {view!r}')
-    fig = Figure(figsize=(6.4, 5.6))
+    fig = Figure(figsize=(7.2, 5.6))
     ax = fig.add_subplot(projection='3d' if dim == 3 else None)
     orient(ax, view)
     return fig, ax
@@ -149,6 +173,8 @@ def orient(ax: Axes, view: str) -> None:
             getattr(ax, f'set_{axis}ticks')([])
         else:
             getattr(ax, f'set_{axis}label')(axis)
+            # a thin box (a flat net seen from the side) has room for few ticks
+            getattr(ax, f'{axis}axis').set_major_locator(MaxNLocator(nbins=4))
 
 
 def draw(ax: Axes, atoms: Atoms, colour: str = 'force',
@@ -172,38 +198,42 @@ def draw(ax: Axes, atoms: Atoms, colour: str = 'force',
     fixed = fixed_atoms(atoms)
     loaded = loaded_points(atoms) & ~fixed
     free = ~fixed
+    small = len(atoms) <= SMALL_NET
     low, high = _limits([atoms]) if limits is None else limits
+    extent = (high - low).max()
     values = spring_values(atoms, colour)
+    springs = max(len(calc.springs), 1)
     lines = (Line3DCollection if dim == 3 else LineCollection)(
-        x[calc.springs], linewidths=1.2, zorder=1)
+        x[calc.springs], linewidths=float(np.clip(1.2 * np.sqrt(2000 / springs), 0.15, 1.2)),
+        zorder=1)
     if values is None:
         lines.set_color('0.55')
     else:
         lines.set(array=values, cmap='viridis',
                   norm=_norm([values]) if norm is None else norm)
     ax.add_collection(lines)
-    ax.scatter(*x[free & ~loaded].T, c='0.2', s=6, zorder=3, label='free point')
-    if loaded.any():
-        ax.scatter(*x[loaded].T, c='C1', marker='v', s=24, zorder=3, label='loaded point')
+    if small:
+        ax.scatter(*x[free].T, c='0.2', s=6, zorder=3, label='free point')
     if fixed.any():
-        ax.scatter(*x[fixed].T, c='k', marker='s', s=24, zorder=3, label='support (fixed)')
+        ax.scatter(*x[fixed].T, c='k', marker='s', s=24 if small else 4, zorder=3,
+                   label='support (fixed)')
+    if loaded.any():
+        load = calc.potential.loads[:, :dim]
+        largest_load = np.linalg.norm(load[loaded], axis=1).max()
+        _arrows(ax, x, load, loaded, arrow_scale(largest_load, extent * LOAD_ARROW / ARROW),
+                'C1', 'load')
     largest = size[free].max(initial=0.0)
-    ftol = force_tolerance(calc.potential) if ftol is None else ftol
+    ftol = force_tolerance(calc.potential, ftol, atoms.positions)
     if largest > ftol:
-        scale = arrow_scale(largest, (high - low).max()) if scale is None else scale
-        arrows = forces[free] / scale
-        label = f'residual force: arrow 1 length unit = {scale:.3g} force units'
-        if dim == 3:
-            ax.quiver(*x[free].T, *arrows.T, color='C3', linewidth=0.8, label=label)
-        else:
-            ax.quiver(*x[free].T, *arrows.T, color='C3', angles='xy', scale_units='xy',
-                      scale=1, width=0.003, zorder=2, label=label)
+        scale = arrow_scale(largest, extent) if scale is None else scale
+        _arrows(ax, x, forces, free, scale, 'C3', 'residual force')
     if dim == 3:
         ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]), zlim=(low[2], high[2]))
-        ax.set_box_aspect((1, 1, 1))
+        ax.set_box_aspect(np.maximum(high - low, THINNEST * extent), zoom=1.1)
     else:
         ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]), aspect='equal')
-    ax.legend(loc='upper left', fontsize=7, framealpha=0.8)
+    ax.legend(loc='upper left', bbox_to_anchor=(0.0, -0.15) if dim == 3 else None, fontsize=7,
+              framealpha=0.8)
     state = 'converged' if largest <= ftol else 'not converged'
     ax.set_title(title if title is not None else
                  f'{len(atoms)} points, {len(calc.springs)} springs, '
@@ -212,20 +242,73 @@ def draw(ax: Axes, atoms: Atoms, colour: str = 'force',
     return lines
 
 
+def _arrows(ax: Axes, x: np.ndarray, vectors: np.ndarray, where: np.ndarray, scale: float,
+            colour: str, what: str) -> None:
+    """Arrows of ``vectors`` at the points ``where`` (a mask), one length
+    unit per ``scale`` force units, labelled ``what`` with the scale; if
+    they are more than :data:`MAX_ARROWS`, of one point in each square of a
+    grid over the net's two largest extents, about :data:`MAX_ARROWS` of
+    them (the legend says the square's side)."""
+    points = np.flatnonzero(where)
+    label = f'{what}: arrow 1 length unit = {scale:.3g} force units'
+    if len(points) > MAX_ARROWS:   # one point in each cell of a grid: evenly spread
+        span = np.ptp(x[points], axis=0)
+        side = float(np.sqrt(np.sort(span)[-2:].prod() / MAX_ARROWS)) or span.max()
+        cells = np.floor((x[points] - x[points].min(axis=0)) / side)
+        points = points[np.sort(np.unique(cells, axis=0, return_index=True)[1])]
+        label += f' (of one point in each {side:.3g} square)'
+    arrows = vectors[points] / scale
+    if x.shape[1] == 3:
+        ax.quiver(*x[points].T, *arrows.T, color=colour, linewidth=0.8, label=label)
+    else:
+        ax.quiver(*x[points].T, *arrows.T, color=colour, angles='xy', scale_units='xy',
+                  scale=1, width=0.003, zorder=2, label=label)
+
+
 def _colour_bar(fig: Figure, ax: Axes, lines: LineCollection, colour: str) -> None:
     if COLOURS[colour] is not None:
-        fig.colorbar(lines, ax=ax, shrink=0.7, label=COLOURS[colour])
+        fig.colorbar(lines, ax=ax, shrink=0.7, pad=0.15 if ax.name == '3d' else 0.04,
+                     label=COLOURS[colour])
+
+
+def label_members(ax: Axes, atoms: Atoms, colour: str = 'force') -> None:
+    """Write each spring's value (:func:`spring_values`: its force ``Q q L``
+    or length, 3 significant digits) at its middle; a ValueError for more
+    than :data:`MAX_LABELS` springs (unreadable) or ``colour`` 'none'."""
+    values = spring_values(atoms, colour)
+    springs = atoms.calc.springs
+    if values is None:
+        raise ValueError("labels show the springs' force or length: colour 'none' has none")
+    if len(springs) > MAX_LABELS:
+        raise ValueError(f'{len(springs)} springs are too many to label (at most '
+                         f'{MAX_LABELS}); draw them coloured, without labels')
+    dim = 3 if ax.name == '3d' else 2
+    middles = atoms.positions[springs].mean(axis=1)[:, :dim]
+    for middle, value in zip(middles, values.tolist(), strict=True):
+        ax.text(*middle, f'{value:.3g}', fontsize=5, ha='center', va='center', zorder=4,
+                bbox={'boxstyle': 'round,pad=0.1', 'fc': 'white', 'ec': 'none',
+                      'alpha': 0.7})
 
 
 def save_picture(atoms: Atoms, path: str | os.PathLike, colour: str = 'force',
                  view: str = 'iso', ftol: float | None = None,
-                 title: str | None = None) -> Figure:
+                 title: str | None = None, labels: bool = False) -> Figure:
     """Draw the net ``atoms`` (:func:`draw`) to an image file, its format
-    by the name; return the figure."""
+    by the name, with each spring's value written on it if ``labels``
+    (:func:`label_members`); return the figure."""
     fig, ax = figure(atoms.calc.dim, view)
     _colour_bar(fig, ax, draw(ax, atoms, colour, ftol=ftol, title=title), colour)
-    fig.savefig(path, dpi=110)
+    if labels:
+        label_members(ax, atoms, colour)
+    fig.savefig(path, dpi=picture_dpi(len(atoms)), bbox_inches='tight')
     return fig
+
+
+def picture_dpi(natoms: int) -> int:
+    """Dots per inch of a still picture of ``natoms`` points: 110, up to
+    three times that for nets of more than 10^4 points (a member about two
+    pixels wide at 50,000 points, on a 7.2 inch wide figure)."""
+    return int(110 * np.clip(np.sqrt(natoms) / 100, 1, 3))
 
 
 def save_animation(frames: Sequence[Atoms], path: str | os.PathLike, fps: int = 8,

@@ -37,9 +37,10 @@ class MaudPotential:
     multiplier of ``Q``, (K,) positive (None: every ``q_s = 1``); ``loads``:
     constant nodal loads ``F``, (N, 3) or, for ``dim=2``, (N, 2), force units
     (None: none; in 2D their z must be 0). Loads change the energy and
-    forces, never a Hessian. Energies count each pair once; forces have
-    ASE's sign, ``f = -dE/dr``. Frozen: a change is a new potential (the
-    spring Hessian it caches stays valid).
+    forces, never a Hessian. ``a = 0`` switches the repulsion off: springs
+    and loads alone, the force-density method (:attr:`repulsive`). Energies
+    count each pair once; forces have ASE's sign, ``f = -dE/dr``. Frozen: a
+    change is a new potential (the spring Hessian it caches stays valid).
     """
 
     springs: np.ndarray
@@ -85,6 +86,12 @@ class MaudPotential:
             raise ValueError(f'loads of atom {k} has z = {float(loads[k, 2])!r}: a dim=2 '
                              'scene takes loads in its plane (z = 0)')
         return loads
+
+    @property
+    def repulsive(self) -> bool:
+        """Whether the points repel: ``a > 0``. At ``a = 0`` nothing is
+        computed in reduced units (there are none) and no backend is called."""
+        return self.a > 0
 
     @property
     def stiffnesses(self) -> float | np.ndarray:
@@ -172,7 +179,9 @@ class MaudPotential:
         ``Q``: ``-B_ij`` off the diagonal, the nodal block ``K_ii = sum_j
         B_ij`` on it (:mod:`.physics`); the repulsion's part by ``backend``
         (:func:`.backends.repulsion_hessian`)."""
-        unit = backends.repulsion_hessian(self.reduced(positions), self.dim, backend)[2]
+        n = self.dim * len(positions)
+        unit = (backends.repulsion_hessian(self.reduced(positions), self.dim, backend)[2]
+                if self.repulsive else np.zeros((n, n)))   # a = 0: the springs alone
         return self.whole_hessian(unit)
 
     def whole_hessian(self, repulsion: np.ndarray) -> np.ndarray:
@@ -200,7 +209,8 @@ class MaudPotential:
         block = v.reshape(-1, n, dim)
         u = np.zeros((len(block), n, 3))
         u[:, :, :dim] = block
-        hv = self.Q * backends.repulsion_hvp(self.reduced(positions), u)[:, :, :dim]
+        hv = (self.Q * backends.repulsion_hvp(self.reduced(positions), u)[:, :, :dim]
+              if self.repulsive else np.zeros(block.shape))
         hv += (self.spring_hessian(n) @ block.reshape(len(block), -1).T
                ).T.reshape(hv.shape)
         return hv.reshape(v.shape)

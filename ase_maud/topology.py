@@ -2,9 +2,9 @@
 have a finite minimum at all, from its spring graph and its loads.
 
 Supports by rule: :func:`boundary_vertices` (a mesh's boundary: the points
-on edges of exactly one face) and :func:`leaf_vertices` (a network's
-leaves: points on exactly one spring); :func:`support_excursion` says how far
-a form strays beyond its supports.
+on edges of exactly one face), :func:`outer_rim` (its outer loop alone) and
+:func:`leaf_vertices` (a network's leaves: points on exactly one spring);
+:func:`support_excursion` says how far a form strays beyond its supports.
 
 Finite minima: a spring component free to translate in 3D beside other components feels
 their repulsion as a sum of 1/L terms, a harmonic function of its translation:
@@ -43,23 +43,55 @@ def spring_components(natoms: int, springs: ArrayLike) -> np.ndarray:
     return connected_components(graph, directed=False)[1]
 
 
-def boundary_vertices(faces: Iterable[Sequence[int]]) -> np.ndarray:
-    """Sorted indices of the points on a mesh's boundary: the ends of the
-    edges that belong to exactly one face.
+def boundary_edges(faces: Iterable[Sequence[int]]) -> np.ndarray:
+    """The edges of a mesh that belong to exactly one face, (E, 2) sorted
+    pairs of point indices.
 
     ``faces`` are rings of point indices (each ring closed from its last
     point to its first). An edge is the unordered pair of its ends, so the
     faces' orientations need not agree; an edge of three or more faces (a
-    non-manifold edge) is not on the boundary. Each point appears once.
+    non-manifold edge) is not on the boundary.
     """
-    count: dict[tuple[int, int], int] = {}
+    by_size: dict[int, list[Sequence[int]]] = {}   # numpy does the work, size by size
     for face in faces:
-        ring = [int(i) for i in face]
-        for i, j in zip(ring, ring[1:] + ring[:1], strict=True):
-            edge = (min(i, j), max(i, j))
-            count[edge] = count.get(edge, 0) + 1
-    ends = [i for edge, n in count.items() if n == 1 for i in edge]
-    return np.unique(np.array(ends, dtype=int))
+        by_size.setdefault(len(face), []).append(face)
+    pairs = [np.zeros((0, 2), dtype=int)]
+    for rings in by_size.values():
+        ring = np.asarray(rings, dtype=int)
+        pairs.append(np.stack([ring, np.roll(ring, -1, axis=1)], axis=-1).reshape(-1, 2))
+    edges, count = np.unique(np.sort(np.concatenate(pairs), axis=1), axis=0,
+                             return_counts=True)
+    return edges[count == 1]
+
+
+def boundary_vertices(faces: Iterable[Sequence[int]]) -> np.ndarray:
+    """Sorted indices of the points on a mesh's boundary: the ends of the
+    edges that belong to exactly one face (:func:`boundary_edges`), each
+    once."""
+    return np.unique(boundary_edges(faces))
+
+
+def outer_rim(faces: Iterable[Sequence[int]], positions: np.ndarray) -> np.ndarray:
+    """Sorted indices of the points of a mesh's outer rim: of the loops of
+    its boundary (:func:`boundary_edges`, joined where they share a point),
+    the one of largest extent (the diagonal of its points' bounding box,
+    ``positions`` (N, 3)): a hole's rim is left free. Empty for a closed
+    mesh."""
+    edges = boundary_edges(faces)
+    if not len(edges):
+        return np.zeros(0, dtype=int)
+    points, local = np.unique(edges, return_inverse=True)
+    loops = spring_components(len(points), local.reshape(-1, 2))
+    extent = [np.linalg.norm(np.ptp(positions[points[loops == k]], axis=0))
+              for k in range(loops.max() + 1)]
+    return points[loops == int(np.argmax(extent))]
+
+
+def mean_spring_length(positions: np.ndarray, springs: ArrayLike) -> float:
+    """The mean length of the springs ((K, 2) pairs, K >= 1), in the
+    positions' unit."""
+    i, j = np.asarray(springs, dtype=int).reshape(-1, 2).T
+    return float(np.linalg.norm(positions[i] - positions[j], axis=1).mean())
 
 
 def leaf_vertices(natoms: int, springs: ArrayLike) -> np.ndarray:

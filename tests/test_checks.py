@@ -59,7 +59,7 @@ def test_an_unknown_calculator_parameter_is_named():
     (['backends', '--natoms', '-5'], 'count must be a whole number >= 1'),
     (['classify', 'net.obj', '-k', '-3'], 'count must be a whole number >= 1'),
     (['relax', '--steps', '-1'], 'steps must be a whole number >= 0'),
-    (['relax', '--a', '0'], 'a must be a positive finite number'),
+    (['relax', '--a', '-1'], 'a must be a finite number >= 0'),
     (['relax', '--threads', '0'], 'count must be a whole number >= 1'),
 ])
 def test_command_line_values_follow_the_rules(argv, message, capsys):

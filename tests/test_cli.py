@@ -217,7 +217,7 @@ def test_relax_net_options_need_a_file(capsys, option):
     (['relax', 'absent.obj'], 'absent.obj: No such file or directory'),
     (['relax', 'bad.obj'], 'bad.obj line 3: face index 9 out of range'),
     (['relax', 'net.obj', '--fixed', 'absent.txt'],
-     "fixed='absent.txt' is neither a rule (boundary, leaves) nor a file"),
+     "fixed='absent.txt' is neither a rule (boundary, outer, leaves) nor a file"),
     (['classify', 'bad.obj'], 'bad.obj line 3: face index 9 out of range'),
     (['show', 'net.obj', '-o', 'net.txt'], "--output 'net.txt': a picture is written as one "
      'of .'),
@@ -277,7 +277,7 @@ def relaxation(tmp_path_factory):
         path, *_ = write_quad_net(folder, 'obj', n=4, seed=dim, flat=flat)
         trajectories[dim] = folder / f'net{dim}.traj'
         assert main(['relax', str(path), '--fixed', str(folder / 'fixed.txt'), '--fmax',
-                     '1e-8', '--traj', str(trajectories[dim]), '--quiet']) == 0
+                     '1e-8', '--traj', str(trajectories[dim]), '--quiet', '--a', '0.3']) == 0
     return trajectories
 
 
@@ -336,7 +336,7 @@ def test_classify_judges_at_the_fmax_relaxed_to(tmp_path, capsys, seed):
     it), not at the default 1e-6 Q a, unless --fmax says otherwise."""
     path, *_ = write_quad_net(tmp_path, 'obj', n=4, seed=seed)
     traj = tmp_path / 'r.traj'
-    assert main(['relax', str(path), '--fixed', str(tmp_path / 'fixed.txt'),
+    assert main(['relax', str(path), '--fixed', str(tmp_path / 'fixed.txt'), '--a', '0.3',
                  '--fmax', '1e-2', '--traj', str(traj), '--quiet']) == 0
     fmax = np.linalg.norm(read(traj).get_forces(), axis=1).max()
     assert 1e-6 < fmax < 1e-2   # the default would judge otherwise
@@ -414,3 +414,14 @@ def test_saddles_checks_its_output_first(tmp_path):
     with pytest.raises(ValueError, match='--out .*does not exist'):
         cli.check_outputs(cli.build_parser().parse_args(
             ['saddles', 'x.traj', '--out', str(tmp_path / 'no' / 'g.png')]))
+
+
+def test_help_imports_nothing_heavy():
+    """ase-maud --help imports argparse, not numpy, numba, ASE or matplotlib:
+    it answers at once."""
+    code = ('import sys\nfrom ase_maud.cli import main\n'
+            'try:\n    main(["--help"])\nexcept SystemExit:\n    pass\n'
+            'print(sorted({"numpy", "numba", "ase", "scipy", "matplotlib"} & set(sys.modules)))')
+    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          check=True)
+    assert done.stdout.startswith('usage: ase-maud') and done.stdout.endswith('[]\n')

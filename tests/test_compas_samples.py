@@ -96,10 +96,21 @@ def test_samples_relax_from_the_command_line(tmp_path, capsys, name):
     start = read_net(path, fixed=rule)
     held = fixed_atoms(start)
     np.testing.assert_array_equal(relaxed.positions[held], start.positions[held])
-    if path.suffix == '.json':   # everything but the coordinates as it was
+    if path.suffix == '.json':   # everything but the coordinates as it was, and
+        # the results: supports, member forces and reactions (ase_maud.results)
+        document = json.loads(out.read_text())
+        reactions = {key: [vertex.pop(name) for name in ('rx', 'ry', 'rz')]
+                     for key, vertex in document['vertex'].items() if 'rx' in vertex}
+        assert len(reactions) == held.sum()
+        members = document.pop('edgedata')
+        assert len(members) == len(relaxed.calc.springs)
+        assert all({'q', 'force', 'length'} <= set(m) for m in members.values())
+        original = json.loads(path.read_text())
+        original.pop('edgedata', None)
+
         def strip(document):
             for vertex in document['vertex'].values():
-                for axis in 'xyz':
-                    vertex.pop(axis)
+                for name in ('x', 'y', 'z', 'is_anchor', 'is_fixed'):
+                    vertex.pop(name, None)
             return document
-        assert strip(json.loads(out.read_text())) == strip(json.loads(path.read_text()))
+        assert strip(document) == strip(original)

@@ -91,3 +91,17 @@ def test_quick_start_relax_compiles_once_into_the_user_cache(tmp_path):
     assert not [f for f in package.rglob('*.nb[ic]') if f.stat().st_mtime >= start]
     assert second[1] == ''
     assert second[0].splitlines()[-1] == first[0].splitlines()[-1]
+
+
+def test_form_finding(monkeypatch, tmp_path, capsys):
+    """The canopy hangs from its outer rim: the reactions balance its load,
+    the cables round the opening carry it, and the files are written."""
+    run_example('form_finding.py', ['--weight', '0.3'], monkeypatch, tmp_path)
+    out = capsys.readouterr().out
+    assert 'canopy.obj: 100 points, 180 members, 36 supports, a = 0.0' in out
+    assert '4 cables round the opening at q = 3.0' in out
+    balance = float(out.split('reactions + loads = ')[1].split()[0])
+    assert balance < 1e-9 * 0.3 * 64
+    assert float(out.split('sag at the opening: ')[1].split()[0]) > 0.1
+    for name in ('canopy_forces.csv', 'canopy.json', 'canopy.png'):
+        assert (tmp_path / name).stat().st_size > 0

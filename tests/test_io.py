@@ -98,11 +98,12 @@ def write_quad_net(folder, kind, n=5, seed=0, flat=False):
     return path, positions, springs, fixed
 
 
-def rule_a(positions, springs):
-    """The a that a net read from a file gets: the rule's fraction of the
-    mean length of its springs."""
-    return A_PER_MEAN_SPRING * np.mean([np.linalg.norm(positions[i] - positions[j])
-                                        for i, j in springs])
+def rule_a(positions, springs, supported=True):
+    """The a that a net read from a file gets: 0 (the force-density
+    equilibrium) if its supports hold every spring component, else the
+    rule's fraction of the mean length of its springs."""
+    return 0.0 if supported else A_PER_MEAN_SPRING * np.mean(
+        [np.linalg.norm(positions[i] - positions[j]) for i, j in springs])
 
 
 def relaxed_in_python(positions, springs, fixed, dim=3, fmax=1e-6):

@@ -2,6 +2,7 @@
 supports and loads in the legend, residual-force arrows at the stated scale
 and none when converged, the 3D view), not how the pixels look."""
 
+import io
 import math
 
 import matplotlib
@@ -15,6 +16,8 @@ from ase_maud import Maud, MaudCalculator
 from ase_maud.pictures import (
     ARROW,
     COLOURS,
+    MAX_ARROWS,
+    SMALL_NET,
     VIEWS,
     arrow_scale,
     draw,
@@ -154,18 +157,43 @@ def test_arrow_scale_is_the_least_1_2_5_number(seed):
 
 @pytest.mark.parametrize('seed', SEEDS)
 def test_supports_and_loads_in_the_legend(seed):
-    atoms = shaken('hanging_net', seed)
+    """Supports as markers, loads as arrows at their stated scale (of the
+    free points only)."""
+    atoms = shaken('net2d', seed)
     loads = np.zeros((len(atoms), 3))
-    loaded = np.random.default_rng(seed).choice(len(atoms), 5, replace=False)
-    loads[loaded, 2] = -1.0
+    rng = np.random.default_rng(seed)
+    loaded = rng.choice(len(atoms), 5, replace=False)
+    loads[loaded, :2] = rng.normal(size=(5, 2))
     atoms.calc.set(loads=loads)
+    fig, ax = figure(2)
+    draw(ax, atoms)
+    texts = legend_texts(ax)
+    assert {'free point', 'support (fixed)'} <= set(texts)
+    fixed = set(atoms.constraints[0].index.tolist())
+    (quiver,) = [c for c in ax.collections if c.get_label().startswith('load: ')]
+    free = sorted(set(loaded.tolist()) - fixed)
+    scale = float(quiver.get_label().split('= ')[1].split(' force')[0])
+    assert np.allclose(np.column_stack([quiver.U, quiver.V]) * scale, loads[free, :2],
+                       rtol=1e-3)
+
+
+def test_large_nets_mark_supports_only_and_thin_their_arrows():
+    """Above SMALL_NET points no free-point markers; about MAX_ARROWS load
+    arrows, spread over the net, the legend saying how."""
+    atoms = build('hanging_net', 30, seed=0)   # 900 points
+    assert len(atoms) > SMALL_NET
+    free = ~np.isin(np.arange(len(atoms)), atoms.constraints[0].index)
+    atoms.calc.set(loads=np.where(free[:, None], [0.0, 0.0, -0.1], 0.0))
     fig, ax = figure(3)
     draw(ax, atoms)
     texts = legend_texts(ax)
-    assert {'free point', 'support (fixed)', 'loaded point'} <= set(texts)
-    fixed = set(atoms.constraints[0].index.tolist())
-    marked = next(c for c in ax.collections if c.get_label() == 'loaded point')
-    assert len(marked.get_offsets()) == len(set(loaded.tolist()) - fixed)
+    assert 'free point' not in texts and 'support (fixed)' in texts
+    (load,) = [text for text in texts if text.startswith('load: arrow 1 length unit = ')]
+    assert 'square)' in load
+    (quiver,) = [c for c in ax.collections if c.get_label() == load]
+    fig.savefig(io.BytesIO(), format='png')   # a 3D collection projects when drawn
+    drawn = len(quiver.get_segments()) / 3   # a shaft and two head strokes each
+    assert MAX_ARROWS / 3 < drawn <= 1.5 * MAX_ARROWS
 
 
 @pytest.mark.parametrize('view', list(VIEWS))
@@ -187,3 +215,16 @@ def test_animation_writes_every_frame(tmp_path):
     frames = [shaken('net2d', seed, amount=amount) for seed, amount in ((0, 0.3), (0, 0.1))]
     assert save_animation(frames, tmp_path / 'run.gif') == 2
     assert (tmp_path / 'run.gif').read_bytes()[:6] == b'GIF89a'
+
+
+@pytest.mark.parametrize('colour', ['force', 'length'])
+def test_labels_give_each_member_its_value(tmp_path, colour):
+    atoms = shaken('hanging_net', int(np.random.default_rng().integers(100)))
+    fig = save_picture(atoms, tmp_path / 'labels.png', colour=colour, labels=True)
+    texts = [t.get_text() for t in fig.axes[0].texts]
+    assert texts == [f'{v:.3g}' for v in spring_values(atoms, colour)]
+    with pytest.raises(ValueError, match="colour 'none' has none"):
+        save_picture(atoms, tmp_path / 'plain.png', colour='none', labels=True)
+    big = build('hanging_net', 20, seed=0)
+    with pytest.raises(ValueError, match=r'springs are too many to label \(at most 300\)'):
+        save_picture(big, tmp_path / 'big.png', labels=True)

@@ -368,7 +368,8 @@ def test_off_plane_error_says_what_to_add():
     (('ring', np.nan), {}, r'ring needs an integer size >= 3, got nan'),
     (('chain', None), {'seed': 'x'}, r"seed must be a whole number >= 0, got 'x'"),
     (('chain', None), {'seed': 1.5}, r'seed must be a whole number >= 0, got 1.5'),
-    (('ring', 8), {'a': 'x'}, r"a must be a positive finite number, got 'x'"),
+    (('ring', 8), {'a': 'x'}, r"a must be a finite number >= 0 \(0: no repulsion, "
+     r"the force-density method\), got 'x'"),
     (('ring', 8), {'b': 1}, r"build takes the keywords a and Q, got \['b'\]"),
     (('molecule', 'XYZ'), {}, r"molecule needs the name of a molecule of ase.collections.g2 "
                               r".*got 'XYZ'"),

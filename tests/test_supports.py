@@ -9,7 +9,7 @@ from test_io import quad_net, write_quad_net
 
 from ase_maud import Maud
 from ase_maud.cli import main
-from ase_maud.io import A_PER_MEAN_SPRING, read_net, write_net
+from ase_maud.io import A_PER_MEAN_SPRING, mean_spring_length, read_net, write_net
 from ase_maud.topology import boundary_vertices, leaf_vertices, support_excursion
 
 HAND_CHECKED = [
@@ -130,7 +130,7 @@ def test_read_net_fixes_the_leaves_of_a_network(tmp_path):
     with pytest.raises(ValueError, match=r"fixed='leaves' finds no point"):
         read_net(closed, fixed='leaves')
     with pytest.raises(ValueError, match=r"fixed='bondary' is neither a rule \(boundary, "
-                       r'leaves\) nor a file'):
+                       r'outer, leaves\) nor a file'):
         read_net(path, fixed='bondary')
     (tmp_path / 'leaves').write_text('0 3\n')   # a file of that name, given as a Path
     assert read_net(path, fixed=tmp_path / 'leaves').constraints[0].index.tolist() == [0, 3]
@@ -138,12 +138,20 @@ def test_read_net_fixes_the_leaves_of_a_network(tmp_path):
 
 @pytest.mark.parametrize('seed', range(3))
 def test_a_of_a_file_is_a_fraction_of_its_mean_spring(tmp_path, seed):
-    """Files without a stored a get the rule's; a trajectory keeps its own,
-    the calculator's default 1 included; a given a wins."""
+    """Files without a stored a get the rule's (0, the force-density
+    equilibrium, where supports hold every spring component); a trajectory
+    keeps its own, the calculator's default 1 included; a given a wins."""
     path, positions, springs, _ = write_quad_net(tmp_path, 'obj', seed=seed)
     mean = np.mean([np.linalg.norm(positions[i] - positions[j]) for i, j in springs])
     assert read_net(path).calc.parameters['a'] == pytest.approx(A_PER_MEAN_SPRING * mean,
                                                                 rel=1e-14)
+    assert read_net(path, fixed='boundary').calc.parameters['a'] == 0.0
+    assert read_net(path, fixed=[0]).calc.parameters['a'] == 0.0   # one component
+    (tmp_path / 'two.txt').write_text('0 1\n2 3\n')
+    assert read_net(path, edges=tmp_path / 'two.txt', fixed=[0]).calc.parameters['a'] \
+        == pytest.approx(A_PER_MEAN_SPRING * np.linalg.norm(positions[0] - positions[1])
+                         / 2 + A_PER_MEAN_SPRING * np.linalg.norm(positions[2] - positions[3])
+                         / 2, rel=1e-14)
     assert read_net(path, a=2.5).calc.parameters['a'] == 2.5
     atoms = read_net(path, a=1.0)
     write_net(tmp_path / 'one.traj', atoms)
@@ -152,11 +160,18 @@ def test_a_of_a_file_is_a_fraction_of_its_mean_spring(tmp_path, seed):
 
 def test_relax_warns_when_a_balloons_the_net(tmp_path, capsys):
     """A quad net relaxed with a far above its spring length leaves its
-    supports' box and is warned about, naming --a; with the rule's a it is
-    not."""
+    supports' box and is warned about, naming --a; with the default a (0, the
+    force-density equilibrium) it is not, nor with the rule's a."""
     path, *_ = write_quad_net(tmp_path, 'obj', n=6, seed=0)
     traj = str(tmp_path / 'r.traj')
     assert main(['relax', str(path), '--fix', 'boundary', '--quiet', '--traj', traj]) == 0
+    out, err = capsys.readouterr()
+    assert 'a 0 (the force-density equilibrium: no repulsion)' in out
+    assert 'warning' not in err
+    a = A_PER_MEAN_SPRING * mean_spring_length(read_net(path).positions,
+                                               read_net(path).calc.springs)
+    assert main(['relax', str(path), '--fix', 'boundary', '--quiet', '--traj', traj,
+                 '--a', repr(a)]) == 0
     out, err = capsys.readouterr()
     assert f'({A_PER_MEAN_SPRING:g} x the mean spring length at the start)' in out
     assert 'warning' not in err
@@ -165,7 +180,7 @@ def test_relax_warns_when_a_balloons_the_net(tmp_path, capsys):
     relaxed = read_net(traj)
     beyond, diagonal = support_excursion(relaxed)
     assert beyond > diagonal / 10
-    assert 'ase-maud: warning: free points reach' in err and '--a' in err
+    assert 'ase-maud: warning: the repulsion of a = 4 carries' in err and '--a' in err
 
 
 def test_relax_fixes_by_rule_like_python(tmp_path, capsys):

@@ -27,6 +27,11 @@ ANCHOR_ATTRIBUTES = ('is_anchor', 'is_fixed')
 LOAD_ATTRIBUTES = ('px', 'py', 'pz')
 
 
+#: Vertex (node) attributes that :func:`compas_text` gives each support: its
+#: reaction (:mod:`ase_maud.results`).
+REACTION_ATTRIBUTES = ('rx', 'ry', 'rz')
+
+
 def _compas_data(path: PathLike, number=None) -> tuple[Any, dict[str, Any]]:
     """The whole JSON document of a COMPAS file and its data dict;
     ``number(text)`` makes every number if given."""
@@ -255,16 +260,24 @@ def _placed(places):
     return number
 
 
-def compas_text(atoms, like):
+def compas_text(atoms, like, result=None):
     """The COMPAS JSON text of ``atoms``: ``like`` as it is but for the
-    x, y, z that moved, or a COMPAS 2.x graph. A file whose ``q`` or loads
-    the net changes, or with a vertex that takes a coordinate from the
-    defaults and moves in it, is written anew, without its layout."""
+    x, y, z that moved, or a COMPAS 2.x graph. A file whose ``q``, loads or
+    supports (``is_anchor``) the net changes, or with a vertex that takes a
+    coordinate from the defaults and moves in it, is written anew, without
+    its layout; so is one given a ``result`` (a
+    :class:`~ase_maud.results.FormResult` of ``atoms``), whose member forces
+    become edge attributes ``q`` (``Q q``, force per length), ``force``
+    (``Q q L``, tension positive) and ``length``, and whose reactions vertex
+    attributes ``rx``, ``ry``, ``rz`` of the supports."""
     potential = atoms.calc.potential
     q = np.broadcast_to(potential.stiffnesses, len(potential.springs))
     loads = np.zeros((len(atoms), 3)) if potential.loads is None else potential.loads
     if like is None:
-        return json.dumps(_compas_graph(atoms, q, loads))
+        document = _compas_graph(atoms, q, loads)
+        if result is not None:
+            _set_results(like, document['data'], result)
+        return json.dumps(document)
     places = itertools.count()
     document, data = _compas_data(like, number=_placed(places))
     points, defaults = _compas_points(like, data)
@@ -283,7 +296,11 @@ def compas_text(atoms, like):
             elif value != defaults.get(axis):
                 layout = False
             attributes[axis] = value
-    if _update_forces(like, data, atoms.calc.springs, q, loads) or not layout:
+    changed = _update_forces(like, data, atoms.calc.springs, q, loads)
+    changed = _update_supports(like, data, fixed_atoms(atoms)) or changed
+    if result is not None:
+        _set_results(like, data, result)
+    if changed or result is not None or not layout:
         return json.dumps(document)
     pieces, done = [mark], 0
     for start in sorted(edits):
@@ -318,6 +335,49 @@ def _update_forces(path, data, springs, q, loads) -> bool:
             attributes['q'] = float(q[s])
         changed = True
     return changed
+
+
+def _update_supports(path, data, fixed) -> bool:
+    """Mark the points ``fixed`` (a boolean mask) of COMPAS ``data`` (read
+    from ``path``) ``is_anchor`` true, and the others false where the file
+    says they are anchors (``is_anchor`` or ``is_fixed``); whether anything
+    was set."""
+    points, defaults = _compas_points(path, data)
+    changed = False
+    for attributes, held in zip(points.values(), fixed.tolist(), strict=True):
+        said = any(attributes.get(name, defaults.get(name)) for name in ANCHOR_ATTRIBUTES)
+        if said != held:
+            attributes['is_anchor'] = held
+            if not held:
+                attributes['is_fixed'] = False
+            changed = True
+    return changed
+
+
+def _set_results(path, data, result) -> None:
+    """Edge attributes ``q``, ``force``, ``length`` of every member of
+    ``result`` (a FormResult) and vertex attributes ``rx``, ``ry``, ``rz``
+    of every support, in COMPAS ``data`` (of ``path``, or None for a graph
+    written anew); a member that is no edge of the data (from an edge list)
+    is left out."""
+    points, _ = _compas_points(path, data)
+    keys = list(points)
+    edges = _edge_attributes(data, {str(k): n for n, k in enumerate(keys)})
+    mesh = 'face' in data
+    for (i, j), density, force, length in zip(
+            result.edges.tolist(), result.force_densities.tolist(), result.forces.tolist(),
+            result.lengths.tolist(), strict=True):
+        pair = (min(i, j), max(i, j))
+        if pair not in edges:
+            if not mesh:
+                continue
+            edges[pair] = [data.setdefault('edgedata', {}).setdefault(
+                f'({keys[pair[0]]}, {keys[pair[1]]})', {})]
+        for attributes in edges[pair]:   # each time the file lists it
+            attributes.update(q=density, force=force, length=length)
+    for n, reaction in zip(result.supports.tolist(), result.reactions.tolist(),
+                           strict=True):
+        points[keys[n]].update(zip(REACTION_ATTRIBUTES, reaction, strict=True))
 
 
 def _compas_graph(atoms, q, loads):

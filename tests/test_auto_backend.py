@@ -94,8 +94,31 @@ def test_choices_follow_n_tol_and_threads(monkeypatch):
     assert picked(10**9, tol=0.0) == [exact]         # 0: exact
     assert picked(3, tol=1e-12, crossover=3)[0][0] == 'fmm'
     assert picked(10**6, tol=1e-300, crossover=3) == [exact]   # beyond FMM3D
+    monkeypatch.setenv(fmm.THREADS_VARIABLE, '4')       # an OpenMP build
+    assert auto.crossover_points(1e-3, 3, False) == 100 * 2 / 4
+    assert picked(49, tol=1e-3) == [exact]
+    assert picked(50, tol=1e-3)[0][0] == 'fmm'          # 100 x 2 / 4
+    assert picked(24, blocks=True, tol=1e-3) == [exact]
+    assert picked(25, blocks=True, tol=1e-3)[0][0] == 'fmm'   # 50 x 2 / 4
     monkeypatch.setitem(sys.modules, 'fmm3dpy', None)   # not installed
     assert picked(10**9, tol=1e-4) == [exact]
+
+
+@pytest.mark.parametrize('value, threads', [(None, 1), ('1', 1), ('3', 3)])
+def test_fmm_threads_as_declared(monkeypatch, value, threads):
+    if value is None:
+        monkeypatch.delenv(fmm.THREADS_VARIABLE, raising=False)
+    else:
+        monkeypatch.setenv(fmm.THREADS_VARIABLE, value)
+    assert fmm.threads() == threads
+
+
+@pytest.mark.parametrize('bad', ['0', '-2', '1.5', 'two', ''])
+def test_bad_fmm_threads_name_the_variable(monkeypatch, bad):
+    monkeypatch.setenv(fmm.THREADS_VARIABLE, bad)
+    with pytest.raises(ValueError, match=f'{fmm.THREADS_VARIABLE} must be '
+                       f'a positive integer .* got {bad!r}'):
+        auto.choose(10**6, 3, False, tol=1e-4)
 
 
 def test_set_tol_keeps_results_that_meet_it(random_points):

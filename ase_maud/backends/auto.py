@@ -43,10 +43,10 @@ DEFAULT_TOL = 1e-8
 #: Between two rows the crossover is interpolated in log-log; below the last
 #: row the FMM is never used.
 CROSSOVER: dict[tuple[int, bool], dict[float, int]] = {
-    (3, False): {0.001: 12000, 1e-06: 29000, 1e-09: 53000, 1e-12: 190000},
-    (3, True): {0.001: 14000, 1e-06: 38000, 1e-09: 65000, 1e-12: 272000},
-    (2, False): {0.001: 11000, 1e-06: 27000, 1e-09: 49000},
-    (2, True): {0.001: 12000, 1e-06: 33000, 1e-09: 64000},
+    (3, False): {0.001: 12100, 1e-06: 29200, 1e-09: 66400, 1e-12: 280400},
+    (3, True): {0.001: 13600, 1e-06: 36700, 1e-09: 83300, 1e-12: 367900},
+    (2, False): {0.001: 11100, 1e-06: 28200, 1e-09: 55700},
+    (2, True): {0.001: 13800, 1e-06: 28800, 1e-09: 59600},
 }
 #: The finest ``fmm_eps`` asked of the FMM (a ``tol`` below 10 times it, even
 #: with ``crossover`` set, takes the direct sum: FMM3D cannot promise it).

@@ -119,8 +119,9 @@ class MaudCalculator(Calculator):
     threads: ``NUMBA_NUM_THREADS`` at start-up, or
     ``numba.set_num_threads(n)`` (or :func:`ase_maud.threads.pin_threads`)
     later. The FMM follows ``OMP_NUM_THREADS`` if fmm3dpy was built with
-    OpenMP; the PyPI wheel was not and runs on one thread (the ``auto``
-    crossovers assume that).
+    OpenMP; the PyPI wheel was not and runs on one thread. The ``auto``
+    crossovers count the FMM's threads as ``ASE_MAUD_FMM_THREADS`` declares
+    them (unset: one; :func:`ase_maud.backends.fmm.threads`).
 
     Memory is O(N) on every path but ``hessian``: no N x N array is built
     for energy, forces or stiffness.

@@ -94,8 +94,50 @@ def test_choices_follow_n_tol_and_threads(monkeypatch):
     assert picked(10**9, tol=0.0) == [exact]         # 0: exact
     assert picked(3, tol=1e-12, crossover=3)[0][0] == 'fmm'
     assert picked(10**6, tol=1e-300, crossover=3) == [exact]   # beyond FMM3D
+    monkeypatch.setenv(fmm.THREADS_VARIABLE, '4')       # an OpenMP build
+    assert auto.crossover_points(1e-3, 3, False) == 100 * 2 / 4
+    assert picked(49, tol=1e-3) == [exact]
+    assert picked(50, tol=1e-3)[0][0] == 'fmm'          # 100 x 2 / 4
+    assert picked(24, blocks=True, tol=1e-3) == [exact]
+    assert picked(25, blocks=True, tol=1e-3)[0][0] == 'fmm'   # 50 x 2 / 4
     monkeypatch.setitem(sys.modules, 'fmm3dpy', None)   # not installed
     assert picked(10**9, tol=1e-4) == [exact]
+
+
+@pytest.mark.parametrize('numba_threads, fmm_threads, start', [
+    (1, '1', 16230), (2, '1', 32460), (2, '2', 16230), (1, '2', 8115)])
+def test_choice_at_tol_1e4_follows_the_measured_table(
+        monkeypatch, numba_threads, fmm_threads, start):
+    """docs/calculator.md: in 3D at tol 1e-4 (E+F) the FMM wins from 16230
+    points with one thread each (log-log between the 1e-3 and 1e-6 rows),
+    twice that with the direct sum on 2 threads and the wheel on one; a
+    6x10^4-point net takes the FMM in either case."""
+    monkeypatch.setattr(numba, 'get_num_threads', lambda: numba_threads)
+    monkeypatch.setenv(fmm.THREADS_VARIABLE, fmm_threads)
+    assert auto.crossover_points(1e-4, 3, False) == pytest.approx(start)
+    below = auto.choose(int(start) - 1, 3, False, tol=1e-4)
+    above = auto.choose(int(start) + 1, 3, False, tol=1e-4)
+    assert [c.backend.name for c in below] == ['numba']
+    assert [c.backend.name for c in above] == ['fmm', 'numba']
+    assert above[0].options == {'fmm_eps': 1e-4}
+    assert auto.choose(60025, 3, False, tol=1e-4)[0].backend.name == 'fmm'
+
+
+@pytest.mark.parametrize('value, threads', [(None, 1), ('1', 1), ('3', 3)])
+def test_fmm_threads_as_declared(monkeypatch, value, threads):
+    if value is None:
+        monkeypatch.delenv(fmm.THREADS_VARIABLE, raising=False)
+    else:
+        monkeypatch.setenv(fmm.THREADS_VARIABLE, value)
+    assert fmm.threads() == threads
+
+
+@pytest.mark.parametrize('bad', ['0', '-2', '1.5', 'two', ''])
+def test_bad_fmm_threads_name_the_variable(monkeypatch, bad):
+    monkeypatch.setenv(fmm.THREADS_VARIABLE, bad)
+    with pytest.raises(ValueError, match=f'{fmm.THREADS_VARIABLE} must be '
+                       f'a positive integer .* got {bad!r}'):
+        auto.choose(10**6, 3, False, tol=1e-4)
 
 
 def test_set_tol_keeps_results_that_meet_it(random_points):

@@ -2,12 +2,15 @@
 behind ``backend='auto'`` (ase_maud.backends.auto.CROSSOVER and
 ase_maud.backends.fmm.FORCE_ERROR_PER_EPS).
 
-Timing: CPU seconds per call of the numba direct sum and of the FMM at several
+Timing: seconds per call of the numba direct sum and of the FMM at several
 ``fmm_eps``, for energy + forces (E+F) and with the nodal blocks (E+F+K), on
 N random points of unit density in a cube (dim 3) or a square (dim 2). The
 direct sum is timed up to ``--direct-max`` points and fitted as ``alpha
 N**2`` beyond; the crossover is the N where the FMM's time (interpolated
-log-log, extrapolated linearly past the last N) meets it.
+log-log, extrapolated linearly past the last N) meets it. The clock is CPU
+time when both run on one thread (``NUMBA_NUM_THREADS=1`` and
+``ASE_MAUD_FMM_THREADS`` unset: the numbers of ``auto.CROSSOVER``), else
+wall time (to check how the crossover moves with threads).
 
 Errors (``--errors``): the FMM's largest force error (norm over points),
 relative to the largest force, against the exact direct sum, over seeds, on
@@ -19,6 +22,8 @@ FORCE_ERROR_PER_EPS.
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \
         python tools/backend_crossover.py --errors \
         --out docs/bench/crossover_backends.md
+    NUMBA_NUM_THREADS=2 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \
+        python tools/backend_crossover.py --out crossover_2threads.md
 """
 
 import argparse
@@ -45,15 +50,27 @@ def points(n, dim, seed=0):
     return p
 
 
+def cpu_clock():
+    """Whether to time by CPU time: if the direct sum and the FMM each run
+    on one thread (it does not count the time others' processes take; else
+    wall time)."""
+    return numba.get_num_threads() == 1 and fmm.threads() == 1
+
+
+def clock():
+    """Seconds by the clock :func:`cpu_clock` says."""
+    return time.process_time() if cpu_clock() else time.perf_counter()
+
+
 def seconds(evaluate, repeats):
-    """Best CPU time of ``repeats`` calls after one warm-up call (CPU time:
-    on one thread it does not count the time others' processes take)."""
+    """Best time (:func:`clock`) of ``repeats`` calls after one warm-up
+    call."""
     evaluate()
     best = np.inf
     for _ in range(repeats):
-        start = time.process_time()
+        start = clock()
         evaluate()
-        best = min(best, time.process_time() - start)
+        best = min(best, clock() - start)
     return best
 
 
@@ -163,18 +180,20 @@ def errors(n, seeds, eps_list):
 
 def timing_section(rows, table):
     """Markdown: the crossover table, as CROSSOVER, and the seconds."""
-    lines = ['## Crossover N (FMM faster above it), one numba thread', '',
+    lines = ['## Crossover N (FMM faster above it), numba threads '
+             f'{numba.get_num_threads()}, FMM threads {fmm.threads()}', '',
              '| dim | computes | ' + ' | '.join(f'fmm_eps {e:g}' for e in EPS)
              + ' |', '|---|---|' + '---|' * len(EPS)]
     for (dim, blocks), row in table.items():
         lines.append(f'| {dim} | {"E+F+K" if blocks else "E+F"} | '
                      + ' | '.join(f'{row[e]:.0f}' for e in EPS) + ' |')
-    lines += ['', 'As ase_maud.backends.auto.CROSSOVER:', '', '```python',
-              '{' + ',\n '.join(
-                  f'({d}, {b}): {{' + ', '.join(f'{e:g}: {round(v, -2):.0f}'
-                                               for e, v in row.items()) + '}'
-                  for (d, b), row in table.items()) + '}', '```', '',
-              '## CPU seconds per call', '',
+    if cpu_clock():   # one thread each: the layout of auto.CROSSOVER
+        lines += ['', 'As ase_maud.backends.auto.CROSSOVER:', '', '```python',
+                  '{' + ',\n '.join(
+                      f'({d}, {b}): {{' + ', '.join(
+                          f'{e:g}: {round(v, -2):.0f}' for e, v in row.items())
+                      + '}' for (d, b), row in table.items()) + '}', '```']
+    lines += ['', f'## {"CPU" if cpu_clock() else "Wall"} seconds per call', '',
               '| dim | computes | N | backend | seconds |', '|---|---|---|---|---|']
     return lines + [f'| {d} | {"E+F+K" if b else "E+F"} | {n} | {name} | {t:.4g} |'
                     for d, b, n, name, t in rows]
@@ -203,11 +222,14 @@ def main():
     if not args.no_timing:
         lines += timing_section(*timing(args.sizes, args.direct_max,
                                         args.repeats, args.dims))
+    threads, fmm_threads = numba.get_num_threads(), fmm.threads()
+    declared = (f'{fmm.THREADS_VARIABLE}={fmm_threads} ' if fmm_threads > 1
+                else '')
     header = (f'# Backend crossovers\n\nMeasured {time.strftime("%Y-%m-%d")}, '
-              f'numba threads {numba.get_num_threads()}, fmm3dpy wheel (one '
-              'thread): `NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 '
-              f'OPENBLAS_NUM_THREADS=1 python tools/backend_crossover.py '
-              f'{" ".join(sys.argv[1:])}`\n\n')
+              f'numba threads {threads}, FMM threads {fmm_threads}: '
+              f'`NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={fmm_threads} '
+              f'{declared}OPENBLAS_NUM_THREADS=1 python '
+              f'tools/backend_crossover.py {" ".join(sys.argv[1:])}`\n\n')
     text = header + '\n'.join(lines) + '\n'
     print(text)
     if args.out:

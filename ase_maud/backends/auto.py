@@ -10,12 +10,15 @@ when the scene has at least the crossover number of points for that
 nodal blocks). Should the FMM refuse the scene (too many near pairs,
 :mod:`.fmm`), the direct sum is used.
 
-The crossovers are :data:`CROSSOVER`, measured on one thread by
-``python tools/backend_crossover.py`` (docs/calculator.md has the table, the
-date and the command) and multiplied by numba's thread count (the direct sum
-runs on ``numba.get_num_threads()`` threads, the FMM wheel on one). Override
-them for a machine of your own by assigning to
-``ase_maud.backends.auto.CROSSOVER``, or per calculator with the
+The crossovers are :data:`CROSSOVER`, measured with one thread for each
+backend by ``python tools/backend_crossover.py`` (docs/calculator.md has the
+table, the date and the command), times the direct sum's threads over the
+FMM's (:func:`crossover_points`): the direct sum runs on
+``numba.get_num_threads()`` threads, the FMM on :func:`.fmm.threads` (one
+for the PyPI wheel; an OpenMP build's threads are declared in
+``ASE_MAUD_FMM_THREADS``), and each call's time is taken as its one-thread
+time over its threads. Override them for a machine of your own by assigning
+to ``ase_maud.backends.auto.CROSSOVER``, or per calculator with the
 ``crossover`` keyword: a number of points from which the FMM is used
 whatever the thread count (``None``, the default: the table).
 """
@@ -34,16 +37,16 @@ from .base import Backend, Choice, Result, evaluate_first
 DEFAULT_TOL = 1e-8
 
 #: Points from which the FMM (rows: its ``fmm_eps``) is faster than the numba
-#: direct sum on one thread, by (dim, with blocks), in CPU seconds, as
+#: direct sum, both on one thread, by (dim, with blocks), in CPU seconds, as
 #: ``python tools/backend_crossover.py`` measures them (docs/calculator.md
 #: gives the table, its date and the command; a faster kernel moves them).
 #: Between two rows the crossover is interpolated in log-log; below the last
 #: row the FMM is never used.
 CROSSOVER: dict[tuple[int, bool], dict[float, int]] = {
-    (3, False): {0.001: 12000, 1e-06: 29000, 1e-09: 53000, 1e-12: 190000},
-    (3, True): {0.001: 14000, 1e-06: 38000, 1e-09: 65000, 1e-12: 272000},
-    (2, False): {0.001: 11000, 1e-06: 27000, 1e-09: 49000},
-    (2, True): {0.001: 12000, 1e-06: 33000, 1e-09: 64000},
+    (3, False): {0.001: 12100, 1e-06: 29200, 1e-09: 66400, 1e-12: 280400},
+    (3, True): {0.001: 13600, 1e-06: 36700, 1e-09: 83300, 1e-12: 367900},
+    (2, False): {0.001: 11100, 1e-06: 28200, 1e-09: 55700},
+    (2, True): {0.001: 13800, 1e-06: 28800, 1e-09: 59600},
 }
 #: The finest ``fmm_eps`` asked of the FMM (a ``tol`` below 10 times it, even
 #: with ``crossover`` set, takes the direct sum: FMM3D cannot promise it).
@@ -52,18 +55,24 @@ MIN_EPS = 1e-13
 MAX_EPS = 1e-3
 
 
+def thread_ratio() -> float:
+    """The direct sum's threads over the FMM's: how much further the
+    crossover lies than with one thread each."""
+    return numba.get_num_threads() / fmm.threads()
+
+
 def crossover_points(eps: float, dim: int, want_blocks: bool) -> float:
     """Points from which the FMM at ``eps`` beats the direct sum here: the
     :data:`CROSSOVER` row of ``eps`` (log-log interpolated between rows, the
-    coarsest row above it), times numba's thread count; inf below the
-    tightest row."""
+    coarsest row above it), times numba's thread count over the FMM's
+    (:func:`.fmm.threads`); inf below the tightest row."""
     rows = sorted(CROSSOVER[dim, want_blocks].items())   # tightest first
     if eps < rows[0][0]:
         return np.inf
     log_eps, log_n = np.log([row[0] for row in rows]), np.log(
         [row[1] for row in rows])
     points = round(float(np.exp(np.interp(np.log(eps), log_eps, log_n))))
-    return points * numba.get_num_threads()
+    return points * thread_ratio()
 
 
 def choose(natoms: int, dim: int, want_blocks: bool,
@@ -73,7 +82,7 @@ def choose(natoms: int, dim: int, want_blocks: bool,
     exact = Choice(direct.BACKEND, {}, 0.0)
     fewest = min(min(row.values()) for row in CROSSOVER.values())
     if (tol == 0 or not fmm.BACKEND.installed
-            or (crossover is None and natoms < fewest)):
+            or (crossover is None and natoms < fewest * thread_ratio())):
         return [exact]
     eps = min(fmm.eps_for(tol), MAX_EPS)
     start = (crossover_points(eps, dim, want_blocks) if crossover is None

@@ -34,12 +34,17 @@ and the exact backend. Finding them costs a k-d tree per call.
 
 Cost is O(N), with a fixed cost per call; the fmm3dpy wheel from PyPI is
 built without OpenMP and runs on one thread (a source build with OpenMP
-follows ``OMP_NUM_THREADS``). The crossovers against the numba direct sum
-are in docs/calculator.md. Below a few hundred points FMM3D sums directly
-and the result is exact to rounding.
+follows ``OMP_NUM_THREADS``). Nothing in fmm3dpy says how it was built, so
+the threads it runs on are what the user declares in the environment
+variable ``ASE_MAUD_FMM_THREADS`` (:func:`threads`; unset: 1, the wheel),
+which the ``auto`` backend's crossovers take into account. The crossovers
+against the numba direct sum are in docs/calculator.md. Below a few hundred
+points FMM3D sums directly and the result is exact to rounding.
 """
 
 from __future__ import annotations
+
+import os
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -61,6 +66,25 @@ NEAR_ROUNDING = 1e-15
 #: Most points summed exactly with one another (:data:`NEAR_ROUNDING`), a
 #: direct sum over them at every call.
 MAX_NEAR_POINTS = 4096
+#: The environment variable that declares the threads FMM3D runs on: unset
+#: or 1 for the PyPI wheel; an OpenMP build's ``OMP_NUM_THREADS``.
+THREADS_VARIABLE = 'ASE_MAUD_FMM_THREADS'
+
+
+def threads() -> int:
+    """The threads the installed FMM3D runs on, as declared in
+    :data:`THREADS_VARIABLE` (1 if unset: the PyPI wheel has no OpenMP);
+    ValueError naming the variable unless it is a positive integer."""
+    value = os.environ.get(THREADS_VARIABLE, '1')
+    try:
+        count = int(value)
+    except ValueError:
+        count = 0
+    if count < 1:
+        raise ValueError(f'{THREADS_VARIABLE} must be a positive integer '
+                         '(the threads of an OpenMP build of fmm3dpy, 1 for '
+                         f'the PyPI wheel), got {value!r}')
+    return count
 
 
 def force_tolerance(fmm_eps: float) -> float:
@@ -183,5 +207,5 @@ BACKEND = Backend(
     parameters={'fmm_eps': 1e-6}, requires=('fmm3dpy',),
     force_tolerance=force_tolerance,
     summary="FMM3D's fast multipole method, O(N), forces to fmm_eps; "
-    'one thread with the PyPI wheel (OMP_NUM_THREADS if built with '
-    "OpenMP)")
+    'one thread with the PyPI wheel (an OpenMP build: declare its threads '
+    f'in {THREADS_VARIABLE})')

@@ -26,6 +26,7 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.figure import Figure
 
+from ..backends import fmm
 from ..pictures import save_png
 from ..threads import THREAD_VARIABLES
 from .optimizers import ASE_BASELINES, SCIPY_BASELINE
@@ -48,6 +49,7 @@ def environment(argv=None):
     return {'date': datetime.now(timezone.utc).isoformat(timespec='seconds'),
             'command': ' '.join(['ase-maud', *(argv or [])]),
             'numba_threads': numba.get_num_threads(),
+            'fmm_threads': fmm.threads(),
             **{v: os.environ.get(v, 'unset') for v in THREAD_VARIABLES},
             'cpu_count': os.cpu_count(), 'machine': platform.platform(),
             'processor': platform.processor(),

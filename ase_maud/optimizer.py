@@ -70,48 +70,27 @@ __all__ = ['DivergenceError', 'FileInUseError', 'Maud', 'MaudError', 'NoEquilibr
 
 
 class Maud(Optimizer):
-    """The Maud optimiser; see the module docstring and docs/optimizer.md.
+    """The Maud optimiser; see the module docstring, and docs/optimizer.md
+    for every keyword and why it has its default.
 
     Parameters
     ----------
     atoms : Atoms (or anything with ``__ase_optimizable__``)
         The system to relax.
     model : 'auto', 'exact', 'global', 'nodal', 'secant', 'springs' or a StiffnessModel
-        The stiffness ``K`` of the step (default 'auto'; see
-        :func:`ase_maud.stiffness.choose_model`).
-    method : 'tensor' (default) or 'scalar'
-        For ``model='nodal'``: ``K_mm^-1 f_m`` or ``f_m / Tr K_mm``.
+        The stiffness ``K`` of the step (:func:`ase_maud.stiffness.choose_model`);
+        ``method`` ('tensor' or 'scalar') is the nodal model's, ``floor`` a
+        model's relative eigenvalue floor, ``kappa0`` the secant model's start.
     target : 'minimum', 'stationary', 'saddle' or None
-        Move only downhill, seek any stationary point, or climb to a
-        stationary point with exactly ``order`` negative curvatures. None
-        (default): 'minimum', except for a band of images (ASE's ``NEB``):
-        'stationary' (said in the log). With a StiffnessModel given, its own.
-    gamma, gamma_max, gamma_growth, beta_max, memory, maxstep_nn : float or None
-        Initial step factor (default 1: the model's full Newton step), its
-        largest value and growth after each accepted step, the largest
-        momentum weight (in [0, 1)), the L-BFGS pairs kept over ``K^-1``, and
-        the largest move of a point in one step as a fraction of its distance
-        to its nearest other point (in (0, 0.5)). None (default): the
-        model's, :data:`ase_maud.strategy.STEP_DEFAULTS`.
-    overshoot_shrink : float
-        Factor gamma shrinks by at a kinetic-damping restart (default 0.6).
-    floor : float or None
-        Relative eigenvalue floor of the model (default: the model's).
-    maxstep : float or None
-        Largest move of a point in one step, in length units (default None).
-    kappa0 : float
-        Initial stiffness of the secant model (default 70, ASE's BFGS's).
-    divergence_factor, patience : float, int
-        Growth of the scene's size over ``max(start size, a N)`` that counts
-        as divergence (default 3); steps without progress after which the run
-        stops as stagnant (default 2000).
-    order, mode : int; int, array (N, 3) or None
-        For ``target='saddle'``: the negative curvatures sought (default 1),
-        and which way to climb first (an index of the Hessian's internal
-        modes at the start, or a move whose closest mode is followed; None:
-        the lowest). A converged search checks the index from the analytic
-        Hessian (:attr:`found`) and raises :class:`WrongIndexError` if it
-        differs.
+        Only downhill, any stationary point, or one with exactly ``order``
+        negative curvatures (``mode``: which Hessian mode, by index or by a
+        move (N, 3), to climb first; :attr:`found` holds the converged point,
+        a WrongIndexError says it is of another index). None: 'minimum', or
+        'stationary' for a band of images (ASE's ``NEB``).
+    gamma, gamma_max, gamma_growth, overshoot_shrink, beta_max, memory, maxstep_nn, maxstep
+        The step rule (:data:`ase_maud.strategy.STEP_DEFAULTS`; None: the model's).
+    divergence_factor, patience
+        When a run counts as diverged or stagnant (:mod:`ase_maud.monitor`).
     restart, logfile, trajectory, append_trajectory, **kwargs
         As for every ASE optimizer.
     """
@@ -387,23 +366,16 @@ class Maud(Optimizer):
                 self.state, self._local_at(self.optimizable.get_x().reshape(-1, 3))))
 
     def _verify(self) -> None:
-        """For ``target='saddle'``: classify the converged point from the
-        analytic Hessian (:attr:`found`); a WrongIndexError if its index is
-        not the ``order`` sought, or a zero curvature leaves it unknown."""
-        if self.target != 'saddle':
-            return
-        from .analysis import classify
-        self.found = point = classify(self._atoms(), ftol=max(self.fmax, self.fmax_now))
-        order = self.rule.order
-        self.logfile.write(f'Maud: converged on a {point.verdict} of index '
-                           f'{point.index} (order {order} sought)\n')
-        if point.index != order or point.n_zero:
-            zero = f' and {point.n_zero} zero curvatures' if point.n_zero else ''
-            self._stop(WrongIndexError(
-                f'converged at step {self.nsteps} on a {point.verdict} of index '
-                f'{point.index}{zero}, not of index {order}: lowest curvatures '
-                f'{np.array2string(point.eigenvalues[:order + 2], precision=4)}; '
-                'try another mode= or start'))
+        """For ``target='saddle'``: the converged point classified from the
+        analytic Hessian (:attr:`found`); a WrongIndexError if it is not of
+        the index sought (:meth:`~ase_maud.strategy.Saddle.verify`)."""
+        if self.target == 'saddle':
+            self.found, error = self.maud.verify(self._atoms(), max(self.fmax, self.fmax_now),
+                                                 self.nsteps)
+            self.logfile.write(f'Maud: converged on a {self.found.verdict} of index '
+                               f'{self.found.index} (order {self.rule.order} sought)\n')
+            if error is not None:
+                self._stop(error)
 
     def _preflight(self) -> None:
         """Before the first step: a NoEquilibriumError if the calculator

@@ -55,6 +55,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from ase import Atoms
 
 from .descent import (
     ModeFollowing,
@@ -65,6 +66,7 @@ from .descent import (
     off,
     truncated_newton,
 )
+from .monitor import WrongIndexError
 from .neighbours import NearestDistances
 from .search import (
     Limits,
@@ -387,6 +389,22 @@ class Saddle(Strategy):
         guess = None if state.modes is None else state.modes[:order + 1]
         values = local.eigenpairs(order + 1, guess)[0]
         return int(np.sum(values < -RTOL * np.abs(values).max(initial=0.0))) == order
+
+    def verify(self, atoms: Atoms, ftol: float, step: int) -> tuple[Any, WrongIndexError | None]:
+        """The converged point of ``atoms`` classified from the analytic
+        Hessian (:func:`ase_maud.analysis.classify`, forces below ``ftol``),
+        and a WrongIndexError (else None) if its index is not ``order`` or a
+        zero curvature leaves it unknown (``step``: where it converged)."""
+        from .analysis import classify
+        point, order = classify(atoms, ftol=ftol), self.rule.order
+        if point.index == order and not point.n_zero:
+            return point, None
+        zero = f' and {point.n_zero} zero curvatures' if point.n_zero else ''
+        return point, WrongIndexError(
+            f'converged at step {step} on a {point.verdict} of index {point.index}{zero}, '
+            f'not of index {order}: lowest curvatures '
+            f'{np.array2string(point.eigenvalues[:order + 2], precision=4)}; '
+            'try another mode= or start')
 
     def _move(self, state: MaudState) -> np.ndarray:
         solver, forces = state.solver, state.last.forces

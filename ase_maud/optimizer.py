@@ -57,6 +57,7 @@ from .monitor import (
     RunMonitor,
     StagnationError,
     WrongIndexError,
+    minimum_proved,
 )
 from .restart import RestartFile, difference
 from .run_files import SceneSignature, check_files, other_scene
@@ -102,9 +103,10 @@ class Maud(Optimizer):
     kappa0 : float
         Initial stiffness of the secant model (default 70, ASE's BFGS's).
     divergence_factor, patience : float, int
-        Growth of the scene's size over ``max(start size, a N)`` that counts
-        as divergence (default 3); steps without progress after which the run
-        stops as stagnant (default 2000).
+        Where no finite minimum is proved: the growth of the scene between
+        two looks at its forces (default 2; inf: no divergence test; see
+        :class:`ase_maud.monitor.RunMonitor`); steps without progress after
+        which the run stops as stagnant (default 2000).
     order, mode : int; int, array (N, 3) or None
         For ``target='saddle'``: the negative curvatures sought (default 1),
         and which way to climb first (an index of the Hessian's internal
@@ -125,7 +127,7 @@ class Maud(Optimizer):
                  beta_max: float | None = None, memory: int | None = None,
                  floor: float | None = None, maxstep_nn: float | None = None,
                  maxstep: float | None = None, kappa0: float = 70.0,
-                 overshoot_shrink: float = 0.6, divergence_factor: float = 3.0,
+                 overshoot_shrink: float = 0.6, divergence_factor: float = 2.0,
                  patience: int = 2000, order: int = 1,
                  mode: int | np.ndarray | None = None, **kwargs: Any):
         steps = check_all(gamma=gamma, gamma_max=gamma_max, gamma_growth=gamma_growth,
@@ -177,11 +179,12 @@ class Maud(Optimizer):
     def initialize(self) -> None:
         self._handoff: Handoff | None = None
         self.state = self.maud.start()
-        calc = getattr(self._atoms(), 'calc', None)
+        atoms = self._atoms()
         self.monitor = RunMonitor(   # a cell filter's rows do not spread like points
             self.divergence_factor if self._points else np.inf, self.patience,
             merit_name='energy' if self.target == 'minimum' else '|f|^2',
-            length_scale=getattr(calc, 'length_scale', 0.0))
+            length_scale=getattr(getattr(atoms, 'calc', None), 'length_scale', 0.0),
+            bounded=minimum_proved(atoms, self.target))
         self.fmax_now = np.inf   # largest force at the last step
 
     def read(self) -> None:

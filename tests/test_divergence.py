@@ -17,18 +17,15 @@ from ase.optimize import BFGS
 from ase_maud import DivergenceError, Maud, MaudCalculator, NoEquilibriumError
 from ase_maud.analysis import classify
 from ase_maud.cli import main
-from ase_maud.scenes import chain, hanging_net
+from ase_maud.hardcases import heavy_net
+from ase_maud.scenes import chain
 from ase_maud.topology import minimum_proved
 
 
 def loaded_net(seed, load, plane=None):
-    """``hanging_net(6)`` (boundary fixed) with ``load`` along z on every
-    point; ``plane``: an interior point held to its z plane by FixedPlane
-    (a constraint no proof covers)."""
-    atoms = hanging_net(6, seed=seed)
-    loads = np.zeros((len(atoms), 3))
-    loads[:, 2] = load
-    atoms.calc = MaudCalculator(atoms.calc.springs, loads=loads)
+    """:func:`heavy_net` pulled by ``-load``; ``plane``: an interior point
+    held to its z plane by FixedPlane (a constraint no proof covers)."""
+    atoms = heavy_net(6, seed=seed, load=-load)
     if plane is not None:
         atoms.set_constraint([*atoms.constraints, FixedPlane(plane, [0, 0, 1])])
     return atoms

@@ -194,7 +194,7 @@ class Maud(Optimizer):
         x, here = data['x'].ravel(), self.optimizable.get_x()
         why = (f'points {x.size // 3} in it, {here.size // 3} in the atoms given'
                if x.shape != here.shape
-               else difference(data['scene'], self._scene(self._atoms())))
+               else difference(data['scene'], self._scene(self._atoms()), every=True))
         if why:
             raise ValueError(f'restart file {name} is of another scene: {why}; give '
                              'the atoms of that run, or delete the file')

@@ -19,10 +19,12 @@ from typing import Any
 
 import numpy as np
 from ase import Atoms
+from ase.calculators.singlepoint import SinglePointCalculator
 from ase.filters import Filter
 
+from .calculator import MaudCalculator
 from .checks import check
-from .dofs import PROJECTIONS
+from .dofs import PROJECTIONS, free_dofs
 from .neighbours import NearestDistances
 from .stiffness import StiffnessModel, choose_model
 from .strategy import STEP_DEFAULTS, StepRule, Strategy, compose, step_rule
@@ -60,6 +62,7 @@ def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
     images = image_size(system)
     scene = (subset.current() if subset is not None
              else getattr(system, 'atoms', None if images is None else atoms))
+    check_calculator(scene)
     chosen = target is None and not isinstance(model, StiffnessModel)
     if chosen:   # NEB forces are not the gradient of its energy
         target = 'minimum' if images is None else 'stationary'
@@ -70,9 +73,44 @@ def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
                              f'model given ({model.target!r}): leave target out')
     else:
         model = choose_model(scene, model, target, nearest=nearest, **options)
+    if model.target == 'saddle':
+        check_free(scene)
     rule = rule_for(model, scene, images, steps, order)
     return Assembly(model, compose(model, rule, nearest, check_mode(mode, scene)),
                     subset, scene is not None, chosen)
+
+
+def check_calculator(scene: Atoms | None) -> None:
+    """A ValueError unless the Atoms ``scene`` (None: a band of images or a
+    cell filter, not checked here) has a calculator that computes forces
+    at new positions, and one the atoms fit: a MaudCalculator checks them
+    (:meth:`~ase_maud.calculator.MaudCalculator.check_atoms`: a spring to an
+    atom deleted since, say, is named)."""
+    if not isinstance(scene, Atoms):
+        return
+    calc = scene.calc
+    fix = ('attach one that computes forces (atoms.calc = MaudCalculator(springs), '
+           'or read a net with ase_maud.io.read_net)')
+    if calc is None:
+        raise ValueError(f'the atoms have no calculator: Maud needs forces; {fix}')
+    if isinstance(calc, SinglePointCalculator):
+        raise ValueError('the atoms\' calculator is a SinglePointCalculator (results '
+                         'read from a file, as ase.io.read gives): it computes no '
+                         f'forces at new positions; {fix}')
+    if isinstance(calc, MaudCalculator):
+        calc.check_atoms(scene)
+
+
+def check_free(scene: Atoms | None) -> None:
+    """A ValueError if FixAtoms and FixCartesian hold every coordinate of
+    the Atoms ``scene`` (a saddle search has nothing to climb along)."""
+    if not isinstance(scene, Atoms) or not len(scene):
+        return
+    dim = scene.calc.dim if isinstance(scene.calc, MaudCalculator) else 3
+    if not free_dofs(scene, dim).any():
+        raise ValueError(f"target='saddle' with every coordinate of the {len(scene)} "
+                         'atoms held by a constraint: nothing is free to climb '
+                         'along; free some atoms')
 
 
 def check_mode(mode: Any, scene: Atoms | None) -> int | np.ndarray | None:

@@ -446,6 +446,12 @@ class MaudCalculator(Calculator):
         (:func:`.topology.unbounded_components`); empty if there are none."""
         return topology.unbounded_components(atoms, self.springs, self.dim)
 
+    def minimum_proved(self, atoms: Atoms) -> bool:
+        """True if ``atoms`` are proved to have a finite minimum, however far
+        out (:func:`.topology.minimum_proved`): then a run that spreads far is
+        on its way there, not diverging."""
+        return topology.minimum_proved(atoms, self.springs, self.potential.loads, self.dim)
+
     def no_equilibrium(self, atoms: Atoms, minimum: bool = True) -> str | None:
         """Why ``atoms`` can have no finite equilibrium, in words, or None if
         nothing is proved: loads with a net sum along a direction nothing

@@ -48,13 +48,15 @@ class Rule:
     ``accepted``: the words of the error message. Either ``choices`` (the
     values allowed, compared by equality with a value of the same type) or a
     number: ``test`` on the float (or, if ``whole``, on the int) value.
-    ``none``: None is accepted too (a default decided elsewhere).
+    ``none``: None is accepted too (a default decided elsewhere);
+    ``infinite``: +inf is accepted too (a test switched off).
     """
 
     accepted: str
     test: Callable[[float], bool] | None = None
     whole: bool = False
     none: bool = False
+    infinite: bool = False
     choices: tuple[Any, ...] = ()
 
 
@@ -80,7 +82,8 @@ RULES: dict[str, Rule] = {
                        "or None (the model's)", lambda v: 0 < v < 0.5, none=True),
     'maxstep': Rule('a positive finite length, or None (no bound)',
                     lambda v: v > 0, none=True),
-    'divergence_factor': Rule('a finite number > 1', lambda v: v > 1),
+    'divergence_factor': Rule('a number > 1, or inf (no divergence test)',
+                              lambda v: v > 1, infinite=True),
     'patience': Rule('a whole number >= 0 (steps)', lambda v: v >= 0, whole=True),
     'fmax': Rule('a positive finite number (force units)', lambda v: v > 0),
     'steps': Rule('a whole number >= 0', lambda v: v >= 0, whole=True),
@@ -132,6 +135,8 @@ def check(name: str, value: Any) -> Any:
     rule = RULES[name]
     if value is None and rule.none:
         return None
+    if rule.infinite and isinstance(value, Real) and value == math.inf:
+        return math.inf
     if rule.choices:
         for choice in rule.choices:
             if _matches(value, choice):

@@ -135,7 +135,8 @@ def relax(args: argparse.Namespace) -> int:
     logfile = args.log or (None if progress or args.quiet else '-')
     with CallRecorder(atoms.calc) as recorder, StagedTrajectory(args.traj) as staged, \
             Maud(atoms, model=args.model, method=args.method, logfile=logfile,
-                 trajectory=staged.trajectory) as opt:
+                 trajectory=staged.trajectory,
+                 divergence_factor=args.divergence_factor) as opt:
         opt.attach(staged.keep)   # the trajectory replaces --traj at its first frame
         bar = _progress_bar(opt, atoms, args.fmax, args.steps) if progress else None
         try:
@@ -544,6 +545,12 @@ def build_parser() -> argparse.ArgumentParser:
                    '(default: %(default)s)')
     p.add_argument('--steps', type=_ruled('steps', int), default=1000,
                    help='step budget (default: %(default)s)')
+    p.add_argument('--divergence-factor', type=_ruled('divergence_factor'), default=2.0,
+                   metavar='F', help='where no finite minimum is proved (nothing '
+                   'fixed in some spring component, or constraints other than '
+                   'fixed points and axes): the growth of the scene between two '
+                   'looks at whether its forces still near a balance; inf: no '
+                   'divergence test (default: %(default)s)')
     p.add_argument('--traj', default='maud.traj',
                    help='trajectory file (default: %(default)s)')
     p.add_argument('--progress', action=argparse.BooleanOptionalAction,

@@ -191,6 +191,19 @@ def tangled_hanging_net(size: int = 6, seed: int = 0, a: float = 1.0, Q: float =
     return atoms
 
 
+def heavy_net(size: int = 6, seed: int = 0, a: float = 1.0, Q: float = 1.0,
+              load: float = 100.0) -> Atoms:
+    """:func:`scenes.hanging_net` with ``load`` ``Q a`` pulling every point
+    down (-z): its minimum lies far below the fixed boundary (at ``load`` =
+    100 and size 6 the scene spreads to about 4.7 ``a N``), yet the fixed
+    boundary proves it exists."""
+    atoms = hanging_net(size, seed, a, Q)
+    loads = np.zeros((len(atoms), 3))
+    loads[:, 2] = -load * Q * a
+    atoms.calc = MaudCalculator(atoms.calc.springs, a=a, Q=Q, loads=loads)
+    return atoms
+
+
 def flat_cluster(size: int = 8, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Atoms:
     """:func:`scenes.all_pairs` pressed onto the plane z = 0, in 3D (dim=3).
 

@@ -7,13 +7,24 @@ forces and its step factor, and gets a :class:`DivergenceError` or a
 :class:`StagnationError` (both :class:`MaudError`) whose message says what was
 observed. Its state goes into a restart file (:meth:`RunMonitor.todict`).
 
-- Divergence: the points spread beyond ``divergence_factor`` times their
-  reference size, ``max(start size, a N)`` (the size is the largest distance
-  from the centroid); or the centroid of the scene moves by more than
-  ``divergence_factor`` times that reference (a scene that drifts as a
-  whole). A scene proved to have no finite equilibrium is stopped before
-  its first step instead (:class:`NoEquilibriumError`, raised by the
-  optimiser).
+- Divergence, only where no finite minimum is proved (``bounded`` False;
+  a scene whose calculator proves one, ``calc.minimum_proved``, is on its
+  way there however far it spreads, and only the stagnation rules apply).
+  The run is judged by its forces as it grows: each time the scene's
+  extent (the larger of its size, the largest distance from the centroid,
+  and the drift of its centroid) grows by ``divergence_factor`` again over
+  its reference ``max(start size, a N)``, the move since the last such mark
+  and the forces' change over it give the secant curvature along the move,
+  and with the forces now, how much further on they would balance
+  (:func:`balance_ahead`; exact for springs and loads, whose energy is
+  quadratic). A run that at :data:`DIVERGENCE_PASSES` successive marks
+  either moved past the balance predicted at the mark before or saw it no
+  nearer (relative to its move) has no balance in reach: a constant force
+  with nothing holding the scene shows no curvature (balance nowhere); a
+  repulsion with nothing holding it shows a balance that recedes as the run
+  goes. ``divergence_factor=inf`` switches the test off. A scene
+  proved to have no finite equilibrium is stopped before its first step
+  instead (:class:`NoEquilibriumError`, raised by the optimiser).
 - Stagnation: ``gamma`` (the optimiser's step factor) underflowed, every
   step having been taken back; or no progress for ``patience`` steps,
   progress being fmax falling by 0.1 % below its best and, for
@@ -30,7 +41,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from ase import Atoms
 
+from .calculator import MaudCalculator
 from .checks import as_number, as_whole
 
 
@@ -64,8 +77,40 @@ FMAX_PROGRESS = 1e-3
 #: The energy counts as progress when it falls below its lowest by more than
 #: this fraction of ``fmax * size`` (and by more than its error).
 ENERGY_PROGRESS = 1e-3
+#: Successive marks (growths of the scene by ``divergence_factor``) at which
+#: the scene outran the extent its forces predicted for their balance before
+#: the run counts as divergent.
+DIVERGENCE_PASSES = 2
 #: ``gamma`` has underflowed below this fraction of its start.
 GAMMA_UNDERFLOW = 1e-12
+
+
+def balance_ahead(move: np.ndarray, pull: np.ndarray, forces: np.ndarray) -> float:
+    """How far on along ``move`` (the positions' change since the last mark,
+    ``pull`` the forces' change over it) the forces now acting (``forces``,
+    minus the energy's gradient) would balance, by the secant curvature
+    ``-pull . move / |move|^2`` (exact for springs and loads, whose energy is
+    quadratic): a length in the units of the positions; 0 if the forces
+    already pull back, inf if nothing was seen to slow the run (no positive
+    curvature along the move)."""
+    length = float(np.linalg.norm(move))
+    if length == 0:
+        return np.inf
+    unit = move / length
+    push = float(np.vdot(forces, unit))
+    curvature = -float(np.vdot(pull, unit)) / length
+    if push <= 0:
+        return 0.0
+    return push / curvature if curvature > 0 else np.inf
+
+
+def minimum_proved(atoms: Atoms | None, target: str) -> bool:
+    """True if a run seeks a ``target='minimum'`` whose existence the
+    calculator of ``atoms`` proves (:meth:`MaudCalculator.minimum_proved`):
+    the run then gets no divergence test."""
+    calc = getattr(atoms, 'calc', None)
+    return (target == 'minimum' and isinstance(calc, MaudCalculator)
+            and calc.minimum_proved(atoms))
 
 
 @dataclass
@@ -74,7 +119,14 @@ class RunMonitor:
 
     ``merit_name``: what the merit is in messages (``'energy'`` for
     ``target='minimum'``, else ``'|f|^2'``, which is not watched for
-    progress); ``length_scale``: the scene's ``a`` (0 if unknown).
+    progress); ``length_scale``: the scene's ``a`` (0 if unknown);
+    ``bounded``: a finite minimum is proved (no divergence test);
+    ``divergence_factor`` inf: no divergence test either. The divergence
+    test's record: ``marks`` (growths seen), ``passes`` (successive ones
+    that came no nearer), ``ahead`` (the last predicted balance: how far
+    on, and that length over the move before it) and ``mark`` (positions and
+    forces at the last growth); not kept in a restart file: a resumed run
+    judges its growth afresh.
     """
 
     divergence_factor: float
@@ -85,6 +137,11 @@ class RunMonitor:
     centre0: np.ndarray | None = None
     best: tuple[float, int] = (np.inf, 0)
     lowest: tuple[float, int] = (np.inf, 0)
+    bounded: bool = False
+    marks: int = 0
+    passes: int = 0
+    ahead: tuple[float, float] | None = None
+    mark: tuple[np.ndarray, np.ndarray] | None = None
 
     def check(self, step: int, x: np.ndarray, merit: float, forces: np.ndarray,
               gamma: float, gamma0: float, tolerance: float) -> None:
@@ -96,19 +153,9 @@ class RunMonitor:
         if self.size0 is None:
             self.size0 = max(size, self.length_scale * len(x), np.finfo(float).tiny)
             self.centre0 = centre
-        factor, why = self.divergence_factor, 'no stationary point in reach'
-        if size > factor * self.size0:
-            raise DivergenceError(
-                f'diverged at step {step}: the points spread to {size:.3g}, '
-                f'{size / self.size0:.3g} times their reference size '
-                f'{self.size0:.3g}; {why}')
-        drift = np.linalg.norm(centre - self.centre0)
-        if drift > factor * self.size0:
-            raise DivergenceError(
-                f'diverged at step {step}: the scene as a whole drifted by '
-                f'{drift:.3g}, {drift / self.size0:.3g} times its reference size '
-                f'{self.size0:.3g}; {why} (a constant force on a free scene?)')
         fmax = float(np.linalg.norm(forces, axis=1).max(initial=0.0))
+        if not self.bounded:
+            self._judge_growth(step, x, forces, size, np.linalg.norm(centre - self.centre0))
         if fmax < (1 - FMAX_PROGRESS) * self.best[0]:
             self.best = (fmax, step)
         if (self.merit_name == 'energy'
@@ -129,6 +176,41 @@ class RunMonitor:
                 f'since step {max(self.best[1], self.lowest[1])} raised the '
                 f'{self.merit_name}, even the shortest along the model\'s direction '
                 f'(fmax {fmax:.3g})')
+
+    def _judge_growth(self, step: int, x: np.ndarray, forces: np.ndarray,
+                      size: float, drift: float) -> None:
+        """Mark the run at each growth by ``divergence_factor``; raise
+        DivergenceError if it came no nearer its predicted balance at
+        :data:`DIVERGENCE_PASSES` successive marks (module docstring)."""
+        if self.mark is None:   # the start, or the first step of a resumed run
+            self.mark = (x.copy(), forces.copy())
+            return
+        extent = max(size, drift)
+        if not extent >= self.size0 * self.divergence_factor ** (self.marks + 1):
+            return
+        move, pull = x - self.mark[0], forces - self.mark[1]
+        self.marks, self.mark = self.marks + 1, (x.copy(), forces.copy())
+        length = float(np.linalg.norm(move))
+        ahead = balance_ahead(move, pull, forces)
+        before, self.ahead = self.ahead, (ahead, ahead / length)
+        if before is None:
+            return
+        nearing = length <= before[0] and self.ahead[1] < before[1]
+        self.passes = 0 if nearing else self.passes + 1
+        if self.passes >= DIVERGENCE_PASSES:
+            what = ('the scene as a whole drifted by' if drift > size
+                    else 'the points spread to')
+            raise DivergenceError(
+                f'diverged at step {step}: {what} {extent:.3g}, {extent / self.size0:.3g} '
+                f'times the reference size {self.size0:.3g}, and at {self.passes} '
+                f'successive growths by {self.divergence_factor:g} it came no nearer '
+                'the point where its forces would balance (the secant curvature '
+                'along its move predicts it ' + (
+                    'nowhere' if ahead == np.inf else
+                    f'{self.ahead[1]:.3g} times that move further on') + '): no '
+                'stationary point in reach (nothing holds the scene against a '
+                'constant force or the repulsion?); fix some points, or give '
+                'divergence_factor=inf (--divergence-factor inf) to run on')
 
     def _lowest_text(self) -> str:
         if self.merit_name != 'energy':

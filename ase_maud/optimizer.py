@@ -57,6 +57,7 @@ from .monitor import (
     RunMonitor,
     StagnationError,
     WrongIndexError,
+    minimum_proved,
 )
 from .restart import RestartFile, difference
 from .run_files import SceneSignature, check_files, other_scene
@@ -90,7 +91,10 @@ class Maud(Optimizer):
     gamma, gamma_max, gamma_growth, overshoot_shrink, beta_max, memory, maxstep_nn, maxstep
         The step rule (:data:`ase_maud.strategy.STEP_DEFAULTS`; None: the model's).
     divergence_factor, patience
-        When a run counts as diverged or stagnant (:mod:`ase_maud.monitor`).
+        Where no finite minimum is proved: the growth of the scene between two
+        looks at its forces (default 2; inf: no divergence test;
+        :class:`ase_maud.monitor.RunMonitor`); steps without progress after
+        which the run stops as stagnant (default 2000).
     restart, logfile, trajectory, append_trajectory, **kwargs
         As for every ASE optimizer.
     """
@@ -104,7 +108,7 @@ class Maud(Optimizer):
                  beta_max: float | None = None, memory: int | None = None,
                  floor: float | None = None, maxstep_nn: float | None = None,
                  maxstep: float | None = None, kappa0: float = 70.0,
-                 overshoot_shrink: float = 0.6, divergence_factor: float = 3.0,
+                 overshoot_shrink: float = 0.6, divergence_factor: float = 2.0,
                  patience: int = 2000, order: int = 1,
                  mode: int | np.ndarray | None = None, **kwargs: Any):
         steps = check_all(gamma=gamma, gamma_max=gamma_max, gamma_growth=gamma_growth,
@@ -156,11 +160,12 @@ class Maud(Optimizer):
     def initialize(self) -> None:
         self._handoff: Handoff | None = None
         self.state = self.maud.start()
-        calc = getattr(self._atoms(), 'calc', None)
+        atoms = self._atoms()
         self.monitor = RunMonitor(   # a cell filter's rows do not spread like points
             self.divergence_factor if self._points else np.inf, self.patience,
             merit_name='energy' if self.target == 'minimum' else '|f|^2',
-            length_scale=getattr(calc, 'length_scale', 0.0))
+            length_scale=getattr(getattr(atoms, 'calc', None), 'length_scale', 0.0),
+            bounded=minimum_proved(atoms, self.target))
         self.fmax_now = np.inf   # largest force at the last step
 
     def read(self) -> None:
@@ -170,7 +175,7 @@ class Maud(Optimizer):
         x, here = data['x'].ravel(), self.optimizable.get_x()
         why = (f'points {x.size // 3} in it, {here.size // 3} in the atoms given'
                if x.shape != here.shape
-               else difference(data['scene'], self._scene(self._atoms())))
+               else difference(data['scene'], self._scene(self._atoms()), every=True))
         if why:
             raise ValueError(f'restart file {name} is of another scene: {why}; give '
                              'the atoms of that run, or delete the file')

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from .atomic import temporary_beside
-from .lock import RunLock
+from .lock import FileInUseError, RunLock
 
 PathLike = str | os.PathLike
 #: (argument, file) pairs: the argument as the user wrote it ('--traj',
@@ -88,9 +88,11 @@ class StagedTrajectory:
     Give :attr:`trajectory` to the optimizer and attach :meth:`keep` as an
     observer after it (ASE runs observers in order, its trajectory's
     first). A run holding ``path`` (:class:`~ase_maud.lock.RunLock`) is
-    refused first; this one holds the lock of the previous file at ``path``
-    (if any: a lock would create, and on release remove, the file) and of its
-    own file, which moves with it onto ``path``.
+    refused first, and one whose first frame was kept at ``path`` while this
+    one ran (both started with no file there) at this one's first frame;
+    this one holds the lock of the previous file at ``path`` (if any: a lock
+    would create, and on release remove, the file) and of its own file,
+    which moves with it onto ``path``.
     """
 
     def __init__(self, path: PathLike):
@@ -108,8 +110,16 @@ class StagedTrajectory:
         self.kept = False
 
     def keep(self) -> None:
-        """Move the trajectory onto ``path`` if it holds a frame (once)."""
+        """Move the trajectory onto ``path`` if it holds a frame (once); a
+        FileInUseError, ``path`` left alone, if a file appeared there since
+        this run started with none (a second run's trajectory, whose first
+        frame came first)."""
         if not self.kept and len(self.trajectory):
+            if len(self._locks) == 1 and self.path.exists():
+                raise FileInUseError(
+                    f'trajectory {str(self.path)!r} was written by another run (or '
+                    'program) since this one started: it is left as it is and this '
+                    "run's is not kept; give this run another --traj")
             os.replace(self.temporary, self.path)
             self.kept = True
 

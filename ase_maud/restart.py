@@ -301,9 +301,17 @@ def _crc(values: np.ndarray) -> int:
     return zlib.crc32(np.ascontiguousarray(values, dtype=np.float64).tobytes())
 
 
-def difference(held: dict[str, Any], given: dict[str, Any]) -> str | None:
+def difference(held: dict[str, Any], given: dict[str, Any],
+               every: bool = False) -> str | None:
     """The first way the scene of a file (``held``) and the atoms given
-    differ, in words (None if they agree on every key both have)."""
+    differ, in words (None if they agree on every key both have; with
+    ``every``, as a restart file's scene, which its run wrote whole, also
+    if ``held`` lacks a key of ``given``)."""
+    missing = [key for key in given if key not in held] if every else []
+    if missing:
+        return (f'its scene has no {missing[0]!r} (the atoms given have: '
+                f'{given[missing[0]]!r}; a file damaged by hand, or of a run on '
+                'another calculator)')
     for key in held:
         if key in given and held[key] != given[key]:
             what = key.removesuffix(' crc')

@@ -19,6 +19,14 @@ Loads: springs and repulsion are internal forces (they sum to zero), so a
 scene that nothing holds in some direction has no equilibrium at all unless
 its loads sum to zero in that direction: it drifts for ever
 (:func:`net_load`).
+
+Proved minima (:func:`minimum_proved`): the springs' energy is quadratic and
+positive in the points' positions relative to their component, the repulsion
+positive, the loads linear; so when every component is held in every
+direction (each direction by some atom of it) the energy grows without bound
+far out and has a finite minimum, however far the loads push it. A single
+component may instead be free along a direction if its loads sum to zero
+there (it is then flat along it).
 """
 
 from __future__ import annotations
@@ -165,6 +173,23 @@ def net_load(atoms: Atoms, loads: np.ndarray | None, dim: int = 3) -> np.ndarray
     if np.all(np.abs(total) <= NET_LOAD_RTOL * scale):
         return None
     return total
+
+
+def minimum_proved(atoms: Atoms, springs: ArrayLike, loads: np.ndarray | None,
+                   dim: int = 3) -> bool:
+    """True if the scene is proved to have a finite minimum (module
+    docstring): every constraint a FixAtoms or FixCartesian, and either
+    every spring component held along each of the first ``dim`` directions
+    by one of its atoms, or one component whose loads sum to zero along the
+    directions nothing holds (:func:`net_load`). False: not proved (which
+    does not mean there is none)."""
+    if any(not isinstance(c, (FixAtoms, FixCartesian)) for c in atoms.constraints):
+        return False
+    labels = spring_components(len(atoms), springs)
+    if labels.max(initial=0) == 0:
+        return net_load(atoms, loads, dim) is None
+    held = held_directions(atoms)[:, :dim]
+    return all(held[labels == k].any(axis=0).all() for k in range(labels.max() + 1))
 
 
 def describe_net_load(total: np.ndarray) -> str:

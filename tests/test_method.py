@@ -278,15 +278,41 @@ def test_state_survives_json():
 
 # -- the run monitor ------------------------------------------------------------
 
-def test_monitor_names_a_spread_and_a_drift():
-    monitor = RunMonitor(divergence_factor=3.0, patience=100)
-    x = np.random.default_rng(0).uniform(-1, 1, (10, 3))
-    forces = np.ones((10, 3))
-    monitor.check(0, x, 1.0, forces, 1.0, 1.0, 1e-12)
-    with pytest.raises(DivergenceError, match='spread to'):
-        monitor.check(1, 5 * x, 1.0, forces, 1.0, 1.0, 1e-12)
-    with pytest.raises(DivergenceError, match='drifted by'):
-        monitor.check(1, x + 20.0, 1.0, forces, 1.0, 1.0, 1e-12)
+def _grow(monitor, x, forces_at, steps=200, factor=1.15):
+    """Check ``monitor`` along a run that scales ``x`` by ``factor`` a step
+    (shifting it too), the forces at each point ``forces_at(y)``."""
+    for step in range(steps):
+        y = x * factor**step + step
+        monitor.check(step, y, 0.0, forces_at(y), 1.0, 1.0, 1e-12)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_monitor_stops_a_run_no_force_slows(seed):
+    # A constant push, as on a free scene under a load: no curvature along
+    # the move, no balance anywhere: diverged, named a spread or a drift.
+    x = np.random.default_rng(seed).uniform(-1, 1, (10, 3))
+    push = np.random.default_rng(seed + 10).normal(size=(10, 3))
+    monitor = RunMonitor(divergence_factor=2.0, patience=1000)
+    with pytest.raises(DivergenceError, match='drifted by|spread to') as error:
+        _grow(monitor, x, lambda y: push)
+    assert 'no nearer' in str(error.value)
+    unbounded = RunMonitor(divergence_factor=np.inf, patience=1000)
+    _grow(unbounded, x, lambda y: push)   # switched off
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_monitor_lets_a_spring_held_run_grow(seed):
+    # Zero-length springs to far anchors (equilibrium far out): the secant
+    # curvature along the move sees them, so the growth is no divergence.
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-1, 1, (10, 3))
+    far = x * 1.15**60 + 60 + rng.normal(size=(10, 3))
+    monitor = RunMonitor(divergence_factor=2.0, patience=1000)
+    _grow(monitor, x, lambda y: 1e-3 * (far - y), steps=60)
+    assert monitor.marks >= 5 and monitor.passes == 0
+    bounded = RunMonitor(divergence_factor=2.0, patience=1000, bounded=True)
+    _grow(bounded, x, lambda y: np.ones_like(y))   # proved: never diverged
+    assert bounded.marks == 0
 
 
 def test_monitor_names_stagnation_and_an_underflowed_gamma():

@@ -219,6 +219,24 @@ def test_a_second_writer_of_a_staged_trajectory_is_refused(tmp_path, previous):
     assert len(read(traj, ':')) == 1
 
 
+@pytest.mark.parametrize('seed', [3, 4])
+def test_two_staged_trajectories_started_on_no_file_keep_the_first(tmp_path, seed):
+    # Both start before either has a frame (no file to lock yet): the first
+    # frame kept wins, the other run is refused at its first frame, its own
+    # file removed (it had replaced the first run's trajectory without a word).
+    traj = tmp_path / 'run.traj'
+    first, second = build('ring', 5, seed=seed), build('ring', 6, seed=seed)
+    with StagedTrajectory(traj) as a, StagedTrajectory(traj) as b:
+        b.trajectory.write(second)
+        b.keep()
+        a.trajectory.write(first)
+        with pytest.raises(FileInUseError, match='written by another run'):
+            a.keep()
+        b.trajectory.write(second)
+    frames = read(traj, ':')
+    assert [len(f) for f in frames] == [6, 6] and list(tmp_path.iterdir()) == [traj]
+
+
 def test_ctrl_c_in_another_command_is_one_line(capsys, monkeypatch, net):
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt

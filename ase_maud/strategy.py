@@ -260,6 +260,13 @@ class Strategy:
         """Record the move the constraints allowed, from ``state.last``."""
         state.v = x_new - state.last.x
 
+    def learn(self, state: MaudState, s: np.ndarray, y: np.ndarray) -> None:
+        """Learn from a step ``s`` (N, 3) that changed the forces by ``-y``:
+        the model's state and, with a memory, the L-BFGS pairs."""
+        state.model = self.model.observe(s, y, state.model)
+        if self.rule.memory and keeps_pair(s, y):
+            state.pairs = [*state.pairs, (s, y)][-self.rule.memory:]
+
 
 @dataclass(frozen=True)
 class Minimise(Strategy):
@@ -307,11 +314,8 @@ class Minimise(Strategy):
         """Learn from the accepted step that ended at ``x``."""
         if state.last is None:
             return
-        s, y = x - state.last.x, state.last.forces - forces
-        state.model = self.model.observe(s, y, state.model)
+        self.learn(state, x - state.last.x, state.last.forces - forces)
         state.gamma = min(state.gamma * self.rule.gamma_growth, self.rule.gamma_max)
-        if self.rule.memory and keeps_pair(s, y):
-            state.pairs = [*state.pairs, (s, y)][-self.rule.memory:]
 
     def _move(self, state: MaudState) -> np.ndarray:
         """The bounded move from ``state.last`` (with ``state.solver``)."""

@@ -1,5 +1,6 @@
 """Maud against independent answers: FIRE/BFGS from the same start, analytic
-minima, ASE's own optimizer tests, and the ASE machinery around an optimizer."""
+minima, and the ASE machinery around an optimizer (ASE's own optimizer tests
+are run in tests/ase_suite)."""
 
 import numpy as np
 import pytest
@@ -9,36 +10,10 @@ from ase.io import read
 from ase.optimize import BFGS, FIRE
 from ase.optimize.basin import BasinHopping
 
-# ASE's own optimizer tests, run against Maud through the fixtures below.
-from ase.test.optimize.test_optimizers import (  # noqa: F401
-    fixture_atoms,
-    fixture_ref_atoms,
-    test_optimize,
-    test_path,
-    test_run_twice,
-    test_unconverged,
-)
-
 from ase_maud import Maud, MaudCalculator
 from ase_maud.scenes import SUITE, build
 
 FMAX = 1e-6
-
-
-@pytest.fixture(name='optcls')
-def fixture_optcls():
-    return Maud
-
-
-@pytest.fixture(name='kwargs')
-def fixture_kwargs():
-    return {}
-
-
-@pytest.fixture(name='testdir')
-def fixture_testdir(tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
 
 
 def relax(atoms, opt, fmax=FMAX, steps=20000, **kwargs):

@@ -18,7 +18,8 @@ by its rule in :data:`ase_maud.checks.RULES`.
   (saddle-free Newton) for small scenes, a sparse model with an L-BFGS
   memory for large ones; the specification's nodal blocks (``model='nodal'``,
   with ``method='tensor'`` or ``'scalar'``) and Day's momentum remain as
-  options; a calculator with no stiffness gets the secant model ``kappa I``.
+  options; a calculator with no stiffness gets BFGS's inverse Hessian
+  (``'bfgs'``; the secant model ``kappa I`` for a band of images).
 - ``target='minimum'`` makes every model positive definite, so no step is
   meant uphill; ``'stationary'`` keeps the signs: saddles and maxima are
   fixed points too; ``'saddle'`` climbs along ``order`` modes by eigenvector
@@ -77,7 +78,7 @@ class Maud(Optimizer):
     ----------
     atoms : Atoms (or anything with ``__ase_optimizable__``)
         The system to relax.
-    model : 'auto', 'exact', 'global', 'nodal', 'secant', 'springs' or a StiffnessModel
+    model : 'auto', 'exact', 'global', 'nodal', 'bfgs', 'secant', 'springs' or a StiffnessModel
         The stiffness ``K`` of the step (default 'auto'; see
         :func:`ase_maud.stiffness.choose_model`).
     method : 'tensor' (default) or 'scalar'
@@ -154,8 +155,8 @@ class Maud(Optimizer):
             self.logfile.write("Maud: target='stationary' (the forces of a band of "
                                'images are not the gradient of its energy)\n')
         if isinstance(self.model, SecantModel):
-            self.logfile.write('Maud: the calculator gives no stiffness; it is '
-                               'estimated as kappa I (secant curvature)\n')
+            self.logfile.write(f'Maud: the calculator gives no stiffness; it is '
+                               f'learnt from the forces ({self.model.name} model)\n')
 
     @property
     def target(self) -> str:

@@ -253,12 +253,13 @@ class Maud(Optimizer):
         Maud.
         """
         images = frame_atoms(atoms)
-        frames = last_step(trajectory, len(images))
-        for frame, image in zip(frames or (), images, strict=False):
+        frames = last_step(trajectory, len(images)) or []
+        for frame, image in zip(frames, images, strict=False):   # all checked first
             if (why := other_scene(frame, image)):
                 raise ValueError(f'trajectory {str(trajectory)!r} is of another scene: '
                                  f'{why}; give the atoms of that run, or another '
                                  'trajectory')
+        for frame, image in zip(frames, images, strict=False):
             if isinstance(atoms, UnitCellFilter):
                 image.set_cell(frame.cell)
             image.set_positions(frame.positions, apply_constraint=False)

@@ -3,8 +3,10 @@ and enough to carry on exactly.
 
 Two files. ``NAME`` is JSON: the step, the run monitor's state, the step
 rule's scalars (gamma, momentum count, the last point's merit and noise, the
-model's learnt state, a saddle search's predicted energy change) and which
-rows of the arrays file hold what. ``NAME.arrays`` holds the arrays as raw
+model's learnt state, a saddle search's predicted energy change), under a
+cell filter its original cell (the filter's coordinates are measured from
+it; ASE's recipe makes a new filter on the last frame), and which rows of the
+arrays file hold what. ``NAME.arrays`` holds the arrays as raw
 float64 rows of 3N numbers each:
 
 - two state slots, used in turn, of three rows (the positions, the last

@@ -9,6 +9,7 @@ the table gives calculator calls, CPU seconds, the final energy, and whether
 it converged. ``--maud`` adds Maud variants as ``name=keyword=value,...``.
 
     python tools/ase_systems.py --seeds 0 1 2 --fmax 0.01 --steps 2000
+    python tools/ase_systems.py --basin 20 --systems LJ13 LJ38 --seeds 0 1 2
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from __future__ import annotations
 import argparse
 import time
 
+import numpy as np
 from ase import Atoms
 from ase.optimize import BFGS, FIRE, LBFGS
 
@@ -50,12 +52,33 @@ def relax(system: str, seed: int, opt, fmax: float, steps: int, **kwargs):
     return counter.calls, cpu, atoms.get_potential_energy(), converged
 
 
+def basin(system: str, seed: int, opt, hops: int, fmax: float):
+    """ASE's BasinHopping (kT 1, dr 0.5) of ``hops`` hops with ``opt`` from
+    the seeded start, its random moves seeded alike: (calls, CPU s, lowest
+    energy, or the error that stopped it)."""
+    from ase.optimize.basin import BasinHopping
+    atoms = SYSTEMS[system](seed)
+    counter = Counted(atoms)
+    np.random.seed(seed)   # BasinHopping draws from numpy's global generator
+    start = time.process_time()
+    try:
+        with BasinHopping(atoms, temperature=1.0, dr=0.5, optimizer=opt, fmax=fmax,
+                          logfile=None, trajectory=None, optimizer_logfile=None) as hopping:
+            hopping.run(hops)
+            lowest = f'{hopping.get_minimum()[0]:.4f}'
+    except Exception as error:   # noqa: BLE001 (a row of the table says it)
+        lowest = f'{type(error).__name__}: {error}'
+    return counter.calls, time.process_time() - start, lowest
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--seeds', type=int, nargs='+', default=[0, 1, 2])
     parser.add_argument('--fmax', type=float, default=0.01)
     parser.add_argument('--steps', type=int, default=2000)
     parser.add_argument('--systems', nargs='+', default=list(SYSTEMS))
+    parser.add_argument('--basin', type=int, default=0,
+                        help='instead: BasinHopping of this many hops, Maud against BFGS')
     parser.add_argument('--maud', nargs='*', default=[],
                         help='Maud variants: name=keyword=value,keyword=value')
     args = parser.parse_args()
@@ -65,6 +88,15 @@ def main() -> None:
         keywords = dict(item.split('=', 1) for item in settings.split(',') if item)
         optimizers[name] = (Maud, {k: _value(v) for k, v in keywords.items()})
     optimizers.update({'BFGS': (BFGS, {}), 'LBFGS': (LBFGS, {}), 'FIRE': (FIRE, {})})
+    if args.basin:
+        print('| system | seed | Maud: calls, CPU, lowest | BFGS: calls, CPU, lowest |')
+        print('|---|---|---|---|')
+        for system in args.systems:
+            for seed in args.seeds:
+                cells = [basin(system, seed, opt, args.basin, args.fmax) for opt in (Maud, BFGS)]
+                print(f'| {system} | {seed} | ' + ' | '.join(
+                    f'{c}, {t:.1f} s, {e}' for c, t, e in cells) + ' |', flush=True)
+        return
     print(f'| system | seed | {" | ".join(optimizers)} |')
     print('|---|---|' + '---|' * len(optimizers))
     for system in args.systems:

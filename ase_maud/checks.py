@@ -86,6 +86,9 @@ RULES: dict[str, Rule] = {
                               lambda v: v > 1, infinite=True),
     'patience': Rule('a whole number >= 0 (steps)', lambda v: v >= 0, whole=True),
     'fmax': Rule('a positive finite number (force units)', lambda v: v > 0),
+    # a run's fmax (Maud.run, irun): ASE's convention, 0 takes every step asked
+    'run_fmax': Rule('a finite number >= 0 (force units; 0 takes every step asked, '
+                     'as in ASE)', lambda v: v >= 0),
     'steps': Rule('a whole number >= 0', lambda v: v >= 0, whole=True),
     # the stiffness models
     'target': _choice('minimum', 'stationary', 'saddle', none=True,
@@ -127,12 +130,12 @@ RULES: dict[str, Rule] = {
 }
 
 
-def check(name: str, value: Any) -> Any:
-    """``value`` checked against ``RULES[name]``: returned as a float (an int
-    for a whole number or an integer choice, the value itself for a string
-    choice, None where allowed), or a ValueError naming ``name``, the value
-    and what is accepted."""
-    rule = RULES[name]
+def check(name: str, value: Any, rule_name: str | None = None) -> Any:
+    """``value`` checked against ``RULES[rule_name or name]``: returned as a
+    float (an int for a whole number or an integer choice, the value itself
+    for a string choice, None where allowed), or a ValueError naming
+    ``name``, the value and what is accepted."""
+    rule = RULES[rule_name or name]
     if value is None and rule.none:
         return None
     if rule.infinite and isinstance(value, Real) and value == math.inf:

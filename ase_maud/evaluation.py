@@ -7,6 +7,9 @@ left the run.
   they are fetched once, and a non-finite value stops the run (a
   :class:`~ase_maud.monitor.MaudError` naming the step, the atom and the
   value) with the positions put back where the results were finite.
+- :class:`Padded`: an optimizable whose number of coordinates is not a
+  multiple of 3 (a function of 2 variables, say) seen as rows of 3, as the
+  step works on (N, 3) arrays.
 - :class:`Handoff`: the positions, calculator and potential at the end of a
   step, compared at the next run's start (the run starts afresh if any
   changed).
@@ -109,3 +112,43 @@ class CheckedOptimizable:
             where = f'positions restored to step {self.good[1]}'
         self.stop(MaudError(f'the calculator returned {what} at step '
                             f'{self.steps()}; {where}'))
+
+
+class Padded:
+    """An optimizable of ``n`` coordinates, ``n`` not a multiple of 3, seen
+    as ``ceil(n / 3)`` rows of 3: zeros after its coordinates, held there by
+    a zero gradient (so no step moves them), and dropped again before its
+    own ``set_x``, ``converged`` and ``gradient_norm`` see them (everything
+    else passes through)."""
+
+    def __init__(self, inner: Any):
+        self.inner = inner
+        self.n = inner.get_x().size
+        self.pad = -self.n % 3
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
+
+    def ndofs(self) -> int:
+        return self.n + self.pad
+
+    def get_x(self) -> np.ndarray:
+        return np.concatenate([self.inner.get_x(), np.zeros(self.pad)])
+
+    def set_x(self, x: np.ndarray) -> None:
+        self.inner.set_x(x[:self.n])
+
+    def get_gradient(self) -> np.ndarray:
+        return np.concatenate([self.inner.get_gradient(), np.zeros(self.pad)])
+
+    def converged(self, gradient: np.ndarray, fmax: float) -> bool:
+        return self.inner.converged(gradient[:self.n], fmax)
+
+    def gradient_norm(self, gradient: np.ndarray) -> float:
+        return self.inner.gradient_norm(gradient[:self.n])
+
+
+def in_rows_of_3(optimizable: Any) -> Any:
+    """``optimizable`` itself if its coordinates are a multiple of 3, else
+    :class:`Padded`."""
+    return optimizable if optimizable.get_x().size % 3 == 0 else Padded(optimizable)

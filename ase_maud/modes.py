@@ -24,7 +24,13 @@ Conventions, fixed here once:
 - Phonopy sees the scene centred in a cubic box with :data:`BOX_MARGIN`
   extents of empty space on each side, with no symmetry and the box as its
   own primitive cell; at Gamma every phase factor is 1, so no periodic image
-  enters. Constraints are not passed on.
+  enters.
+- Fixed points are held, by one rule (:func:`free_indices`, ASE's for
+  :class:`~ase.vibrations.VibrationsData`): the modes are those of the free
+  points, the Hessian's block of their coordinates (a fixed point is an
+  infinite mass). :func:`gamma_modes` gives phonopy the free points only;
+  :func:`finite_difference_force_constants` (a check of the analytic
+  constants) keeps every point.
 """
 
 from __future__ import annotations
@@ -59,29 +65,48 @@ def force_constants(atoms: Atoms) -> np.ndarray:
     return hessian.reshape(n, 3, n, 3).transpose(0, 2, 1, 3)
 
 
-def phonopy_cell(atoms: Atoms, masses: ArrayLike | None = None) -> PhonopyAtoms:
-    """Phonopy's unit cell: the scene centred in a large cubic box.
+def free_indices(atoms: Atoms) -> np.ndarray:
+    """The points the modes move: ASE's rule (any point under FixAtoms or
+    FixCartesian is left out, :meth:`VibrationsData.indices_from_constraints`),
+    except that the z mask :func:`ase_maud.scenes.keep_on_plane` puts on a
+    planar (``dim=2``) scene is not counted: its points keep all three
+    coordinates, as the 3D Hessian does."""
+    planar = getattr(atoms.calc, 'dim', 3) == 2
+    copy = atoms.copy()
+    copy.set_constraint([c for c in atoms.constraints if not (
+        planar and isinstance(c, FixCartesian)
+        and list(c.mask) == [False, False, True])])
+    return np.asarray(VibrationsData.indices_from_constraints(copy), dtype=int)
+
+
+def phonopy_cell(atoms: Atoms, masses: ArrayLike | None = None,
+                 points: np.ndarray | None = None) -> PhonopyAtoms:
+    """Phonopy's unit cell: the scene's ``points`` (default all) centred in a
+    large cubic box.
 
     Every point is labelled 'H' (phonopy needs an element; ``masses``, default
-    1, is what counts).
+    1, one per point given, is what counts).
     """
-    positions = atoms.get_positions()
+    points = np.arange(len(atoms)) if points is None else points
+    positions = atoms.get_positions()[points]
     extent = max(np.ptp(positions, axis=0).max(), atoms.calc.length_scale)
     side = (1 + 2 * BOX_MARGIN) * extent
     centred = positions - positions.mean(axis=0) + side / 2
-    masses = np.ones(len(atoms)) if masses is None else masses
-    return PhonopyAtoms(symbols=['H'] * len(atoms), positions=centred,
+    masses = np.ones(len(points)) if masses is None else masses
+    return PhonopyAtoms(symbols=['H'] * len(points), positions=centred,
                         cell=side * np.eye(3), masses=masses)
 
 
-def make_phonopy(atoms: Atoms, masses: ArrayLike | None = None) -> Phonopy:
-    """A Phonopy object for the scene, without force constants (refused
-    above ``max_hessian_atoms``: phonopy's force constants are dense).
+def make_phonopy(atoms: Atoms, masses: ArrayLike | None = None,
+                 points: np.ndarray | None = None) -> Phonopy:
+    """A Phonopy object for the scene's ``points`` (default all), without
+    force constants (refused above ``max_hessian_atoms``: phonopy's force
+    constants are dense).
 
     Frequencies come out angular in ``sqrt(Q / mass)`` (unit conversion 1).
     """
     atoms.calc.check_hessian_size(len(atoms), 'make_phonopy')
-    phonon = Phonopy(phonopy_cell(atoms, masses),
+    phonon = Phonopy(phonopy_cell(atoms, masses, points),
                      supercell_matrix=np.eye(3, dtype=int),
                      primitive_matrix='P', is_symmetry=False)
     phonon.unit_conversion_factor = 1.0
@@ -90,21 +115,28 @@ def make_phonopy(atoms: Atoms, masses: ArrayLike | None = None) -> Phonopy:
 
 def gamma_modes(atoms: Atoms, masses: ArrayLike | None = None,
                 ) -> tuple[np.ndarray, np.ndarray, Phonopy]:
-    """Phonopy's frequencies and modes from the analytic force constants.
+    """Phonopy's frequencies and modes from the analytic force constants,
+    the fixed points held (:func:`free_indices`: ``n`` free points of N).
 
-    Returns ``(frequencies, modes, phonon)``: frequencies (3N,) ascending,
-    signed (see the module docstring); modes (3N, N, 3), real, unit, the
-    eigenvectors of the mass-weighted Hessian; the Phonopy object, with its
-    force constants set, for anything else phonopy offers.
+    Returns ``(frequencies, modes, phonon)``: frequencies (3n,) ascending,
+    signed (see the module docstring); modes (3n, N, 3), real, unit, the
+    eigenvectors of the mass-weighted Hessian of the free points (zero on
+    the fixed ones); the Phonopy object of the free points, with its force
+    constants set, for anything else phonopy offers. ``masses``: one per
+    point (N), default 1.
     """
-    phonon = make_phonopy(atoms, masses)
-    phonon.force_constants = force_constants(atoms)
+    free = free_indices(atoms)
+    masses = None if masses is None else np.asarray(masses, dtype=float)[free]
+    phonon = make_phonopy(atoms, masses, free)
+    phonon.force_constants = force_constants(atoms)[np.ix_(free, free)]
     qpoints = phonon.run_qpoints([[0, 0, 0]], with_eigenvectors=True)
     frequencies = qpoints.frequencies[0]
     vectors = qpoints.eigenvectors[0].T
     big = vectors[np.arange(len(vectors)), np.abs(vectors).argmax(axis=1)]
-    modes = (vectors * np.conj(big / np.abs(big))[:, None]).real
-    return frequencies, modes.reshape(len(modes), len(atoms), 3), phonon
+    modes = np.zeros((len(vectors), len(atoms), 3))
+    modes[:, free] = (vectors * np.conj(big / np.abs(big))[:, None]).real.reshape(
+        len(vectors), len(free), 3)
+    return frequencies, modes, phonon
 
 
 def finite_difference_force_constants(atoms: Atoms,
@@ -136,22 +168,14 @@ def finite_difference_force_constants(atoms: Atoms,
 
 
 def vibrations(atoms: Atoms, masses: ArrayLike | None = None) -> VibrationsData:
-    """The same modes as an ASE :class:`~ase.vibrations.VibrationsData`.
-
-    Atoms left out follow ASE's rule (any atom under FixAtoms or
-    FixCartesian), except that the z mask :func:`ase_maud.scenes.keep_on_plane`
-    puts on a planar (``dim=2``) scene is not counted: its points keep all three
-    coordinates, as the 3D Hessian does. ``masses`` (default 1) are set on
-    the copy the object keeps; its energies assume ASE's units (eV,
+    """The same modes as an ASE :class:`~ase.vibrations.VibrationsData`, the
+    fixed points held (:func:`free_indices`). ``masses`` (default 1) are set
+    on the copy the object keeps; its energies assume ASE's units (eV,
     Angstrom, amu).
     """
     copy = atoms.copy()
     copy.set_masses(np.ones(len(atoms)) if masses is None else masses)
-    planar = getattr(atoms.calc, 'dim', 3) == 2
-    copy.set_constraint([c for c in atoms.constraints if not (
-        planar and isinstance(c, FixCartesian)
-        and list(c.mask) == [False, False, True])])
-    indices = VibrationsData.indices_from_constraints(copy)
-    dofs = (3 * np.asarray(indices, dtype=int)[:, None] + np.arange(3)).ravel()
+    indices = free_indices(atoms)
+    dofs = (3 * indices[:, None] + np.arange(3)).ravel()
     hessian = calculator_3d(atoms.calc).get_hessian(atoms)
-    return VibrationsData.from_2d(copy, hessian[np.ix_(dofs, dofs)], indices)
+    return VibrationsData.from_2d(copy, hessian[np.ix_(dofs, dofs)], indices.tolist())

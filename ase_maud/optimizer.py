@@ -18,7 +18,8 @@ by its rule in :data:`ase_maud.checks.RULES`.
   (saddle-free Newton) for small scenes, a sparse model with an L-BFGS
   memory for large ones; the specification's nodal blocks (``model='nodal'``,
   with ``method='tensor'`` or ``'scalar'``) and Day's momentum remain as
-  options; a calculator with no stiffness gets the secant model ``kappa I``.
+  options; a calculator with no stiffness gets BFGS's inverse Hessian
+  (``'bfgs'``; the secant model ``kappa I`` for a band of images).
 - ``target='minimum'`` makes every model positive definite, so no step is
   meant uphill; ``'stationary'`` keeps the signs: saddles and maxima are
   fixed points too; ``'saddle'`` climbs along ``order`` modes by eigenvector
@@ -43,12 +44,13 @@ from typing import IO, Any
 
 import numpy as np
 from ase import Atoms
+from ase.filters import UnitCellFilter
 from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 
 from . import accuracy, arrays
 from .assembly import assemble
 from .checks import check, check_all
-from .evaluation import CheckedOptimizable, Handoff
+from .evaluation import CheckedOptimizable, Handoff, in_rows_of_3
 from .lock import FileInUseError, RunLock
 from .monitor import (
     DivergenceError,
@@ -59,12 +61,12 @@ from .monitor import (
     WrongIndexError,
     minimum_proved,
 )
-from .restart import RestartFile, difference
-from .run_files import SceneSignature, check_files, other_scene
+from .restart import RestartFile, RestartFileError, difference
+from .run_files import SceneSignature, check_files, frame_atoms, other_scene
 from .search import merit_tolerance
 from .stiffness import SecantModel, StiffnessModel
 from .strategy import StepRule
-from .trajectory import last_frame, repair
+from .trajectory import last_step, repair
 
 __all__ = ['DivergenceError', 'FileInUseError', 'Maud', 'MaudError', 'NoEquilibriumError',
            'StagnationError', 'WrongIndexError']
@@ -78,10 +80,10 @@ class Maud(Optimizer):
     ----------
     atoms : Atoms (or anything with ``__ase_optimizable__``)
         The system to relax.
-    model : 'auto', 'exact', 'global', 'nodal', 'secant', 'springs' or a StiffnessModel
+    model : 'auto', 'exact', 'global', 'nodal', 'bfgs', 'secant', 'springs' or a StiffnessModel
         The stiffness ``K`` of the step (:func:`ase_maud.stiffness.choose_model`);
         ``method`` ('tensor' or 'scalar') is the nodal model's, ``floor`` a
-        model's relative eigenvalue floor, ``kappa0`` the secant model's start.
+        model's relative eigenvalue floor, ``kappa0`` the secant and bfgs models' start.
     target : 'minimum', 'stationary', 'saddle' or None
         Only downhill, any stationary point, or one with exactly ``order``
         negative curvatures (``mode``: which Hessian mode, by index or by a
@@ -130,14 +132,14 @@ class Maud(Optimizer):
         self.divergence_factor, self.patience = run['divergence_factor'], run['patience']
         super().__init__(atoms, restart, logfile, trajectory,
                          append_trajectory=append_trajectory, **kwargs)
-        self.optimizable = CheckedOptimizable(self.optimizable, lambda: self.nsteps,
-                                              self._stop)
+        self.optimizable = CheckedOptimizable(in_rows_of_3(self.optimizable),
+                                              lambda: self.nsteps, self._stop)
         if parts.chosen and self.target == 'stationary':
             self.logfile.write("Maud: target='stationary' (the forces of a band of "
                                'images are not the gradient of its energy)\n')
         if isinstance(self.model, SecantModel):
-            self.logfile.write('Maud: the calculator gives no stiffness; it is '
-                               'estimated as kappa I (secant curvature)\n')
+            self.logfile.write(f'Maud: the calculator gives no stiffness; it is '
+                               f'learnt from the forces ({self.model.name} model)\n')
 
     @property
     def target(self) -> str:
@@ -172,6 +174,8 @@ class Maud(Optimizer):
         """Take the restart file's state, and its positions (they win: the
         state belongs to them; a line in the log says if the atoms moved)."""
         data, name = self._restart_file().read(), repr(str(self.restart))
+        if data['orig_cell'] is not None and isinstance(self.atoms, UnitCellFilter):
+            self.atoms.orig_cell = data['orig_cell']   # the coordinates of its state
         x, here = data['x'].ravel(), self.optimizable.get_x()
         why = (f'points {x.size // 3} in it, {here.size // 3} in the atoms given'
                if x.shape != here.shape
@@ -183,8 +187,8 @@ class Maud(Optimizer):
         try:
             self.monitor.load(data['monitor'])   # this run counts its steps from 0 again
         except ValueError as error:
-            raise ValueError(f'restart file {name} is damaged: {error}; delete it '
-                             'and its arrays file') from None
+            raise RestartFileError(f'restart file {name} is damaged: {error}; delete '
+                                   'it and its arrays file') from None
         if not np.array_equal(x, here):
             self.optimizable.set_x(x)
             self.logfile.write(f'Maud: the atoms moved to the positions of step '
@@ -200,7 +204,15 @@ class Maud(Optimizer):
         if self.restart is not None and self.comm.rank == 0 and self.state.last is not None:
             self._restart_file().write(self.nsteps, self.optimizable.get_x().reshape(-1, 3),
                                        self.state, self.monitor.todict(self.nsteps),
-                                       self.fmax_now, self._scene(self._atoms()))
+                                       self.fmax_now, self._scene(self._atoms()),
+                                       self._orig_cell())
+
+    def _orig_cell(self) -> np.ndarray | None:
+        """A cell filter's original cell, which its coordinates are relative
+        to (a restart file holds it: a filter made again on the last frame
+        would measure from that frame's cell), or None."""
+        return (np.array(self.atoms.orig_cell) if isinstance(self.atoms, UnitCellFilter)
+                else None)
 
     def _restart_file(self) -> RestartFile:
         """The run's restart file (one per run: each step writes only what is
@@ -215,23 +227,44 @@ class Maud(Optimizer):
                trajectory: str | Path = 'maud.traj', **kwargs: Any) -> Maud:
         """Carry on a run that was stopped or killed at any moment.
 
-        ``atoms`` are the run's atoms with their calculator and constraints;
-        they take the last frame of ``trajectory`` if it has one, then the
-        restart file's positions if it exists (its state belongs to them; it
-        is never ahead of the trajectory, at most one frame behind, which is
-        then written again). The trajectory is appended to; the resumed run
-        makes the steps the uninterrupted one would have made. ``kwargs`` go
-        to Maud.
+        ``atoms`` are the run's atoms with their calculator and constraints
+        (or the Filter, cell filter or NEB the run was given); they take the
+        last whole step of ``trajectory`` if it has one (a NEB's images each
+        their frame; the cell too under a cell filter), then the restart
+        file's positions if it exists (its state belongs to them; it is never
+        ahead of the trajectory, at most one frame behind, which is then
+        written again). The trajectory is appended to; the resumed run makes
+        the steps the uninterrupted one would have made. ``kwargs`` go to
+        Maud.
         """
-        frame = last_frame(trajectory)
-        if frame is not None:
-            if (why := other_scene(frame, atoms)):
+        images = frame_atoms(atoms)
+        frames = last_step(trajectory, len(images)) or []
+        for frame, image in zip(frames, images, strict=False):   # all checked first
+            if (why := other_scene(frame, image)):
                 raise ValueError(f'trajectory {str(trajectory)!r} is of another scene: '
                                  f'{why}; give the atoms of that run, or another '
                                  'trajectory')
-            atoms.set_positions(frame.positions, apply_constraint=False)
+        for frame, image in zip(frames, images, strict=False):
+            if isinstance(atoms, UnitCellFilter):
+                image.set_cell(frame.cell)
+            image.set_positions(frame.positions, apply_constraint=False)
         return cls(atoms, restart=restart, trajectory=trajectory,
                    append_trajectory=True, **kwargs)
+
+    def _replay_trajectory(self, frames: Any) -> None:
+        """ASE's ``replay_trajectory``: learn from each step of an earlier
+        run's trajectory (frames of the atoms this run moves, each with its
+        forces) as from an accepted step (the model's state and the L-BFGS
+        memory); the run then starts where it is."""
+        last = None
+        for frame in frames:
+            x, forces = frame.get_positions(), frame.get_forces()
+            if x.size != self.optimizable.get_x().size:
+                raise ValueError(f'replay_trajectory: a frame of {len(x)} points, this '
+                                 f'run moves {self.optimizable.get_x().size // 3}')
+            if last is not None:
+                self.maud.learn(self.state, x - last[0], last[1] - forces)
+            last = x, forces
 
     # -- the step ---------------------------------------------------------------
 
@@ -314,7 +347,7 @@ class Maud(Optimizer):
                              f'positions are those of step {self.nsteps}'))
 
     def irun(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS):
-        self.fmax, steps = check('fmax', fmax), check('steps', steps)
+        self.fmax, steps = check('fmax', fmax, 'run_fmax'), check('steps', steps)
         self._preflight()
         return self._locked(super().irun(self.fmax, steps))
 
@@ -328,7 +361,7 @@ class Maud(Optimizer):
     def run(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS) -> bool:
         """ASE's ``run``; on arrays (:mod:`ase_maud.arrays`, the same steps)
         where nothing watches the run step by step."""
-        self.fmax, steps = check('fmax', fmax), check('steps', steps)
+        self.fmax, steps = check('fmax', fmax, 'run_fmax'), check('steps', steps)
         self._preflight()
         observed = bool(self.observers) or self.restart is not None
         with self._lock, accuracy.kept(getattr(self._atoms(), 'calc', None)):

@@ -3,8 +3,10 @@ and enough to carry on exactly.
 
 Two files. ``NAME`` is JSON: the step, the run monitor's state, the step
 rule's scalars (gamma, momentum count, the last point's merit and noise, the
-model's learnt state, a saddle search's predicted energy change) and which
-rows of the arrays file hold what. ``NAME.arrays`` holds the arrays as raw
+model's learnt state, a saddle search's predicted energy change), under a
+cell filter its original cell (the filter's coordinates are measured from
+it; ASE's recipe makes a new filter on the last frame), and which rows of the
+arrays file hold what. ``NAME.arrays`` holds the arrays as raw
 float64 rows of 3N numbers each:
 
 - two state slots, used in turn, of three rows (the positions, the last
@@ -42,6 +44,7 @@ from typing import Any
 
 import numpy as np
 from ase import Atoms
+from ase.optimize import RestartError
 
 from .atomic import remove_leftovers, replace_text
 from .checks import as_number
@@ -49,7 +52,7 @@ from .strategy import MaudState, Point
 from .topology import fixed_atoms
 
 #: The version of the layout; a file of another one is refused by name.
-FORMAT = 'maud-restart-6'
+FORMAT = 'maud-restart-7'
 #: Rows per state slot before a saddle search's modes: positions, the last
 #: point, its forces.
 STATE_ROWS = 3
@@ -59,6 +62,14 @@ STATE_ROWS = 3
 #: the megabytes of a large scene), more than a whole step of a small one;
 #: rows overwritten between two flushes reach the disk once.
 SYNC_SECONDS = 10.0
+
+
+class RestartFileError(RestartError, ValueError):
+    """A restart file that cannot be read, is damaged, or is of another
+    layout or run: ASE's :class:`~ase.optimize.RestartError` (what ASE's
+    optimizers raise for an unreadable restart file), and a ValueError (a
+    bad argument: the file given). The message names the file and the
+    field."""
 
 
 class RestartFile:
@@ -82,10 +93,13 @@ class RestartFile:
         self._pairs: dict[int, tuple[np.ndarray, int, int]] = {}
 
     def write(self, step: int, x: np.ndarray, state: MaudState,
-              monitor: dict[str, Any], fmax_now: float, scene: dict[str, Any]) -> None:
+              monitor: dict[str, Any], fmax_now: float, scene: dict[str, Any],
+              orig_cell: np.ndarray | None = None) -> None:
         """Save the run at ``step``: positions ``x`` (N, 3), the step rule's
         ``state`` (whose ``last`` is set, and ``modes`` for a saddle search),
-        the monitor's state and the scene's :func:`signature`."""
+        the monitor's state, the scene's :func:`signature` and, under a cell
+        filter, its original cell (3, 3), which its coordinates are
+        relative to."""
         rows = x.size
         self._slot = 1 - self._slot
         kept = {id(s): self._pairs[id(s)] for s, _ in state.pairs if id(s) in self._pairs}
@@ -119,49 +133,57 @@ class RestartFile:
             'model': {name: value for name, value in state.model.items()
                       if name not in self.learnt},
             'learnt': list(self.learnt), 'modes': self.modes, 'predicted': state.predicted,
-            'monitor': _plain(monitor), 'fmax_now': fmax_now, 'scene': scene}
+            'monitor': _plain(monitor), 'fmax_now': fmax_now, 'scene': scene,
+            'orig_cell': None if orig_cell is None else _plain(orig_cell)}
         replace_text(self.path, json.dumps(document), sync)
         if sync:
             self._synced = time.monotonic()
 
     def read(self) -> dict[str, Any]:
         """What :meth:`write` saved: ``step``, ``x`` (N, 3), ``state`` (a
-        :class:`MaudState`), ``monitor``, ``fmax_now``, ``scene``. A file of another
+        :class:`MaudState`), ``monitor``, ``fmax_now``, ``scene``,
+        ``orig_cell`` (an array (3, 3) or None). A file of another
         layout, a damaged field, a file of a run that follows other modes
         (see :attr:`modes`), or one whose arrays file is missing, short or
         damaged is a ValueError naming it (and the field)."""
         try:
-            document = json.loads(self.path.read_text())
-        except (OSError, ValueError, RecursionError) as error:
-            raise ValueError(f'restart file {str(self.path)!r} cannot be read: '
-                             f'{error}') from None
+            text = self.path.read_text()
+        except (OSError, ValueError) as error:
+            raise RestartFileError(f'restart file {str(self.path)!r} cannot be read: '
+                                   f'{error}') from None
+        try:
+            document = json.loads(text)
+        except (ValueError, RecursionError) as error:
+            raise RestartFileError(f'Could not decode restart file {str(self.path)!r} '
+                                   f'as JSON ({error}); delete it and its arrays '
+                                   'file') from None
         if not isinstance(document, dict) or document.get('format') != FORMAT:
             held = document.get('format') if isinstance(document, dict) else None
-            raise ValueError(f'restart file {str(self.path)!r} was not written by this '
-                             f'version of Maud (format {held!r}, this version reads '
-                             f'{FORMAT!r}); delete it and its arrays file')
+            raise RestartFileError(f'restart file {str(self.path)!r} was not written by '
+                                   f'this version of Maud (format {held!r}, this version '
+                                   f'reads {FORMAT!r}); delete it and its arrays file')
         if (damaged := _damaged_field(document)) is not None:
-            raise ValueError(f'restart file {str(self.path)!r} is damaged: {damaged}; '
-                             'delete it and its arrays file')
+            raise RestartFileError(f'restart file {str(self.path)!r} is damaged: {damaged}; '
+                                   'delete it and its arrays file')
         if document['learnt'] != list(self.learnt):
-            raise ValueError(f'restart file {str(self.path)!r} is of another run: '
-                             f"'learnt' {document['learnt']!r} in it, {list(self.learnt)!r} "
-                             "in this run (the arrays its model keeps); give that run's "
-                             'model, or delete it')
+            raise RestartFileError(f'restart file {str(self.path)!r} is of another run: '
+                                   f"'learnt' {document['learnt']!r} in it, "
+                                   f"{list(self.learnt)!r} in this run (the arrays its model "
+                                   "keeps); give that run's model, or delete it")
         if document['modes'] != self.modes:
-            raise ValueError(f'restart file {str(self.path)!r} is of another run: '
-                             f"'modes' {document['modes']!r} in it, {self.modes!r} in "
-                             'this run (the modes a saddle search keeps: its order, '
-                             'and on the springs model the next lowest; null for other '
-                             "targets); give that run's target, order and model, or "
-                             'delete it')
+            raise RestartFileError(f'restart file {str(self.path)!r} is of another run: '
+                                   f"'modes' {document['modes']!r} in it, {self.modes!r} in "
+                                   'this run (the modes a saddle search keeps: its order, '
+                                   'and on the springs model the next lowest; null for other '
+                                   "targets); give that run's target, order and model, or "
+                                   'delete it')
         rows, slot, pairs = document['rows'], document['slot'], document['pairs']
         size, modes = self._slot_rows, self.modes or 0
         last_row = max((slot + 1) * size, 2 * size + 2 * (max(pairs) + 1) if pairs else 0)
         needed = last_row * rows * 8
         if not self.arrays.is_file() or self.arrays.stat().st_size < needed:
-            raise ValueError(f'restart file {str(self.path)!r}: its arrays file '
-                             f'{str(self.arrays)!r} is missing or short; delete both')
+            raise RestartFileError(f'restart file {str(self.path)!r}: its arrays file '
+                                   f'{str(self.arrays)!r} is missing or short; delete both')
         table = np.fromfile(self.arrays, dtype=np.float64, count=last_row * rows
                             ).reshape(-1, rows)
         crc = document['crc']
@@ -179,11 +201,11 @@ class RestartFile:
             where = (f'restart file {str(self.path)!r}: rows {first}-{first + count - 1} '
                      f'of {str(self.arrays)!r}')
             if zlib.crc32(table[first:first + count].tobytes()) != expected:
-                raise ValueError(f'{where} are not what it wrote ({what}; a crash of the '
-                                 'machine before they reached the disk?); delete both files')
+                raise RestartFileError(f'{where} are not what it wrote ({what}; a crash of the '
+                                       'machine before they reached the disk?); delete both files')
             if not np.isfinite(table[first:first + count]).all():
-                raise ValueError(f'{where} hold non-finite numbers ({what}); delete both '
-                                 'files')
+                raise RestartFileError(f'{where} hold non-finite numbers ({what}); delete both '
+                                       'files')
         x, last_x, forces = (table[slot * size + k].reshape(-1, 3).copy()
                              for k in range(STATE_ROWS))
         saddle_modes = table[slot * size + STATE_ROWS:slot * size + STATE_ROWS + modes
@@ -205,7 +227,9 @@ class RestartFile:
                        in zip(state.pairs, pairs, crc['pairs'], strict=True)}
         return {'step': document['step'], 'x': x, 'state': state,
                 'monitor': document['monitor'], 'fmax_now': float(document['fmax_now']),
-                'scene': document['scene']}
+                'scene': document['scene'],
+                'orig_cell': (None if document['orig_cell'] is None
+                              else np.array(document['orig_cell'], dtype=float))}
 
     @staticmethod
     def _write_rows(handle, first: int, rows: int, arrays: list[np.ndarray]) -> int:
@@ -255,6 +279,10 @@ FIELDS: dict[str, tuple[str, Any]] = {
     'fmax_now': ('a number >= 0',
                  lambda v: as_number(v) == 0 or _positive(v) or v == math.inf),
     'scene': ('an object', lambda v: isinstance(v, dict)),
+    'orig_cell': ('null or 3 rows of 3 finite numbers (a cell filter\'s original cell)',
+                  lambda v: v is None or (isinstance(v, list) and len(v) == 3 and all(
+                      isinstance(row, list) and len(row) == 3
+                      and all(as_number(c) is not None for c in row) for row in v))),
 }
 
 

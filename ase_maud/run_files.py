@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 from ase import Atoms
+from ase.filters import Filter
 
 from .checks import check_writable
 from .paths import check_run_files
@@ -35,6 +36,18 @@ class SceneSignature:
             self._key = key
             self._held = signature(atoms, getattr(calc, 'potential', None))
         return self._held
+
+
+def frame_atoms(system: Any) -> list[Atoms]:
+    """The Atoms each step of a run on ``system`` writes to its trajectory,
+    one frame each: the images of a band (ASE's NEB), the atoms behind a
+    Filter or a cell filter, or the atoms themselves."""
+    from ase.mep.neb import BaseNEB
+    if isinstance(system, BaseNEB):
+        return list(system.images)
+    if isinstance(system, Filter):
+        return [system.atoms]
+    return [system]
 
 
 def other_scene(frame: Atoms, atoms: Atoms) -> str | None:

@@ -253,6 +253,20 @@ class SecantModel(StiffnessModel):
         return {**learnt, 'kappa': sy / ss} if sy > 0 and ss > 0 else learnt
 
 
+class BFGSModel(SecantModel):
+    """BFGS's inverse Hessian, learnt from the forces, for calculators that
+    give no stiffness (``'bfgs'``): ``K^-1`` is ``I / kappa`` (the secant
+    model) corrected by the step rule's L-BFGS memory, whose defaults
+    (:data:`ase_maud.strategy.STEP_DEFAULTS`) keep the pairs of the last
+    100 accepted steps and no momentum: for a run of fewer steps, or a scene
+    of fewer coordinates, that is the dense BFGS update of ``I / kappa`` by
+    every step. Its history is the run's state (the pairs of
+    :class:`~ase_maud.strategy.MaudState`, in the restart file); the step
+    keeps the per-point bounds and the search of every model."""
+
+    name = 'bfgs'
+
+
 class _ScaledSolver(Solver):
     """``f / kappa``."""
 
@@ -828,8 +842,8 @@ class _CoordinateSolver(Solver):
 
 
 MODELS: dict[str, type[StiffnessModel]] = {
-    cls.name: cls for cls in (SecantModel, NodalModel, GlobalModel, ExactModel,
-                              SpringsModel)}
+    cls.name: cls for cls in (SecantModel, BFGSModel, NodalModel, GlobalModel,
+                              ExactModel, SpringsModel)}
 
 
 def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
@@ -844,7 +858,8 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
     constraint is one of :data:`PROJECTIONS` (a Hookean tether, say, adds
     stiffness the Hessian does not hold); else ``springs`` if it has a
     ``potential`` (a :class:`~ase_maud.potential.MaudPotential`); else
-    ``nodal`` if it has the nodal blocks; else ``secant``. ``options`` go to
+    ``nodal`` if it has the nodal blocks; else ``bfgs`` for a minimum,
+    ``secant`` for another target (a band of images). ``options`` go to
     the model (``floor``; ``method`` for nodal; ``kappa0`` for secant), and
     each is checked there; an option the chosen model does not take is
     checked here and dropped. ``nearest`` is shared with a model that ages
@@ -863,8 +878,8 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
             name = 'springs'
         elif 'stiffness' in offers:
             name = 'nodal'
-        else:
-            name = 'secant'
+        else:   # a minimum: a memory (its pairs assume a gradient); else momentum
+            name = 'bfgs' if target == 'minimum' else 'secant'
     if not (isinstance(name, str) and name in MODELS):
         raise ValueError(f"model must be 'auto', one of {sorted(MODELS)} or a "
                          f'StiffnessModel, got {name!r}')
@@ -903,4 +918,5 @@ def _saddle_model(atoms: Atoms | None, name: Any, offers: set[str]) -> str:
 
 
 #: Options beyond ``target`` and ``floor`` that a model takes.
-_EXTRA_OPTIONS = {NodalModel: ('method',), SecantModel: ('kappa0',)}
+_EXTRA_OPTIONS = {NodalModel: ('method',), SecantModel: ('kappa0',),
+                  BFGSModel: ('kappa0',)}

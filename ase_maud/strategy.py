@@ -78,6 +78,7 @@ from .search import (
     trust_region,
 )
 from .stiffness import (
+    BFGSModel,
     ExactModel,
     GlobalModel,
     NodalModel,
@@ -95,7 +96,9 @@ from .stiffness import (
 #: whole move scaled by one factor (the springs one by the scene's size only,
 #: gamma back to 1 after every accepted step and a cubic cut on a rise, as a
 #: line search). The nodal and secant models keep Day's momentum, as the
-#: specification has it.
+#: specification has it; the bfgs model (the secant one with a long memory,
+#: for calculators with forces only) takes gamma 1, no momentum and 100 pairs,
+#: chosen by measurement on ASE's systems (docs/benchmarks.md).
 STEP_DEFAULTS: dict[Any, dict[str, Any]] = {
     'common': {'gamma': 1.0, 'gamma_growth': 1.1, 'overshoot_shrink': 0.6,
                'maxstep_nn': 0.45, 'maxstep': None, 'maxstep_size': None,
@@ -104,6 +107,7 @@ STEP_DEFAULTS: dict[Any, dict[str, Any]] = {
     GlobalModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 30, 'bound': 'whole'},
     NodalModel: {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0},
     SecantModel: {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0},
+    BFGSModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 100},
     SpringsModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 20, 'maxstep_nn': None,
                    'maxstep_size': 1.0, 'bound': 'whole', 'gamma_growth': 1e3,
                    'interpolate': True},
@@ -262,6 +266,13 @@ class Strategy:
         """Record the move the constraints allowed, from ``state.last``."""
         state.v = x_new - state.last.x
 
+    def learn(self, state: MaudState, s: np.ndarray, y: np.ndarray) -> None:
+        """Learn from a step ``s`` (N, 3) that changed the forces by ``-y``:
+        the model's state and, with a memory, the L-BFGS pairs."""
+        state.model = self.model.observe(s, y, state.model)
+        if self.rule.memory and keeps_pair(s, y):
+            state.pairs = [*state.pairs, (s, y)][-self.rule.memory:]
+
 
 @dataclass(frozen=True)
 class Minimise(Strategy):
@@ -309,11 +320,8 @@ class Minimise(Strategy):
         """Learn from the accepted step that ended at ``x``."""
         if state.last is None:
             return
-        s, y = x - state.last.x, state.last.forces - forces
-        state.model = self.model.observe(s, y, state.model)
+        self.learn(state, x - state.last.x, state.last.forces - forces)
         state.gamma = min(state.gamma * self.rule.gamma_growth, self.rule.gamma_max)
-        if self.rule.memory and keeps_pair(s, y):
-            state.pairs = [*state.pairs, (s, y)][-self.rule.memory:]
 
     def _move(self, state: MaudState) -> np.ndarray:
         """The bounded move from ``state.last`` (with ``state.solver``)."""

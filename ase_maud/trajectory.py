@@ -70,7 +70,21 @@ def last_frame(path: str | os.PathLike) -> Atoms | None:
     """The last intact frame of the trajectory at ``path``, or None if it has
     none (missing, empty, killed before its first frame was complete, or cut
     before it)."""
-    return _last_intact(Path(path))[0]
+    frames = last_step(path, 1)
+    return None if frames is None else frames[0]
+
+
+def last_step(path: str | os.PathLike, count: int) -> list[Atoms] | None:
+    """The frames of the last whole step of the trajectory at ``path``, a
+    step being ``count`` frames (a band of ``count`` images writes each
+    image): its last ``count`` frames after dropping a step written in part,
+    or None if it has no whole step (missing, empty, or cut before it)."""
+    path = Path(path)
+    whole = intact(path)[0] // count * count
+    if whole == 0:
+        return None
+    with _frames(path) as frames:
+        return [_read(frames, index) for index in range(whole - count, whole)]
 
 
 def repair(path: str | os.PathLike) -> str | None:

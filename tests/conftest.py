@@ -13,7 +13,7 @@ import pytest
 #: Test modules whose every test is an integration test.
 INTEGRATION_MODULES = {'test_accuracy', 'test_bench', 'test_cli', 'test_drivers',
                        'test_examples', 'test_filters', 'test_landscape',
-                       'test_restart_kill', 'test_run_files'}
+                       'test_restart_kill', 'test_run_files', 'test_ase_restart'}
 
 
 def pytest_collection_modifyitems(config, items):

@@ -90,3 +90,25 @@ def test_vibrations_of_a_planar_scene_keep_every_point(seed):
     data = vibrations(atoms)
     assert list(data.get_indices()) == list(range(len(atoms)))
     assert len(data.get_energies()) == 3 * len(atoms)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_gamma_modes_hold_fixed_points(seed):
+    """A relaxed hanging net (a minimum, by classify) has no imaginary mode at
+    Gamma: its supports are held, the modes those of the free points."""
+    from ase_maud import Maud
+    from ase_maud.analysis import classify
+    atoms = build('hanging_net', 5, seed=seed)
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-9, steps=2000)
+    assert classify(atoms).verdict == 'minimum'
+    free = np.setdiff1d(np.arange(len(atoms)), atoms.constraints[0].index)
+    assert 0 < len(free) < len(atoms)
+    frequencies, modes, phonon = gamma_modes(atoms)
+    assert len(frequencies) == 3 * len(free) == 3 * len(phonon.unitcell)
+    assert frequencies.min() > 0
+    dofs = (3 * free[:, None] + np.arange(3)).ravel()
+    block = atoms.calc.get_hessian(atoms)[np.ix_(dofs, dofs)]
+    np.testing.assert_allclose(frequencies**2, np.linalg.eigvalsh(block),
+                               atol=1e-10 * np.abs(block).max())
+    assert not np.any(np.delete(modes, free, axis=1))   # the supports never move

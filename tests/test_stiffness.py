@@ -174,7 +174,8 @@ def test_auto_picks_by_size_and_calculator():
     assert choose_model(build('hanging_net', 20)).name == 'springs'
     bulk = Atoms('Cu4', positions=np.eye(4, 3) * 2.5)
     bulk.calc = EMT()
-    assert choose_model(bulk).name == 'secant'
+    assert choose_model(bulk).name == 'bfgs'
+    assert choose_model(bulk, target='stationary').name == 'secant'
     with pytest.raises(ValueError, match="property 'hessian'"):
         choose_model(bulk, 'exact')
     with pytest.raises(ValueError, match='model must be'):

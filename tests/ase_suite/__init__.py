@@ -1,0 +1,1 @@
+"""ASE's own optimizer tests, run with Maud (conftest.py says how)."""

@@ -1,0 +1,6 @@
+"""ASE's ase/test/constraints/test_fixcom.py with Maud."""
+
+from ase.test.constraints.test_fixcom import (  # noqa: F401
+    fixture_atoms,
+    test_center_of_mass_position,
+)

@@ -1,0 +1,124 @@
+"""Maud against ASE's optimizers on ASE's usual systems (issue 32), calls
+counted at the calculator, CPU time beside.
+
+Systems: :data:`ase_maud.bench.ase_systems.SYSTEMS` (Lennard-Jones clusters
+of 13 and 38 atoms from random starts, an EMT Au13 icosahedron, bulk Au32 and
+O on Au(111), rattled; seeded). Each optimizer
+relaxes each system from the same start to ``--fmax`` within ``--steps``;
+the table gives calculator calls, CPU seconds, the final energy, and whether
+it converged. ``--maud`` adds Maud variants as ``name=keyword=value,...``.
+
+    python tools/ase_systems.py --seeds 0 1 2 --fmax 0.01 --steps 2000
+    python tools/ase_systems.py --basin 20 --systems LJ13 LJ38 --seeds 0 1 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from ase import Atoms
+from ase.optimize import BFGS, FIRE, LBFGS
+
+from ase_maud import Maud
+from ase_maud.bench.ase_systems import SYSTEMS
+
+
+class Counted:
+    """Counts the calls to a calculator's ``calculate``."""
+
+    def __init__(self, atoms: Atoms):
+        self.calls = 0
+        calc = atoms.calc
+        inner = calc.calculate
+
+        def calculate(*args, **kwargs):
+            self.calls += 1
+            return inner(*args, **kwargs)
+        calc.calculate = calculate
+
+
+def relax(system: str, seed: int, opt, fmax: float, steps: int, **kwargs):
+    atoms = SYSTEMS[system](seed)
+    counter = Counted(atoms)
+    start = time.process_time()
+    try:
+        with opt(atoms, logfile=None, **kwargs) as dyn:
+            converged = dyn.run(fmax=fmax, steps=steps)
+    except Exception as error:   # noqa: BLE001 (a row of the table says it)
+        converged = f'{type(error).__name__}'
+    cpu = time.process_time() - start
+    return counter.calls, cpu, atoms.get_potential_energy(), converged
+
+
+def basin(system: str, seed: int, opt, hops: int, fmax: float):
+    """ASE's BasinHopping (kT 1, dr 0.5) of ``hops`` hops with ``opt`` from
+    the seeded start, its random moves seeded alike: (calls, CPU s, lowest
+    energy, or the error that stopped it)."""
+    from ase.optimize.basin import BasinHopping
+    atoms = SYSTEMS[system](seed)
+    counter = Counted(atoms)
+    np.random.seed(seed)   # BasinHopping draws from numpy's global generator
+    start = time.process_time()
+    try:
+        with BasinHopping(atoms, temperature=1.0, dr=0.5, optimizer=opt, fmax=fmax,
+                          logfile=None, trajectory=None, optimizer_logfile=None) as hopping:
+            hopping.run(hops)
+            lowest = f'{hopping.get_minimum()[0]:.4f}'
+    except Exception as error:   # noqa: BLE001 (a row of the table says it)
+        lowest = f'{type(error).__name__}: {error}'
+    return counter.calls, time.process_time() - start, lowest
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--seeds', type=int, nargs='+', default=[0, 1, 2])
+    parser.add_argument('--fmax', type=float, default=0.01)
+    parser.add_argument('--steps', type=int, default=2000)
+    parser.add_argument('--systems', nargs='+', default=list(SYSTEMS))
+    parser.add_argument('--basin', type=int, default=0,
+                        help='instead: BasinHopping of this many hops, Maud against BFGS')
+    parser.add_argument('--maud', nargs='*', default=[],
+                        help='Maud variants: name=keyword=value,keyword=value')
+    args = parser.parse_args()
+    optimizers = {'Maud': (Maud, {})}
+    for variant in args.maud:
+        name, _, settings = variant.partition('=')
+        keywords = dict(item.split('=', 1) for item in settings.split(',') if item)
+        optimizers[name] = (Maud, {k: _value(v) for k, v in keywords.items()})
+    optimizers.update({'BFGS': (BFGS, {}), 'LBFGS': (LBFGS, {}), 'FIRE': (FIRE, {})})
+    if args.basin:
+        print('| system | seed | Maud: calls, CPU, lowest | BFGS: calls, CPU, lowest |')
+        print('|---|---|---|---|')
+        for system in args.systems:
+            for seed in args.seeds:
+                cells = [basin(system, seed, opt, args.basin, args.fmax) for opt in (Maud, BFGS)]
+                print(f'| {system} | {seed} | ' + ' | '.join(
+                    f'{c}, {t:.1f} s, {e}' for c, t, e in cells) + ' |', flush=True)
+        return
+    print(f'| system | seed | {" | ".join(optimizers)} |')
+    print('|---|---|' + '---|' * len(optimizers))
+    for system in args.systems:
+        for seed in args.seeds:
+            cells = []
+            for opt, kwargs in optimizers.values():
+                calls, cpu, energy, converged = relax(system, seed, opt, args.fmax,
+                                                      args.steps, **kwargs)
+                mark = (f' ({converged})' if isinstance(converged, str)
+                        else '' if converged else ' (no)')
+                cells.append(f'{calls}{mark}, {cpu:.2f} s, {energy:.4f}')
+            print(f'| {system} | {seed} | ' + ' | '.join(cells) + ' |', flush=True)
+
+
+def _value(text: str):
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+if __name__ == '__main__':
+    main()

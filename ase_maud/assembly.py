@@ -62,7 +62,6 @@ def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
     images = image_size(system)
     scene = (subset.current() if subset is not None
              else getattr(system, 'atoms', None if images is None else atoms))
-    check_calculator(scene)
     chosen = target is None and not isinstance(model, StiffnessModel)
     if chosen:   # NEB forces are not the gradient of its energy
         target = 'minimum' if images is None else 'stationary'

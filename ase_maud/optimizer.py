@@ -48,7 +48,7 @@ from ase.filters import UnitCellFilter
 from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 
 from . import accuracy, arrays
-from .assembly import assemble
+from .assembly import assemble, check_calculator
 from .checks import check, check_all
 from .evaluation import CheckedOptimizable, Handoff, in_rows_of_3
 from .lock import FileInUseError, RunLock
@@ -160,6 +160,7 @@ class Maud(Optimizer):
                     'memory', 'maxstep_nn')}}
 
     def initialize(self) -> None:
+        check_calculator(self._atoms())   # after a restart file was read, as ASE's
         self._handoff: Handoff | None = None
         self.state = self.maud.start()
         atoms = self._atoms()

@@ -46,6 +46,7 @@ from ase import Atoms
 from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 
 from . import accuracy, arrays
+from .analysis import Work
 from .assembly import assemble
 from .checks import check, check_all
 from .evaluation import CheckedOptimizable, Handoff
@@ -162,6 +163,13 @@ class Maud(Optimizer):
         return self.model.target
 
     @property
+    def work(self) -> Work:
+        """The Hessian-vector products and Hessians of the optimizer's runs so
+        far, beside its calculator calls (force-call equivalents,
+        :class:`~ase_maud.analysis.Work`)."""
+        return self.model.work
+
+    @property
     def rule(self) -> StepRule:
         """The step rule's settings."""
         return self.maud.rule
@@ -267,6 +275,7 @@ class Maud(Optimizer):
         accuracy.ask(atoms.calc, self.fmax, self.fmax_now)
         if (prop := self.model.needs(atoms)) is not None:
             atoms.calc.get_property(prop, atoms)
+            self.work.hessians += prop == 'hessian'
 
     def _afresh_if_changed(self) -> None:
         """Start afresh if the atoms, the calculator or its potential changed
@@ -392,7 +401,9 @@ class Maud(Optimizer):
         if self.target != 'saddle':
             return
         from .analysis import classify
-        self.found = point = classify(self._atoms(), ftol=max(self.fmax, self.fmax_now))
+        # the exact model's Hessian there is the calculator's, counted already
+        self.found = point = classify(self._atoms(), ftol=max(self.fmax, self.fmax_now),
+                                      work=None if self.model.complete_modes else self.work)
         order = self.rule.order
         self.logfile.write(f'Maud: converged on a {point.verdict} of index '
                            f'{point.index} (order {order} sought)\n')

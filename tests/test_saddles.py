@@ -113,6 +113,38 @@ def test_tool_writes_its_table(tmp_path, capsys):
     assert (again / 'saddles.md').read_text() == table
 
 
+@pytest.mark.parametrize('seed', range(2))
+@pytest.mark.parametrize('model, size', [('springs', 12), ('springs', 40), ('exact', 12)])
+def test_every_hessian_vector_product_and_hessian_is_counted(monkeypatch, model, size, seed):
+    """``Maud.work`` counts each vector the search multiplied by the Hessian
+    (counted here again where the potential computes them) and each Hessian
+    the calculator computed for it, the verification of the end point's
+    index included; the tool's row sums them with the calls."""
+    start = saddles.make_start('all_pairs2d', size, seed, 'up')
+    vectors, hessians = [], []
+    hvp, compute = type(start.calc.potential).hvp, type(start.calc).calculate
+
+    def counted_hvp(potential, positions, v):
+        vectors.append(1 if np.ndim(v) == 2 else len(v))
+        return hvp(potential, positions, v)
+
+    def counted_calculate(calc, atoms=None, properties=('energy',), changes=()):
+        hessians.append('hessian' in properties)
+        return compute(calc, atoms, properties, changes)
+
+    monkeypatch.setattr(type(start.calc.potential), 'hvp', counted_hvp)
+    monkeypatch.setattr(type(start.calc), 'calculate', counted_calculate)
+    atoms = fresh_copy(start)
+    opt = Maud(atoms, target='saddle', model=model, logfile=None)
+    assert opt.run(fmax=FMAX, steps=500)
+    assert opt.work.hvp_vectors == sum(vectors)
+    assert (opt.work.hvp_vectors > 0) == (model == 'springs')
+    assert opt.work.hessians == sum(hessians) >= 1   # the verification's at least
+    row = saddles.search(start, 'Maud-saddle-exact', FMAX, 500)[1]
+    assert row['cost'] == row['calls'] + row['hvp_vectors'] + row['hessians']
+    assert row['hessians'] >= row['calls'] - 1 > 0
+
+
 # -- target='saddle': eigenvector following --------------------------------------
 
 def _verified_index(atoms):

@@ -114,8 +114,9 @@ CLIMB_SIDE = 1e-3
 #: Eigenpairs beyond the followed modes that a large saddle search computes
 #: (LOBPCG) and steps along one by one: the next lowest, negative or soft,
 #: which the truncated Newton move off them would otherwise meet (chosen by
-#: measurement, docs/optimizer.md).
-LOWEST_MODES = 3
+#: measurement, docs/optimizer.md; one rather than three: LOBPCG's block of
+#: two converges in far fewer products, docs/bench/saddles.md).
+LOWEST_MODES = 1
 
 
 @dataclass(frozen=True)

@@ -62,6 +62,22 @@ DENSE_MAX_DOFS = 2000
 FTOL = 1e-6
 
 
+@dataclass
+class Work:
+    """What a search computed beyond its calculator calls, in force-call
+    equivalents: ``hvp_vectors``, the vectors multiplied by the Hessian
+    (:func:`hessian_operator`; a block of k vectors is k, each costing about
+    one force call), and ``hessians``, the dense Hessians computed."""
+
+    hvp_vectors: int = 0
+    hessians: int = 0
+
+    @property
+    def total(self) -> int:
+        """Hessian-vector products and Hessians, one equivalent each."""
+        return self.hvp_vectors + self.hessians
+
+
 @dataclass(frozen=True)
 class StationaryPoint:
     """What the Hessian says about a configuration.
@@ -128,13 +144,15 @@ def free_mask(atoms: Atoms, dim: int) -> np.ndarray:
 
 
 def hessian_operator(atoms: Atoms, free: np.ndarray | None = None,
-                     rigid: np.ndarray | None = None) -> LinearOperator:
+                     rigid: np.ndarray | None = None,
+                     work: Work | None = None) -> LinearOperator:
     """``H`` on the free degrees of freedom as a LinearOperator, never dense.
 
     ``free`` (N, dim) and ``rigid`` (orthonormal columns) default to
     :func:`free_mask` and :func:`rigid_body_modes`; the operator is
     ``P H P`` with ``P`` the projector off the rigid modes, so they have
-    eigenvalue 0. A block of vectors is multiplied in one pass over the pairs.
+    eigenvalue 0. A block of vectors is multiplied in one pass over the pairs;
+    each vector is counted in ``work`` (:attr:`Work.hvp_vectors`) if given.
     """
     calc = atoms.calc
     potential = calc.potential
@@ -148,6 +166,8 @@ def hessian_operator(atoms: Atoms, free: np.ndarray | None = None,
         return x - rigid @ (rigid.T @ x)
 
     def matmat(x):
+        if work is not None:
+            work.hvp_vectors += x.shape[1]
         full = np.zeros((flat.size, x.shape[1]))
         full[flat] = project(x)
         hx = potential.hvp(positions, full.T.reshape(-1, *free.shape))
@@ -159,7 +179,8 @@ def hessian_operator(atoms: Atoms, free: np.ndarray | None = None,
 
 
 def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
-             rtol: float = RTOL, ftol: float | None = None) -> StationaryPoint:
+             rtol: float = RTOL, ftol: float | None = None,
+             work: Work | None = None) -> StationaryPoint:
     """Classify ``atoms`` (with a MaudCalculator) by its Hessian.
 
     Parameters
@@ -174,6 +195,8 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
     ftol : float
         Force (units of ``Q a``) above which the point is flagged and warned
         about as not stationary; default :data:`FTOL` ``* Q a``.
+    work : Work
+        If given, counts the dense Hessian or the Hessian-vector products.
     """
     calc = atoms.calc
     potential = calc.potential
@@ -187,9 +210,11 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
     if method == 'dense':
         values, vectors = _dense_spectrum(atoms, free, rigid)
         scale = np.abs(values).max(initial=0.0)
+        if work is not None:
+            work.hessians += 1
     elif method == 'iterative':
         values, vectors, scale = _lowest_spectrum(atoms, free, rigid, k,
-                                                  rtol)
+                                                  rtol, work)
     else:
         raise ValueError(f"method must be 'auto', 'dense' or 'iterative', "
                          f'got {method!r}')
@@ -237,14 +262,14 @@ def _dense_spectrum(atoms, free, rigid):
     return values, basis @ vectors
 
 
-def _lowest_spectrum(atoms, free, rigid, k, rtol):
+def _lowest_spectrum(atoms, free, rigid, k, rtol, work=None):
     """Lowest ``k`` eigenpairs by preconditioned LOBPCG, and max|lambda|.
 
     Iterates stay orthogonal to the rigid modes (LOBPCG's ``Y``). LOBPCG
     stops when every residual ``|H x - lambda x|`` is below a tenth of the
     zero tolerance, so each eigenvalue is that close to a true one.
     """
-    op = hessian_operator(atoms, free, rigid)
+    op = hessian_operator(atoms, free, rigid, work)
     flat = free.ravel()
     near = near_field_stiffness(atoms)[np.ix_(flat, flat)]
     # definite (the translations are its null space), yet no blur of modes

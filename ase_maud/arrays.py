@@ -79,6 +79,7 @@ def relax(atoms: Atoms, model: ExactModel, strategy: Strategy, state: MaudState,
         nonlocal hessian
         if moved:
             results = calc.compute(atoms, ['hessian'])
+            model.work.hessians += 1   # as the optimizer counts its evaluations
         else:   # the results held, if they are of these positions
             calc.get_property('hessian', atoms)
             results = calc.results

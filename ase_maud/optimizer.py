@@ -48,6 +48,7 @@ from ase.filters import UnitCellFilter
 from ase.optimize.optimize import DEFAULT_MAX_STEPS, Optimizer
 
 from . import accuracy, arrays
+from .analysis import Work
 from .assembly import assemble, check_calculator
 from .checks import check, check_all
 from .evaluation import CheckedOptimizable, Handoff, in_rows_of_3
@@ -145,6 +146,13 @@ class Maud(Optimizer):
     def target(self) -> str:
         """'minimum', 'stationary' or 'saddle': the model's."""
         return self.model.target
+
+    @property
+    def work(self) -> Work:
+        """The Hessian-vector products and Hessians of the optimizer's runs so
+        far, beside its calculator calls (force-call equivalents,
+        :class:`~ase_maud.analysis.Work`)."""
+        return self.model.work
 
     @property
     def rule(self) -> StepRule:
@@ -286,6 +294,7 @@ class Maud(Optimizer):
         accuracy.ask(atoms.calc, self.fmax, self.fmax_now)
         if (prop := self.model.needs(atoms)) is not None:
             atoms.calc.get_property(prop, atoms)
+            self.work.hessians += prop == 'hessian'
 
     def _afresh_if_changed(self) -> None:
         """Start afresh if the atoms, the calculator or its potential changed
@@ -407,10 +416,12 @@ class Maud(Optimizer):
     def _verify(self) -> None:
         """For ``target='saddle'``: the converged point classified from the
         analytic Hessian (:attr:`found`); a WrongIndexError if it is not of
-        the index sought (:meth:`~ase_maud.strategy.Saddle.verify`)."""
+        the index sought (:meth:`~ase_maud.strategy.Saddle.verify`). The exact
+        model's Hessian there is the calculator's, counted already."""
         if self.target == 'saddle':
+            work = None if self.model.complete_modes else self.work
             self.found, error = self.maud.verify(self._atoms(), max(self.fmax, self.fmax_now),
-                                                 self.nsteps)
+                                                 self.nsteps, work)
             self.logfile.write(f'Maud: converged on a {self.found.verdict} of index '
                                f'{self.found.index} (order {self.rule.order} sought)\n')
             if error is not None:

@@ -62,6 +62,7 @@ from ase import Atoms
 from scipy.sparse.linalg import LinearOperator, cg, splu
 
 from . import physics
+from .analysis import Work
 from .checks import check
 from .dofs import PROJECTIONS, allowed_basis, free_dofs, internal_basis, rigid_body_modes
 from .neighbours import NearestDistances
@@ -155,6 +156,9 @@ class StiffnessModel(ABC):
         self.target = check('target', target) or 'minimum'
         floor = check('floor', floor)
         self.floor = self.default_floor if floor is None else floor
+        #: Hessian-vector products and Hessians computed for the model
+        #: beyond the calculator's calls (counted by its solvers and the optimizer).
+        self.work = Work()
 
     @abstractmethod
     def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
@@ -712,7 +716,7 @@ class SpringsModel(StiffnessModel):
         if self.target == 'saddle':
             frozen = atoms.copy()   # the positions of this step, the same calculator
             frozen.calc = atoms.calc
-            return _LowestModes(self._kept[2], frozen, free)
+            return _LowestModes(self._kept[2], frozen, free, self.work)
         return self._kept[2]
 
     def _solver(self, atoms: Atoms, potential: Any, free: np.ndarray) -> Solver:
@@ -759,13 +763,14 @@ class _LowestModes(ModeSolver):
     out) and its lowest eigenpairs (:meth:`eigenpairs`, LOBPCG preconditioned
     by ``P^-1``; a dense eigen-decomposition of the products where the
     scene is too small for LOBPCG): what a large saddle search follows
-    (:class:`ase_maud.strategy.Saddle`)."""
+    (:class:`ase_maud.strategy.Saddle`). Every vector it multiplies by the
+    Hessian is counted in ``work``."""
 
-    def __init__(self, inner: Solver, atoms: Atoms, free: np.ndarray):
+    def __init__(self, inner: Solver, atoms: Atoms, free: np.ndarray, work: Work):
         from .analysis import hessian_operator
         self.inner, self.free = inner, free
         self.rigid = rigid_body_modes(atoms.positions, free, free.shape[1])
-        self.operator = hessian_operator(atoms, free, self.rigid)
+        self.operator = hessian_operator(atoms, free, self.rigid, work)
 
     def solve(self, forces):
         return self.inner.solve(forces)

@@ -120,8 +120,9 @@ CLIMB_SIDE = 1e-3
 #: Eigenpairs beyond the followed modes that a large saddle search computes
 #: (LOBPCG) and steps along one by one: the next lowest, negative or soft,
 #: which the truncated Newton move off them would otherwise meet (chosen by
-#: measurement, docs/optimizer.md).
-LOWEST_MODES = 3
+#: measurement, docs/optimizer.md; one rather than three: LOBPCG's block of
+#: two converges in far fewer products, docs/bench/saddles.md).
+LOWEST_MODES = 1
 
 
 @dataclass(frozen=True)
@@ -398,13 +399,15 @@ class Saddle(Strategy):
         values = local.eigenpairs(order + 1, guess)[0]
         return int(np.sum(values < -RTOL * np.abs(values).max(initial=0.0))) == order
 
-    def verify(self, atoms: Atoms, ftol: float, step: int) -> tuple[Any, WrongIndexError | None]:
+    def verify(self, atoms: Atoms, ftol: float, step: int,
+               work: Any = None) -> tuple[Any, WrongIndexError | None]:
         """The converged point of ``atoms`` classified from the analytic
-        Hessian (:func:`ase_maud.analysis.classify`, forces below ``ftol``),
-        and a WrongIndexError (else None) if its index is not ``order`` or a
-        zero curvature leaves it unknown (``step``: where it converged)."""
+        Hessian (:func:`ase_maud.analysis.classify`, forces below ``ftol``,
+        its products counted in ``work`` if given), and a WrongIndexError
+        (else None) if its index is not ``order`` or a zero curvature leaves
+        it unknown (``step``: where it converged)."""
         from .analysis import classify
-        point, order = classify(atoms, ftol=ftol), self.rule.order
+        point, order = classify(atoms, ftol=ftol, work=work), self.rule.order
         if point.index == order and not point.n_zero:
             return point, None
         zero = f' and {point.n_zero} zero curvatures' if point.n_zero else ''

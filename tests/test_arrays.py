@@ -87,3 +87,15 @@ def test_a_run_leaves_the_calculators_tolerance_as_the_user_set_it(seed, watched
     assert any(tol != 1e-7 for tol in asked[:-1])   # the run asked for others
     assert atoms.calc.parameters['tol'] == 1e-7
     assert atoms.calc.todict()['tol'] == 1e-7
+
+
+def test_a_run_on_arrays_counts_its_hessians_as_the_watched_run():
+    counts = []
+    for watched in (False, True):
+        atoms = build('all_pairs', 10, seed=21)
+        with Maud(atoms, logfile=None) as opt:
+            if watched:
+                opt.attach(lambda: None)
+            opt.run(fmax=1e-7)
+        counts.append((opt.nsteps, opt.work.hessians))
+    assert counts[0] == counts[1] and counts[0][1] == counts[0][0] + 1

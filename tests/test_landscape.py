@@ -85,3 +85,23 @@ def test_a_landscape_on_two_workers_is_the_one_in_process(scene, size, seed):
             distributed.Client(cluster) as client:
         spread = landscape(minimum, modes=2, fmax=FMAX, client=client)
     assert _graph(spread) == _graph(here) and here.saddles
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize('seed', range(2))
+def test_a_large_landscape_on_two_workers_is_the_one_in_process(seed):
+    """Above the exact model's size (a tree of 200 points: the springs model's
+    lowest modes climb) the landscape
+    finds verified saddles, and two dask workers find the same graph."""
+    distributed = pytest.importorskip('distributed')
+    minimum = _minimum('tree', 200, seed)
+    here = landscape(minimum, modes=1, fmax=FMAX, steps=500)
+    assert here.saddles and here.failed == 0
+    for saddle in here.saddles:
+        point = classify(fresh_copy(saddle), ftol=FMAX)
+        assert point.verdict == 'saddle' and point.index == 1
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        spread = landscape(minimum, modes=1, fmax=FMAX, steps=500, client=client)
+    assert _graph(spread) == _graph(here)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ase.constraints import FixAtoms
 from ase.io import read
 from ase.mep import NEB
 from ase.optimize.optimize import Optimizer
@@ -110,6 +111,38 @@ def test_tool_writes_its_table(tmp_path, capsys):
     assert saddles.main(['--tables-from', str(tmp_path / 'saddles.csv'),
                          '--out', str(again)]) == 0
     assert (again / 'saddles.md').read_text() == table
+
+
+@pytest.mark.parametrize('seed', range(2))
+@pytest.mark.parametrize('model, size', [('springs', 12), ('springs', 40), ('exact', 12)])
+def test_every_hessian_vector_product_and_hessian_is_counted(monkeypatch, model, size, seed):
+    """``Maud.work`` counts each vector the search multiplied by the Hessian
+    (counted here again where the potential computes them) and each Hessian
+    the calculator computed for it, the verification of the end point's
+    index included; the tool's row sums them with the calls."""
+    start = saddles.make_start('all_pairs2d', size, seed, 'up')
+    vectors, hessians = [], []
+    hvp, compute = type(start.calc.potential).hvp, type(start.calc).calculate
+
+    def counted_hvp(potential, positions, v):
+        vectors.append(1 if np.ndim(v) == 2 else len(v))
+        return hvp(potential, positions, v)
+
+    def counted_calculate(calc, atoms=None, properties=('energy',), changes=()):
+        hessians.append('hessian' in properties)
+        return compute(calc, atoms, properties, changes)
+
+    monkeypatch.setattr(type(start.calc.potential), 'hvp', counted_hvp)
+    monkeypatch.setattr(type(start.calc), 'calculate', counted_calculate)
+    atoms = fresh_copy(start)
+    opt = Maud(atoms, target='saddle', model=model, logfile=None)
+    assert opt.run(fmax=FMAX, steps=500)
+    assert opt.work.hvp_vectors == sum(vectors)
+    assert (opt.work.hvp_vectors > 0) == (model == 'springs')
+    assert opt.work.hessians == sum(hessians) >= 1   # the verification's at least
+    row = saddles.search(start, 'Maud-saddle-exact', FMAX, 500)[1]
+    assert row['cost'] == row['calls'] + row['hvp_vectors'] + row['hessians']
+    assert row['hessians'] >= row['calls'] - 1 > 0
 
 
 # -- target='saddle': eigenvector following --------------------------------------
@@ -267,6 +300,38 @@ def test_large_scene_saddle_search_follows_the_lowest_modes(seed, order):
     assert opt.model.name == 'springs'
     assert opt.run(fmax=FMAX, steps=1000)
     assert _verified_index(atoms) == (order, True)
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_springs_search_leaves_a_converged_minimum(seed):
+    """From a minimum relaxed to fmax 1e-8 (its first step already meets
+    ``fmax``: the index test runs before any move, where main raised a
+    TypeError in ``gradient_converged``) the springs model's search leaves
+    it and ends on a verified index-1 saddle."""
+    atoms = build('hanging_net', 6, seed=seed)
+    assert Maud(atoms, logfile=None).run(fmax=1e-8, steps=5000)
+    opt = Maud(atoms, target='saddle', order=1, model='springs', logfile=None)
+    assert opt.run(fmax=FMAX, steps=500)
+    assert opt.nsteps > 0
+    assert _verified_index(atoms) == (1, True)
+
+
+@pytest.mark.parametrize('seed', range(3))
+@pytest.mark.parametrize('scene, size', [('all_pairs2d', 5), ('all_pairs2d', 7),
+                                         ('all_pairs', 6), ('all_pairs', 8), ('all_pairs2d', 8)])
+def test_springs_search_on_a_tiny_constrained_scene(scene, size, seed):
+    """With 8 points or fewer and one of them fixed the springs model takes
+    its dense path for the lowest modes (SciPy's LOBPCG refuses so few
+    rows, its dense fallback the constraint): from a minimum moved along its
+    lowest mode it reaches a verified index-1 saddle."""
+    atoms = build(scene, size, seed=seed)
+    atoms.set_constraint(FixAtoms([0]))
+    assert Maud(atoms, logfile=None).run(fmax=1e-9, steps=5000)
+    mode = classify(atoms).modes[0]
+    atoms.positions += 0.1 * mode / np.linalg.norm(mode, axis=1).max()
+    opt = Maud(atoms, target='saddle', order=1, model='springs', logfile=None)
+    assert opt.run(fmax=FMAX, steps=500)
+    assert _verified_index(atoms) == (1, True)
 
 
 def _frames(start, directory, stop=None, **keywords):

@@ -34,15 +34,18 @@ index-``--order`` point (default 1):
   (``MaudCalculator``'s ``hessian``), as the exact model has it.
 
 Counted (:class:`ase_maud.bench.runner.CallRecorder`): every ``calc.calculate`` call, Sella's
-finite-difference force calls included; a call that also computes the Hessian counts as one
-(its cost is in the CPU seconds). CPU seconds are ``time.process_time`` over the optimiser's
-construction and run (every thread; run with one). Each optimiser is run once on a small cage
-before the table, so imports and first compilations are not counted. Each end point is
-classified (dense Hessian, a fresh calculator): index, energy, fmax; ``same as Sella`` when
-its energy is within ``--energy-rtol`` (relative) of Sella's end point and its sorted pair
-distances within ``--distance-atol`` (units of a). A run that raised (Maud's
-StagnationError, say) is a result: its error is in the row and its end point is classified
-where it stopped. Run::
+finite-difference force calls included; beside them, for Maud, what its ``work``
+(:class:`ase_maud.analysis.Work`) counted: the vectors it multiplied by the Hessian (each one
+force-call equivalent) and the Hessians it computed (each one, though its cost is larger: it
+is in the CPU seconds), the verification of the end point's index included; ``cost`` is the
+sum of the three (Sella-H's analytic Hessians are not counted). CPU seconds are
+``time.process_time`` over the optimiser's construction and run (every thread; run with one).
+Each optimiser is run once on a small cage before the table, so imports and first compilations
+are not counted. Each end point is classified (dense Hessian, a fresh calculator): index,
+energy, fmax; ``same as Sella`` when its energy is within ``--energy-rtol`` (relative) of
+Sella's end point and its sorted pair distances within ``--distance-atol`` (units of a). A run
+that raised (Maud's StagnationError, say) is a result: its error is in the row and its end
+point is classified where it stopped. Run::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
         python tools/saddles.py --out saddles
@@ -66,7 +69,7 @@ from ase.optimize.optimize import Optimizer
 from scipy.spatial import cKDTree
 
 from ase_maud import Maud
-from ase_maud.analysis import StationaryPoint, classify
+from ase_maud.analysis import StationaryPoint, Work, classify
 from ase_maud.bench.runner import CallRecorder, fresh_copy
 from ase_maud.landscape import same_point
 from ase_maud.scenes import build, keep_on_plane
@@ -181,22 +184,28 @@ def make_start(scene: str, size: int, seed: int, amp: float | str) -> Atoms:
 def search(start: Atoms, optimiser: str, fmax: float, steps: int
            ) -> tuple[Atoms, dict, StationaryPoint]:
     """Run ``optimiser`` from a fresh copy of ``start``; return the end point, its row
-    (converged, calls, cpu_s, error) and its classification."""
+    (converged, calls, Hessian-vector products, Hessians, their sum ``cost``, cpu_s,
+    error) and its classification."""
     atoms = fresh_copy(start)
     converged, error = False, ''
     cpu = time.process_time()
     with CallRecorder(atoms.calc) as recorder:
+        opt = None
         try:
-            converged = bool(OPTIMIZERS[optimiser](atoms).run(fmax=fmax, steps=steps))
+            opt = OPTIMIZERS[optimiser](atoms)
+            converged = bool(opt.run(fmax=fmax, steps=steps))
         except Exception as exc:  # a failed search is a result
             error = f'{type(exc).__name__}: {str(exc).splitlines()[0][:120]}'
     cpu = time.process_time() - cpu
+    work = opt.work if isinstance(opt, Maud) else Work()
+    calls = len(recorder.samples)
     with warnings.catch_warnings():
         warnings.simplefilter('ignore')  # a run that stopped early is not stationary
         point = classify(fresh_copy(atoms))
-    row = {'optimiser': optimiser, 'converged': converged, 'calls': len(recorder.samples),
-           'cpu_s': cpu, 'energy': atoms.get_potential_energy(), 'index': point.index,
-           'verdict': point.verdict, 'fmax': point.fmax, 'error': error}
+    row = {'optimiser': optimiser, 'converged': converged, 'calls': calls,
+           'hvp_vectors': work.hvp_vectors, 'hessians': work.hessians,
+           'cost': calls + work.total, 'cpu_s': cpu, 'energy': atoms.get_potential_energy(),
+           'index': point.index, 'verdict': point.verdict, 'fmax': point.fmax, 'error': error}
     return atoms, row, point
 
 
@@ -230,12 +239,20 @@ def markdown(rows: list[dict], fmax: float) -> str:
                  '' if sella is None else f"{sella['energy']:.10f}"]
         for name in names:
             r = mine[name]
-            cell = f"{r['calls']}, {r['cpu_s']:.2f} s, i{r['index']}"
+            cell = f"{_cost(r)}, {r['cpu_s']:.2f} s, i{r['index']}"
             cell += ' =' if r['same_as_Sella'] is True else f", E {r['energy']:.6f}"
             cell += f" (fmax {r['fmax']:.0e})" if r['fmax'] > fmax else ''
             cells.append(cell)
         lines.append('| ' + ' | '.join(map(str, cells)) + ' |')
     return '\n'.join(lines) + '\n'
+
+
+def _cost(row: dict) -> str:
+    """A row's force-call equivalents: ``calls+HVP vectors v+Hessians H=sum``, or
+    the calls alone when it computed neither."""
+    if row['cost'] == row['calls']:
+        return str(row['calls'])
+    return f"{row['calls']}+{row['hvp_vectors']}v+{row['hessians']}H={row['cost']}"
 
 
 def found(row: dict, fmax: float) -> bool:
@@ -253,6 +270,7 @@ def summary(rows: list[dict], fmax: float) -> str:
         mine = [r for r in rows if r['optimiser'] == name]
         hits = [r for r in mine if found(r, fmax)]
         median = (f", median {np.median([r['calls'] for r in hits]):.0f} calls, "
+                  f"{np.median([r['cost'] for r in hits]):.0f} force-call equivalents, "
                   f"{np.median([r['cpu_s'] for r in hits]):.2f} CPU s" if hits else '')
         same = sum(r['same_as_Sella'] is True for r in hits)
         lines.append(f'- {name}: an index-{order} point (fmax <= {fmax:g}) from {len(hits)} of '
@@ -270,14 +288,16 @@ def _ratios(rows: list[dict], hits: list[dict], fmax: float) -> str:
     if not pairs:
         return ''
     calls = np.median([r['calls'] / s['calls'] for r, s in pairs])
+    cost = np.median([r['cost'] / s['cost'] for r, s in pairs])
     cpu = np.median([r['cpu_s'] / s['cpu_s'] for r, s in pairs])
     return (f"; against Sella's where both do ({len(pairs)}): median ratio {calls:.2f} "
-            f'calls, {cpu:.2f} CPU')
+            f'calls, {cost:.2f} force-call equivalents, {cpu:.2f} CPU')
 
 
 def read_rows(path: Path) -> list[dict]:
     """The rows of a CSV the tool wrote, with their types back."""
-    kinds = {'seed': int, 'natoms': int, 'calls': int, 'index': int, 'cpu_s': float,
+    kinds = {'seed': int, 'natoms': int, 'calls': int, 'hvp_vectors': int, 'hessians': int,
+             'cost': int, 'index': int, 'cpu_s': float,
              'energy': float, 'fmax': float, 'converged': lambda v: v == 'True',
              'same_as_Sella': lambda v: {'True': True, 'False': False}.get(v, v)}
     with open(path, newline='') as fh:
@@ -287,7 +307,7 @@ def read_rows(path: Path) -> list[dict]:
 def by_scene(rows: list[dict], fmax: float) -> str:
     """Per scene (``scene:size``) and optimiser: the starts from which it ended,
     converged, on a point of the index sought (as :func:`summary`) out of all, and
-    the median calls and CPU seconds over those."""
+    the median calls, force-call equivalents and CPU seconds over those."""
     names = list(dict.fromkeys(r['optimiser'] for r in rows))
     lines = ['| scene | N | ' + ' | '.join(names) + ' |', '|' + '---|' * (len(names) + 2)]
     for scene in dict.fromkeys(r['start'].rsplit(':', 1)[0] for r in rows):
@@ -298,6 +318,7 @@ def by_scene(rows: list[dict], fmax: float) -> str:
             hits = [r for r in runs if found(r, fmax)]
             cells.append(f'{len(hits)} of {len(runs)}' + (
                 f", {np.median([r['calls'] for r in hits]):.0f} calls, "
+                f"{np.median([r['cost'] for r in hits]):.0f} equivalents, "
                 f"{np.median([r['cpu_s'] for r in hits]):.2f} s" if hits else ''))
         lines.append('| ' + ' | '.join(cells) + ' |')
     return '\n'.join(lines) + '\n'
@@ -315,7 +336,9 @@ def run_all(args: argparse.Namespace) -> list[dict]:
                                args.energy_rtol, args.distance_atol):
                 rows.append(row)
                 print(f"{row['start']:20s} {seed:3d} {row['optimiser']:11s} "
-                      f"{row['calls']:6d} calls {row['cpu_s']:7.2f} s  E "
+                      f"{row['calls']:6d} calls {row['hvp_vectors']:6d} HVP vectors "
+                      f"{row['hessians']:4d} Hessians {row['cost']:6d} in all "
+                      f"{row['cpu_s']:7.2f} s  E "
                       f"{row['energy']:.10f}  index {row['index']}  fmax {row['fmax']:.1e}"
                       f"  same as Sella: {row['same_as_Sella']}  {row['error']}", flush=True)
     return rows

@@ -27,11 +27,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 
 from .neighbours import NearestDistances
+from .stiffness import DampedSolver
 
 #: How far from 1 the ratio of an energy change to its prediction may be
 #: for a trust fraction to grow (by half), and beyond which it halves.
@@ -139,28 +139,7 @@ def longest(move: np.ndarray, limit: np.ndarray) -> float:
     return float((np.linalg.norm(move, axis=1) / limit).max(initial=0.0))
 
 
-class Damped(Protocol):
-    """A model that can be damped: what :func:`trust_region` needs.
-
-    ``definite``: whether the model is positive definite (its Newton move
-    then goes along the dogleg path); ``scale``: a bound on the size of its
-    eigenvalues (force per length), from which damping starts.
-    """
-
-    definite: bool
-    scale: float
-
-    def solve(self, forces: np.ndarray) -> np.ndarray:
-        """The Newton move ``K^-1 f`` (N, 3)."""
-
-    def dot(self, move: np.ndarray) -> np.ndarray:
-        """``K v`` (N, 3) for a move (N, 3)."""
-
-    def damped(self, forces: np.ndarray, mu: float) -> np.ndarray | None:
-        """``(K + mu I)^-1 f`` (N, 3), or None if ``K + mu I`` is not definite."""
-
-
-def trust_region(model: Damped, forces: np.ndarray, newton: np.ndarray, gamma: float,
+def trust_region(model: DampedSolver, forces: np.ndarray, newton: np.ndarray, gamma: float,
                  limit: np.ndarray) -> np.ndarray:
     """The move whose ``gamma`` times keeps every point within ``limit``:
     ``newton`` (the model's move, or its L-BFGS correction) if it does; else,
@@ -176,7 +155,7 @@ def trust_region(model: Damped, forces: np.ndarray, newton: np.ndarray, gamma: f
     return damping(lambda mu: model.damped(forces, mu), gamma, limit, model.scale)
 
 
-def _dogleg(model: Damped, forces: np.ndarray, newton: np.ndarray, gamma: float,
+def _dogleg(model: DampedSolver, forces: np.ndarray, newton: np.ndarray, gamma: float,
             limit: np.ndarray) -> np.ndarray:
     curvature = np.vdot(forces, model.dot(forces))
     cauchy = forces * (np.vdot(forces, forces) / curvature) if curvature > 0 else None

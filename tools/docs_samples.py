@@ -1,7 +1,9 @@
 """Run the Python samples of the documentation pages that promise they run as written.
 
-Each fenced ``python`` block of each page is written to a scratch directory and run in
-a fresh interpreter there (files it writes stay out of the repository); a block that
+Each fenced ``python`` block of each page is run in a fresh interpreter in a scratch
+directory that holds a copy of the shipped sample nets (``examples/nets``, which the
+guide reads as a reader in the checkout would), so files it writes stay out of the
+repository; a block that
 fails or exceeds ``--timeout`` seconds is reported with its page and line. Run::
 
     NUMBA_NUM_THREADS=1 python tools/docs_samples.py [PAGE ...]
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -35,8 +38,10 @@ def samples(page: Path) -> list[tuple[int, str]]:
 
 
 def run(code: str, timeout: float) -> tuple[bool, float, str]:
-    """Run ``code`` in a fresh interpreter in a scratch directory: (ok, seconds, output)."""
+    """Run ``code`` in a fresh interpreter in a scratch directory with the sample
+    nets: (ok, seconds, output)."""
     with tempfile.TemporaryDirectory() as scratch:
+        shutil.copytree(ROOT / 'examples' / 'nets', Path(scratch) / 'examples' / 'nets')
         start = time.perf_counter()
         try:
             done = subprocess.run([sys.executable, '-c', code], cwd=scratch, text=True,

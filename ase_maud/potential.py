@@ -178,9 +178,10 @@ class MaudPotential:
         """The dense Hessian ``d2E/dr dr``, shape (dim N, dim N), units of
         ``Q``: ``-B_ij`` off the diagonal, the nodal block ``K_ii = sum_j
         B_ij`` on it (:mod:`.physics`); the repulsion's part by ``backend``
-        (:func:`.backends.repulsion_hessian`)."""
+        (:func:`.backends.exact_choice`)."""
         n = self.dim * len(positions)
-        unit = (backends.repulsion_hessian(self.reduced(positions), self.dim, backend)[2]
+        unit = (backends.exact_choice(backend).backend.hessian(self.reduced(positions),
+                                                               self.dim)[2]
                 if self.repulsive else np.zeros((n, n)))   # a = 0: the springs alone
         return self.whole_hessian(unit)
 

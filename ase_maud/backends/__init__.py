@@ -42,7 +42,7 @@ from .base import (
 __all__ = ['Backend', 'BeyondTolerance', 'Choice', 'Result', 'VOIGT_PAIRS',
            'blocks_to_voigt', 'check_parameters', 'evaluate', 'get',
            'installed', 'names', 'parameter_defaults', 'register',
-           'repulsion_hessian', 'repulsion_hvp', 'voigt_to_blocks', 'exact_choice']
+           'repulsion_hvp', 'voigt_to_blocks', 'exact_choice']
 
 _REGISTRY: dict[str, Backend] = {}
 
@@ -98,18 +98,12 @@ def repulsion_hvp(positions: np.ndarray, v: np.ndarray) -> np.ndarray:
     return _first_with('hvp')(positions, v)
 
 
-def repulsion_hessian(positions: np.ndarray, dim: int,
-                      backend: str = 'auto') -> tuple[float, np.ndarray, np.ndarray]:
-    """The unit repulsion's energy, forces (N, 3) and dense Hessian (dim N,
-    dim N) at ``positions`` (N, 3), exact: by ``backend`` if it has a Hessian
-    (``numba``, ``numpy``), else (``auto``, ``fmm``) by the first installed
-    backend that has one."""
-    return _hessian_backend(backend).hessian(positions, dim)
-
-
 def exact_choice(backend: str) -> Choice:
-    """The :class:`Choice` behind :func:`repulsion_hessian` for ``backend``
-    (exact: tolerance 0)."""
+    """The :class:`Choice` whose backend gives the unit repulsion's energy,
+    forces and dense Hessian in one pass (``choice.backend.hessian``) for
+    the calculator parameter ``backend``: itself if it has a Hessian
+    (``numba``, ``numpy``), else (``auto``, ``fmm``) the first installed one
+    that has (exact: tolerance 0)."""
     return Choice(_hessian_backend(backend), {}, 0.0)
 
 

@@ -37,7 +37,6 @@ from numpy.typing import ArrayLike
 from . import backends, physics, topology
 from .checks import check
 from .potential import MaudPotential
-from .springs import check_range
 
 #: Relative tolerance on the spread of z for a ``dim=2`` scene.
 PLANE_TOLERANCE = 1e-10
@@ -267,16 +266,11 @@ class MaudCalculator(Calculator):
         old = self.atoms
         if old is None or len(old) != len(atoms):
             return list(all_changes)
-        changes = []
-        if not np.array_equal(old.positions, atoms.positions):
-            changes.append('positions')
-        if not np.array_equal(old.numbers, atoms.numbers):
-            changes.append('numbers')
-        if not np.array_equal(old.cell.array, atoms.cell.array):
-            changes.append('cell')
-        if not np.array_equal(old.pbc, atoms.pbc):
-            changes.append('pbc')
-        return changes
+        return [name for name, was, now in (
+            ('positions', old.arrays['positions'], atoms.arrays['positions']),
+            ('numbers', old.arrays['numbers'], atoms.arrays['numbers']),
+            ('cell', old.cell.array, atoms.cell.array), ('pbc', old.pbc, atoms.pbc))
+            if not (was == now).all()]
 
     def _hold(self, atoms: Atoms) -> None:
         """Keep what :meth:`check_state` compares next time (ASE's
@@ -309,20 +303,19 @@ class MaudCalculator(Calculator):
         index beyond the last atom, loads not one per atom, a non-finite
         position, or (``dim=2``) a point off the plane of the others.
         """
-        if np.any(atoms.pbc):
+        if atoms.pbc.any():
             raise ValueError(f'periodic boundaries are not supported (pbc='
                              f'{atoms.pbc.tolist()}): 1/L needs an Ewald sum;'
                              ' set atoms.pbc = False')
         natoms = len(atoms)
         if natoms == 0:
             raise ValueError('no atoms: a scene needs at least one point')
-        check_range(self.springs, natoms)   # the rest was checked by set
-        self.potential.check_loads(natoms)
+        self.potential.check_size(natoms)   # the rest was checked by set
         positions = atoms.get_positions()
-        bad = np.flatnonzero(~np.isfinite(positions).all(axis=1))
-        if bad.size:
-            raise ValueError(f'atom {bad[0]} has a non-finite position '
-                             f'{positions[bad[0]].tolist()}')
+        if not np.isfinite(positions).all():
+            bad = np.flatnonzero(~np.isfinite(positions).all(axis=1))[0]
+            raise ValueError(f'atom {bad} has a non-finite position '
+                             f'{positions[bad].tolist()}')
         if self.dim == 2 and natoms > 1:
             z = positions[:, 2]
             extent = max(np.ptp(positions[:, :2]), self.length_scale)
@@ -367,15 +360,17 @@ class MaudCalculator(Calculator):
             h_rep = np.zeros((n, n)) if want_hessian else None
             e_unit = f_unit = Q
         e_spr, f_spr = potential.spring_terms(scaled)
-        with np.errstate(over='ignore', invalid='ignore'):   # said below
-            e_load, f_load = physics.load_terms(positions, potential.loads)
-        if not np.isfinite(e_load):
-            raise ValueError(f'the energy of the loads, -sum p.x, overflows float64 (loads '
-                             f'up to {np.abs(potential.loads).max():.3g} force units, '
-                             f'positions up to {np.abs(positions).max():.3g}): choose '
-                             'units nearer the scene')
-        results = {'energy': e_unit * (e_rep + e_spr) + e_load,
-                   'forces': f_unit * (f_rep + f_spr) + f_load}
+        results = {'energy': e_unit * (e_rep + e_spr), 'forces': f_unit * (f_rep + f_spr)}
+        if potential.loads is not None:
+            with np.errstate(over='ignore', invalid='ignore'):   # said below
+                e_load, f_load = physics.load_terms(positions, potential.loads)
+            if not np.isfinite(e_load):
+                raise ValueError(f'the energy of the loads, -sum p.x, overflows float64 '
+                                 f'(loads up to {np.abs(potential.loads).max():.3g} force '
+                                 f'units, positions up to {np.abs(positions).max():.3g}): '
+                                 'choose units nearer the scene')
+            results['energy'] += e_load
+            results['forces'] += f_load
         if want_blocks:
             blocks = (backends.voigt_to_blocks(block6, dim) if potential.repulsive
                       else np.zeros((len(positions), dim, dim)))
@@ -385,7 +380,7 @@ class MaudCalculator(Calculator):
         if want_hessian:
             results['hessian'] = potential.whole_hessian(h_rep)
         bad = [name for name, value in results.items()
-               if not np.all(np.isfinite(value))]
+               if not np.isfinite(value).all()]
         if bad:
             if potential.repulsive:
                 raise_on_closest(scaled, a)   # the Hessian's 1/L**3

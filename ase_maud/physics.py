@@ -154,14 +154,7 @@ def spring_laplacian(springs: np.ndarray, natoms: int,
     natoms); ``Q`` a number or one per spring (1: ``D - A``). The one home
     of the springs' constant Hessian: :func:`spring_hessian` is it times
     ``I_dim``."""
-    pairs = np.asarray(springs, dtype=int).reshape(-1, 2)
-    i, j = pairs.T
-    weights = np.broadcast_to(np.asarray(Q, dtype=float), len(pairs))
-    adjacency = sp.coo_matrix((np.r_[weights, weights],
-                               (np.r_[i, j], np.r_[j, i])),
-                              shape=(natoms, natoms))
-    degrees = sp.diags(spring_degrees(pairs, natoms, weights))
-    return sp.csr_matrix(degrees - adjacency)
+    return _weighted_laplacian(springs, natoms, Q, 1)
 
 
 def pair_block_laplacian(i: np.ndarray, j: np.ndarray, blocks: np.ndarray,
@@ -185,8 +178,24 @@ def spring_hessian(springs: np.ndarray, natoms: int, Q: float | np.ndarray,
     Laplacian weighted by ``Q``, a number or one per spring:
     :func:`spring_laplacian`), shape (dim N, dim N) (csr), coordinates
     ordered point by point (x0, y0, z0, x1, ...)."""
-    return sp.kron(spring_laplacian(springs, natoms, Q), sp.identity(dim),
-                   format='csr')
+    return _weighted_laplacian(springs, natoms, Q, dim)
+
+
+def _weighted_laplacian(springs: np.ndarray, natoms: int, Q: float | np.ndarray,
+                        dim: int) -> sp.csr_matrix:
+    """``L_Q (x) I_dim`` (``dim`` 1: ``L_Q``): each spring's ``Q_s`` on
+    both diagonal places of each coordinate and ``-Q_s`` on both
+    off-diagonal ones, in one sparse construction (duplicates summed)."""
+    pairs = np.asarray(springs, dtype=int).reshape(-1, 2)
+    i, j = pairs.T
+    weights = np.broadcast_to(np.asarray(Q, dtype=float), len(pairs))
+    axis = np.arange(dim)
+    rows = dim * np.stack([i, j, i, j])[:, :, None] + axis
+    cols = dim * np.stack([j, i, i, j])[:, :, None] + axis
+    data = np.broadcast_to(np.stack([-weights, -weights, weights, weights])[:, :, None],
+                           rows.shape)
+    return sp.csr_matrix((data.ravel(), (rows.ravel(), cols.ravel())),
+                         shape=(dim * natoms,) * 2)
 
 
 def pair_chunks(natoms: int,

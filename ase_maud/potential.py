@@ -122,18 +122,29 @@ class MaudPotential:
         (N, 3), with ``z = 0`` for ``dim=2``; a ValueError names an atom whose
         ``x / a`` overflows."""
         given = np.asarray(positions, dtype=float)
-        positions = np.zeros((len(given), 3))
-        positions[:, :given.shape[1]] = given
-        with np.errstate(over='ignore'):
-            scaled = positions / self.a
-        bad = np.flatnonzero(~np.isfinite(scaled).all(axis=1))
-        if bad.size:
-            raise ValueError(f'atom {bad[0]} at {positions[bad[0]].tolist()} is '
-                             f'beyond the float64 range in units of a = {self.a!r}; '
-                             'choose a nearer the size of the scene')
+        if given.ndim == 2 and given.shape[1] == 3:
+            with np.errstate(over='ignore'):
+                scaled = given / self.a
+        else:
+            scaled = np.zeros((len(given), 3))
+            with np.errstate(over='ignore'):
+                np.divide(given, self.a, out=scaled[:, :given.shape[1]])
+        if not np.isfinite(scaled).all():
+            bad = np.flatnonzero(~np.isfinite(scaled).all(axis=1))[0]
+            raise ValueError(f'atom {bad} at {given[bad].tolist()} is beyond the '
+                             f'float64 range in units of a = {self.a!r}; choose a '
+                             'nearer the size of the scene')
         if self.dim == 2:
             scaled[:, 2] = 0.0
         return scaled
+
+    def check_size(self, natoms: int) -> None:
+        """Raise ValueError if a spring names an atom beyond ``natoms`` or
+        the loads are not one per atom (:func:`.springs.check_range`,
+        :meth:`check_loads`)."""
+        if natoms <= self._kept('highest index', lambda: int(self.springs.max(initial=-1))):
+            check_range(self.springs, natoms)
+        self.check_loads(natoms)
 
     # -- the springs: exact, constant ----------------------------------------
 
@@ -148,7 +159,8 @@ class MaudPotential:
         """Energy and forces (N, 3) of the springs at ``scaled`` positions
         (units of ``a``), at ``a = Q = 1``: :func:`.physics.spring_terms`'s
         law, ``Q q L**2 / 2`` and ``-Q q d``, summed by the spring graph's
-        incidence matrix (kept once per N: two sparse products a call)."""
+        incidence matrix (kept once per N, dense while it is small: two
+        products a call)."""
         n = len(scaled)
         incidence, transpose = self._kept(('incidence', n), lambda: _with_transpose(
             physics.spring_incidence(self._springs_within(n), n)))
@@ -167,7 +179,7 @@ class MaudPotential:
         check_range(self.springs, natoms)
         return self.springs
 
-    def _kept(self, key: tuple, build):
+    def _kept(self, key: tuple | str, build):
         if key not in self._cache:
             self._cache[key] = build()
         return self._cache[key]
@@ -217,8 +229,19 @@ class MaudPotential:
         return hv.reshape(v.shape)
 
 
-def _with_transpose(matrix: sp.csr_matrix) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """``matrix`` and its transpose, both in rows (csr) for fast products."""
+#: The most entries an incidence matrix kept dense may have (below it, a
+#: BLAS product costs less than a sparse one's overhead).
+DENSE_INCIDENCE_ENTRIES = 1 << 16
+
+
+def _with_transpose(matrix: sp.csr_matrix) -> tuple[sp.csr_matrix | np.ndarray,
+                                                    sp.csr_matrix | np.ndarray]:
+    """``matrix`` and its transpose, for fast products: both dense while
+    they have at most :data:`DENSE_INCIDENCE_ENTRIES` entries, else both in
+    rows (csr)."""
+    if np.prod(matrix.shape) <= DENSE_INCIDENCE_ENTRIES:
+        dense = matrix.toarray()
+        return dense, np.ascontiguousarray(dense.T)
     return matrix, sp.csr_matrix(matrix.T)
 
 

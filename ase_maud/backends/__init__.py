@@ -53,6 +53,7 @@ def register(backend: Backend) -> None:
         raise ValueError(f'a backend named {backend.name!r} is already '
                          'registered')
     _REGISTRY[backend.name] = backend
+    _EXACT.clear()   # an earlier pick may have another first backend now
 
 
 def get(name: str) -> Backend:
@@ -104,7 +105,14 @@ def exact_choice(backend: str) -> Choice:
     the calculator parameter ``backend``: itself if it has a Hessian
     (``numba``, ``numpy``), else (``auto``, ``fmm``) the first installed one
     that has (exact: tolerance 0)."""
-    return Choice(_hessian_backend(backend), {}, 0.0)
+    if backend not in _EXACT:
+        _EXACT[backend] = Choice(_hessian_backend(backend), {}, 0.0)
+    return _EXACT[backend]
+
+
+#: :func:`exact_choice`'s picks by parameter (the same every call until a
+#: backend is registered).
+_EXACT: dict[str, Choice] = {}
 
 
 def _hessian_backend(name: str) -> Backend:

@@ -30,10 +30,10 @@ from ase.constraints import FixAtoms, FixCartesian
 from . import accuracy
 from .calculator import MaudCalculator
 from .dofs import free_dofs
-from .monitor import RunMonitor
+from .monitor import MaudError, RunMonitor
 from .search import merit_tolerance
 from .stiffness import ExactModel, StiffnessModel
-from .strategy import MaudState, Strategy
+from .strategy import LocalAt, MaudState, Strategy
 
 
 def applies(atoms: Any, model: StiffnessModel, observed: bool) -> bool:
@@ -63,13 +63,13 @@ def log_line(logfile: IO | None, name: str, step: int, energy: float, fmax: floa
 
 
 def relax(atoms: Atoms, model: ExactModel, strategy: Strategy, state: MaudState,
-          monitor: RunMonitor, fmax: float, gamma0: float, step: Callable[[], int],
+          monitor: RunMonitor, fmax: float, step: Callable[[], int],
           no_step: Callable[[str], None]) -> Iterator[tuple[float, float]]:
     """The energy and the largest force at the start, then after each step
     (taken when the next value is asked for), as ASE's loop would make them.
     ``fmax`` is the run's (the accuracy asked of the calculator follows it),
-    ``gamma0`` the step factor's start (the monitor's reference), ``step()``
-    the optimizer's step count, ``no_step(why)`` stops the run (it raises)."""
+    ``step()`` the optimizer's step count, ``no_step(why)`` stops the run (it
+    raises)."""
     calc = atoms.calc
     held = ~free_dofs(atoms, 3)
     positions = atoms.arrays['positions']
@@ -101,17 +101,52 @@ def relax(atoms: Atoms, model: ExactModel, strategy: Strategy, state: MaudState,
     fmax_now = float(np.linalg.norm(forces, axis=1).max())
     while True:
         yield energy, fmax_now
-        noise = accuracy.noise(calc)
-        move = strategy.step(state, positions.copy(), energy, forces, noise, local_at)
-        here = state.last
-        monitor.check(step(), here.x, here.merit, here.forces, state.gamma, gamma0,
-                      merit_tolerance(here.merit, noise))
-        if not np.isfinite(move).all():
-            no_step(f'the {model.name} stiffness model gave a non-finite move')
-        x = here.x + move
+        x = next_positions(strategy, state, monitor, step(), positions.copy(), energy,
+                           forces, accuracy.noise(calc), local_at, no_step)
         x[held] = positions[held]
         strategy.moved(state, x)
         positions[:] = x
         accuracy.ask(calc, fmax, fmax_now)
         energy, forces = evaluate()
         fmax_now = float(np.linalg.norm(forces, axis=1).max())
+
+
+def next_positions(strategy: Strategy, state: MaudState, monitor: RunMonitor, step: int,
+                   x: np.ndarray, merit: float, forces: np.ndarray, noise: float,
+                   local_at: LocalAt, no_step: Callable[[str], None]) -> np.ndarray:
+    """The positions (N, 3) the strategy's step from ``x`` (its ``merit``,
+    ``forces`` and their relative error ``noise``) reaches, before the
+    constraints, the run watched by ``monitor`` at ``step``; ``no_step(why)``
+    stops a run whose move is not finite. The step of both loops: ASE's
+    (:meth:`Maud.step <ase_maud.optimizer.Maud.step>`) and :func:`relax`."""
+    move = strategy.step(state, x, merit, forces, noise, local_at)
+    here = state.last
+    monitor.check(step, here.x, here.merit, here.forces, state.gamma, strategy.rule.gamma0,
+                  merit_tolerance(here.merit, noise))
+    if not np.isfinite(move).all():
+        no_step(f'the {strategy.model.name} stiffness model gave a non-finite move')
+    return here.x + move
+
+
+def run(opt: Any, steps: int, no_step: Callable[[str], None],
+        stop: Callable[[MaudError], None]) -> bool:
+    """ASE's loop (``Dynamics.irun``) over :func:`relax` for the optimizer
+    ``opt`` (a :class:`~ase_maud.optimizer.Maud` on which :func:`applies`):
+    at most ``steps`` steps to its ``fmax``, logged as ASE logs them;
+    ``no_step(why)`` stops a run with no finite step, ``stop(error)`` any
+    other MaudError (both raise). Returns whether it converged."""
+    opt.max_steps = opt.nsteps + steps
+    steps_made = relax(opt.atoms, opt.model, opt.maud, opt.state, opt.monitor, opt.fmax,
+                       lambda: opt.nsteps, no_step)
+    name = type(opt).__name__
+    try:
+        energy, opt.fmax_now = next(steps_made)
+        if opt.nsteps == 0:
+            log_line(opt.logfile, name, 0, energy, opt.fmax_now)
+        while opt.fmax_now >= opt.fmax and opt.nsteps < opt.max_steps:
+            energy, opt.fmax_now = next(steps_made)
+            opt.nsteps += 1
+            log_line(opt.logfile, name, opt.nsteps, energy, opt.fmax_now)
+    except MaudError as error:
+        stop(error)
+    return opt.fmax_now < opt.fmax

@@ -26,7 +26,7 @@ from .calculator import MaudCalculator
 from .checks import check
 from .dofs import PROJECTIONS, free_dofs
 from .neighbours import NearestDistances
-from .stiffness import StiffnessModel, choose_model
+from .stiffness import SecantModel, StiffnessModel, choose_model
 from .strategy import STEP_DEFAULTS, StepRule, Strategy, compose, step_rule
 from .subset import SubsetView
 
@@ -39,14 +39,15 @@ CELL_MAXSTEP = 0.2
 class Assembly:
     """A run's parts: the local ``model``, the ``strategy`` over it, the
     ``subset`` view behind a Filter (or None), whether the coordinates are
-    ``points`` (their spread is watched), and whether the ``target`` was
-    ``chosen`` here (a band of images: said in the log)."""
+    ``points`` (their spread is watched), and the ``notes`` for the run's
+    log (lines: a target chosen for a band of images, a model learnt from
+    the forces)."""
 
     model: StiffnessModel
     strategy: Strategy
     subset: SubsetView | None
     points: bool
-    chosen: bool
+    notes: tuple[str, ...]
 
 
 def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
@@ -75,8 +76,12 @@ def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
     if model.target == 'saddle':
         check_free(scene)
     rule = rule_for(model, scene, images, steps, order)
+    notes = ((["Maud: target='stationary' (the forces of a band of images are not the "
+               'gradient of its energy)\n'] if chosen and model.target == 'stationary' else [])
+             + ([f'Maud: the calculator gives no stiffness; it is learnt from the forces '
+                 f'({model.name} model)\n'] if isinstance(model, SecantModel) else []))
     return Assembly(model, compose(model, rule, nearest, check_mode(mode, scene)),
-                    subset, scene is not None, chosen)
+                    subset, scene is not None, tuple(notes))
 
 
 def check_calculator(scene: Atoms | None) -> None:

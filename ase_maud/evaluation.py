@@ -152,3 +152,19 @@ def in_rows_of_3(optimizable: Any) -> Any:
     """``optimizable`` itself if its coordinates are a multiple of 3, else
     :class:`Padded`."""
     return optimizable if optimizable.get_x().size % 3 == 0 else Padded(optimizable)
+
+
+def no_step_error(step: int, why: str, model: Any, atoms: Any) -> MaudError:
+    """The MaudError of a run that has no finite step from ``step`` because
+    of ``why``, which gives way to a non-finite property of the calculator
+    of ``atoms`` (None: none) if the ``model`` needs one and it is the cause
+    (its first bad entry named)."""
+    prop = None if atoms is None else model.needs(atoms)
+    if prop is not None:
+        value = np.asarray(atoms.calc.get_property(prop, atoms))
+        if not np.isfinite(value).all():
+            where = np.argwhere(~np.isfinite(value))[0].tolist()
+            why = (f'the calculator returned a non-finite {prop} (entry '
+                   f'{where}: {value[tuple(where)]})')
+    return MaudError(f'no finite step from step {step}: {why}; the positions are '
+                     f'those of step {step}')

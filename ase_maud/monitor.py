@@ -113,6 +113,17 @@ def minimum_proved(atoms: Atoms | None, target: str) -> bool:
             and calc.minimum_proved(atoms))
 
 
+def no_equilibrium(atoms: Atoms | None, target: str) -> NoEquilibriumError | None:
+    """The NoEquilibriumError of a run on ``atoms`` whose calculator proves
+    the scene has no finite equilibrium, or no finite minimum for a
+    ``target='minimum'`` (:meth:`MaudCalculator.no_equilibrium`); None if
+    nothing is proved (another calculator proves nothing)."""
+    calc = getattr(atoms, 'calc', None)
+    why = (calc.no_equilibrium(atoms, minimum=target == 'minimum')
+           if isinstance(calc, MaudCalculator) else None)
+    return NoEquilibriumError(f'before the first step: {why}') if why else None
+
+
 @dataclass
 class RunMonitor:
     """Divergence and stagnation of one run; see the module docstring.
@@ -142,6 +153,18 @@ class RunMonitor:
     passes: int = 0
     ahead: tuple[float, float] | None = None
     mark: tuple[np.ndarray, np.ndarray] | None = None
+
+    @classmethod
+    def of_run(cls, atoms: Atoms | None, target: str, divergence_factor: float,
+               patience: int, points: bool) -> RunMonitor:
+        """The monitor of a run seeking ``target`` on ``atoms`` (None: a band
+        of images or a cell filter); the divergence test only where the
+        coordinates are ``points`` (a cell filter's rows do not spread like
+        points) and no finite minimum is proved."""
+        return cls(divergence_factor if points else np.inf, patience,
+                   merit_name='energy' if target == 'minimum' else '|f|^2',
+                   length_scale=getattr(getattr(atoms, 'calc', None), 'length_scale', 0.0),
+                   bounded=minimum_proved(atoms, target))
 
     def check(self, step: int, x: np.ndarray, merit: float, forces: np.ndarray,
               gamma: float, gamma0: float, tolerance: float) -> None:

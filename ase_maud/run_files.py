@@ -6,6 +6,7 @@ constraints by :class:`SceneSignature`)."""
 from __future__ import annotations
 
 import os
+import warnings
 from typing import Any
 
 import numpy as np
@@ -13,8 +14,10 @@ from ase import Atoms
 from ase.filters import Filter
 
 from .checks import check_writable
+from .lock import RunLock
 from .paths import check_run_files
 from .restart import difference, signature
+from .trajectory import repair
 
 
 class SceneSignature:
@@ -84,3 +87,18 @@ def check_files(restart: Any, logfile: Any, trajectory: Any,
     if not isinstance(append_trajectory, (bool, np.bool_)):
         raise ValueError(f'append_trajectory must be True or False, got '
                          f'{append_trajectory!r}')
+
+
+def open_run(restart: Any, logfile: Any, trajectory: Any, append_trajectory: Any) -> RunLock:
+    """A run's files made ready before ASE opens them: the arguments checked
+    (:func:`check_files`), the lock of the restart file and trajectory
+    checked free (before ASE empties a trajectory another run writes), and a
+    trajectory to append to repaired (a warning says what was cut). Returns
+    the lock the run holds while it steps."""
+    check_files(restart, logfile, trajectory, append_trajectory)
+    lock = RunLock(restart, trajectory)
+    lock.check()
+    if append_trajectory and isinstance(trajectory, (str, os.PathLike)):
+        if (repaired := repair(trajectory)):
+            warnings.warn(repaired, stacklevel=3)
+    return lock

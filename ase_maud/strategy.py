@@ -150,6 +150,20 @@ class StepRule:
     #: ``target='saddle'``: the negative curvatures sought (modes followed uphill).
     order: int = 0
 
+    def todict(self) -> dict[str, Any]:
+        """The user's settings, as an optimizer's ``todict`` gives them (the
+        order of a saddle search too)."""
+        return {**({'order': self.order} if self.order else {}),
+                **{name: getattr(self, name) for name in (
+                    'gamma', 'gamma_max', 'gamma_growth', 'overshoot_shrink', 'beta_max',
+                    'memory', 'maxstep_nn')}}
+
+    @property
+    def gamma0(self) -> float:
+        """The step factor a run starts from (the reference of the monitor's
+        test of a vanishing step)."""
+        return min(self.gamma, self.gamma_max)
+
 
 def defaults(model: StiffnessModel) -> dict[str, Any]:
     """:data:`STEP_DEFAULTS`' common row, then the row of ``model``'s class
@@ -165,12 +179,14 @@ def step_rule(model: StiffnessModel, image_size: int | None = None,
     """The step rule of ``model``: its :func:`defaults`, then the
     ``keywords`` that are not None (the user's; already checked). For
     ``target='stationary'`` and ``'saddle'`` the memory is 0 (L-BFGS assumes
-    a positive-definite model)."""
+    a positive-definite model); ``order`` is a saddle search's only."""
     settings = defaults(model)
     settings.update({name: value for name, value in keywords.items()
                      if value is not None})
     if model.target in ('stationary', 'saddle'):
         settings['memory'] = 0
+    if model.target != 'saddle':
+        settings['order'] = 0   # no mode is followed uphill
     if model.target == 'saddle' and settings['maxstep_nn'] is None:
         settings['maxstep_nn'] = STEP_DEFAULTS['common']['maxstep_nn']
     return StepRule(image_size=image_size, **settings)

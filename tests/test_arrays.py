@@ -99,3 +99,26 @@ def test_a_run_on_arrays_counts_its_hessians_as_the_watched_run():
             opt.run(fmax=1e-7)
         counts.append((opt.nsteps, opt.work.hessians))
     assert counts[0] == counts[1] and counts[0][1] == counts[0][0] + 1
+
+
+@pytest.mark.parametrize('watched', [False, True])
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_run_with_no_finite_step_says_so_once_in_its_log(seed, watched, monkeypatch):
+    """A local model that fails (here: the exact model's factorisation) stops
+    the run with one line in the log, on arrays and in ASE's loop alike (the
+    error passes the optimizer's stop twice on its way out)."""
+    from ase_maud.monitor import MaudError
+    from ase_maud.stiffness import ExactModel
+
+    def failing(self, hessian, atoms):
+        raise np.linalg.LinAlgError('no factor')
+
+    monkeypatch.setattr(ExactModel, 'local', failing)
+    atoms, log = build('all_pairs', 6 + seed, seed=seed), io.StringIO()
+    opt = Maud(atoms, logfile=log)
+    if watched:
+        opt.attach(lambda: None)
+    with pytest.raises(MaudError, match='no finite step from step 0') as error:
+        opt.run(fmax=1e-6)
+    assert log.getvalue().count('Maud: stopped:') == 1
+    assert f'Maud: stopped: {error.value}' in log.getvalue()

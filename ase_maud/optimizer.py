@@ -60,6 +60,7 @@ from .monitor import (
     RunMonitor,
     StagnationError,
     WrongIndexError,
+    divergence_judged,
     minimum_proved,
 )
 from .restart import RestartFile, RestartFileError, difference
@@ -94,7 +95,8 @@ class Maud(Optimizer):
     gamma, gamma_max, gamma_growth, overshoot_shrink, beta_max, memory, maxstep_nn, maxstep
         The step rule (:data:`ase_maud.strategy.STEP_DEFAULTS`; None: the model's).
     divergence_factor, patience
-        Where no finite minimum is proved: the growth of the scene between two
+        On a MaudCalculator's scene where no finite minimum is proved (no test
+        on another calculator's): the growth of the scene between two
         looks at its forces (default 2; inf: no divergence test;
         :class:`ase_maud.monitor.RunMonitor`); steps without progress after
         which the run stops as stagnant (default 2000).
@@ -173,7 +175,8 @@ class Maud(Optimizer):
         self.state = self.maud.start()
         atoms = self._atoms()
         self.monitor = RunMonitor(   # a cell filter's rows do not spread like points
-            self.divergence_factor if self._points else np.inf, self.patience,
+            self.divergence_factor if self._points and divergence_judged(atoms) else np.inf,
+            self.patience,
             merit_name='energy' if self.target == 'minimum' else '|f|^2',
             length_scale=getattr(getattr(atoms, 'calc', None), 'length_scale', 0.0),
             bounded=minimum_proved(atoms, self.target))

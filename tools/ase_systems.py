@@ -69,22 +69,40 @@ def relax(system: str, seed: int, opt, fmax: float, steps: int, **kwargs):
     return counter.calls, cpu, start.energy(), converged
 
 
-def basin(system: str, seed: int, opt, hops: int, fmax: float):
-    """ASE's BasinHopping (kT 1, dr 0.5) of ``hops`` hops with ``opt`` from
-    the seeded start, its random moves seeded alike: (calls, CPU s, lowest
-    energy, or the error that stopped it)."""
+def capped(opt, steps: int, missed: list[int]):
+    """``opt`` whose ``run`` takes at most ``steps`` steps (BasinHopping asks
+    for 10**8), each local relaxation that does not converge in them noted
+    in ``missed``."""
+    class Capped(opt):
+        def run(self, fmax=0.05, steps_asked=None):
+            converged = super().run(fmax=fmax, steps=steps)
+            if not converged:
+                missed.append(self.nsteps)
+            return converged
+    return Capped
+
+
+def basin(system: str, seed: int, opt, hops: int, fmax: float, steps: int):
+    """ASE's BasinHopping (kT 1, dr 0.5) of ``hops`` hops with ``opt`` (each
+    local relaxation at most ``steps`` steps) from the seeded start, its
+    random moves seeded alike: (calls, CPU s, lowest energy, or the error
+    that stopped it, and how many local relaxations did not converge)."""
     from ase.optimize.basin import BasinHopping
     atoms = SYSTEMS[system](seed).target
     counter = Counted([atoms])
+    missed: list[int] = []
     np.random.seed(seed)   # BasinHopping draws from numpy's global generator
     start = time.process_time()
     try:
-        with BasinHopping(atoms, temperature=1.0, dr=0.5, optimizer=opt, fmax=fmax,
+        with BasinHopping(atoms, temperature=1.0, dr=0.5,
+                          optimizer=capped(opt, steps, missed), fmax=fmax,
                           logfile=None, trajectory=None, optimizer_logfile=None) as hopping:
             hopping.run(hops)
             lowest = f'{hopping.get_minimum()[0]:.4f}'
     except Exception as error:   # noqa: BLE001 (a row of the table says it)
         lowest = f'{type(error).__name__}: {error}'
+    if missed:
+        lowest += f' ({len(missed)} not converged in {steps} steps)'
     return counter.calls, time.process_time() - start, lowest
 
 
@@ -95,7 +113,8 @@ def main() -> None:
     parser.add_argument('--steps', type=int, default=2000)
     parser.add_argument('--systems', nargs='+', default=list(SYSTEMS))
     parser.add_argument('--basin', type=int, default=0,
-                        help='instead: BasinHopping of this many hops, Maud against BFGS')
+                        help='instead: BasinHopping of this many hops, Maud against BFGS '
+                        '(each local relaxation at most --steps steps)')
     parser.add_argument('--maud', nargs='*', default=[],
                         help='Maud variants: name=keyword=value,keyword=value')
     parser.add_argument('--csv', help='write every run (system, seed, optimizer, '
@@ -113,7 +132,8 @@ def main() -> None:
         print('|---|---|---|---|')
         for system in args.systems:
             for seed in args.seeds:
-                cells = [basin(system, seed, opt, args.basin, args.fmax) for opt in (Maud, BFGS)]
+                cells = [basin(system, seed, opt, args.basin, args.fmax, args.steps)
+                         for opt in (Maud, BFGS)]
                 print(f'| {system} | {seed} | ' + ' | '.join(
                     f'{c}, {t:.1f} s, {e}' for c, t, e in cells) + ' |', flush=True)
         return

@@ -337,3 +337,28 @@ def test_bfgs_model_steps_within_ase_maxstep_and_reaches_bfgs_minimum(make, seed
     fresh.calc = type(reference.calc)()
     assert np.linalg.norm(fresh.get_forces(), axis=1).max() <= 1e-3
     assert calls['n'] <= bfgs.nsteps + 1
+
+
+@pytest.mark.parametrize('seed', [10, 11])
+def test_basin_hopping_on_lj7_finds_bfgs_lowest_minimum(seed):
+    """Issue 32: BasinHopping with Maud on ASE's LJ7 start (ase/test/test_basin.py,
+    a fresh seed; numpy's generator seeded alike) finds the lowest minimum
+    BasinHopping with BFGS finds, in at most 1.1x its calculator calls."""
+    from ase.units import kB
+    found = {}
+    for opt in (BFGS, Maud):
+        atoms = lj7(seed)
+        calls = [0]
+        inner = atoms.calc.calculate
+
+        def counted(*args, inner=inner, calls=calls, **kwargs):
+            calls[0] += 1
+            return inner(*args, **kwargs)
+        atoms.calc.calculate = counted
+        np.random.seed(seed)
+        with BasinHopping(atoms, temperature=100 * kB, dr=0.5, optimizer=opt, fmax=0.01,
+                          logfile=None, trajectory=None, optimizer_logfile=None) as bh:
+            bh.run(10)
+            found[opt] = bh.get_minimum()[0], calls[0]
+    assert found[Maud][0] == pytest.approx(found[BFGS][0], abs=1e-5)
+    assert found[Maud][1] <= 1.1 * found[BFGS][1]

@@ -339,6 +339,7 @@ def test_bfgs_model_steps_within_ase_maxstep_and_reaches_bfgs_minimum(make, seed
     assert calls['n'] <= bfgs.nsteps + 1
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize('seed', [10, 11])
 def test_basin_hopping_on_lj7_finds_bfgs_lowest_minimum(seed):
     """Issue 32: BasinHopping with Maud on ASE's LJ7 start (ase/test/test_basin.py,

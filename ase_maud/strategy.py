@@ -99,7 +99,8 @@ from .stiffness import (
 #: specification has it; the bfgs model (a secant ``kappa I`` with a long
 #: memory, for calculators with forces only) takes no momentum, 100 pairs, and
 #: the step of ASE's BFGS: the whole move scaled by one factor so that no
-#: point moves more than 0.2 (A), gamma back to 1 after every accepted step
+#: point moves more than 0.2 (A; nor the common 0.45 of its nearest-neighbour
+#: distance, on atoms), gamma back to 1 after every accepted step
 #: and a cubic cut on a rise, as a line search; chosen by measurement on ASE's
 #: systems (docs/benchmarks.md).
 STEP_DEFAULTS: dict[Any, dict[str, Any]] = {

@@ -7,9 +7,12 @@ forces and its step factor, and gets a :class:`DivergenceError` or a
 :class:`StagnationError` (both :class:`MaudError`) whose message says what was
 observed. Its state goes into a restart file (:meth:`RunMonitor.todict`).
 
-- Divergence, only where no finite minimum is proved (``bounded`` False;
-  a scene whose calculator proves one, ``calc.minimum_proved``, is on its
-  way there however far it spreads, and only the stagnation rules apply).
+- Divergence, only for a scene of a :class:`MaudCalculator`
+  (:func:`divergence_judged`; another calculator's run ends by fmax, steps
+  or stagnation, as ASE's optimizers' do) and only where no finite minimum
+  is proved (``bounded`` False; a scene whose calculator proves one,
+  ``calc.minimum_proved``, is on its way there however far it spreads, and
+  only the stagnation rules apply).
   The run is judged by its forces as it grows: each time the scene's
   extent (the larger of its size, the largest distance from the centroid,
   and the drift of its centroid) grows by ``divergence_factor`` again over
@@ -104,6 +107,17 @@ def balance_ahead(move: np.ndarray, pull: np.ndarray, forces: np.ndarray) -> flo
     return push / curvature if curvature > 0 else np.inf
 
 
+def divergence_judged(atoms: Atoms | None) -> bool:
+    """Whether a run on ``atoms`` gets the divergence test: its calculator is
+    a :class:`MaudCalculator`, whose terms (springs, repulsion, loads) the
+    test's secant prediction is made for and whose scenes can fly apart for
+    ever. Another calculator's forces are its own business: a fragment that
+    leaves a cluster (a hop of BasinHopping, a desorption) feels forces that
+    fade with distance or end at a cut-off, and its run ends by fmax, as
+    with BFGS (issue 32)."""
+    return isinstance(getattr(atoms, 'calc', None), MaudCalculator)
+
+
 def minimum_proved(atoms: Atoms | None, target: str) -> bool:
     """True if a run seeks a ``target='minimum'`` whose existence the
     calculator of ``atoms`` proves (:meth:`MaudCalculator.minimum_proved`):
@@ -160,8 +174,10 @@ class RunMonitor:
         """The monitor of a run seeking ``target`` on ``atoms`` (None: a band
         of images or a cell filter); the divergence test only where the
         coordinates are ``points`` (a cell filter's rows do not spread like
-        points) and no finite minimum is proved."""
-        return cls(divergence_factor if points else np.inf, patience,
+        points), the scene is a MaudCalculator's (:func:`divergence_judged`)
+        and no finite minimum is proved."""
+        return cls(divergence_factor if points and divergence_judged(atoms) else np.inf,
+                   patience,
                    merit_name='energy' if target == 'minimum' else '|f|^2',
                    length_scale=getattr(getattr(atoms, 'calc', None), 'length_scale', 0.0),
                    bounded=minimum_proved(atoms, target))

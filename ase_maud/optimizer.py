@@ -88,7 +88,8 @@ class Maud(Resumable):
     gamma, gamma_max, gamma_growth, overshoot_shrink, beta_max, memory, maxstep_nn, maxstep
         The step rule (:data:`ase_maud.strategy.STEP_DEFAULTS`; None: the model's).
     divergence_factor, patience
-        Where no finite minimum is proved: the growth of the scene between two
+        On a MaudCalculator's scene where no finite minimum is proved (no test
+        on another calculator's): the growth of the scene between two
         looks at its forces (default 2; inf: no divergence test;
         :class:`ase_maud.monitor.RunMonitor`); steps without progress after
         which the run stops as stagnant (default 2000).

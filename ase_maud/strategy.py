@@ -96,9 +96,13 @@ from .stiffness import (
 #: whole move scaled by one factor (the springs one by the scene's size only,
 #: gamma back to 1 after every accepted step and a cubic cut on a rise, as a
 #: line search). The nodal and secant models keep Day's momentum, as the
-#: specification has it; the bfgs model (the secant one with a long memory,
-#: for calculators with forces only) takes gamma 1, no momentum and 100 pairs,
-#: chosen by measurement on ASE's systems (docs/benchmarks.md).
+#: specification has it; the bfgs model (a secant ``kappa I`` with a long
+#: memory, for calculators with forces only) takes no momentum, 100 pairs, and
+#: the step of ASE's BFGS: the whole move scaled by one factor so that no
+#: point moves more than 0.2 (A; nor the common 0.45 of its nearest-neighbour
+#: distance, on atoms), gamma back to 1 after every accepted step
+#: and a cubic cut on a rise, as a line search; chosen by measurement on ASE's
+#: systems (docs/benchmarks.md).
 STEP_DEFAULTS: dict[Any, dict[str, Any]] = {
     'common': {'gamma': 1.0, 'gamma_growth': 1.1, 'overshoot_shrink': 0.6,
                'maxstep_nn': 0.45, 'maxstep': None, 'maxstep_size': None,
@@ -108,7 +112,8 @@ STEP_DEFAULTS: dict[Any, dict[str, Any]] = {
     GlobalModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 30, 'bound': 'whole'},
     NodalModel: {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0},
     SecantModel: {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0},
-    BFGSModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 100},
+    BFGSModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 100, 'maxstep': 0.2,
+                'bound': 'whole', 'gamma_growth': 1e3, 'interpolate': True},
     SpringsModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 20, 'maxstep_nn': None,
                    'maxstep_size': 1.0, 'bound': 'whole', 'gamma_growth': 1e3,
                    'interpolate': True},

@@ -368,3 +368,20 @@ def test_basin_hopping_tool_same_hops_and_calls_to_best(tmp_path, capsys):
                 assert int(r['calls_to_own_lowest']) <= int(r['calls_to_best'])
         assert float(start[0]['calls_to_best_x_BFGS']) == 1.0
     assert '| 3 | 6 | 0 | Maud |' in capsys.readouterr().out
+
+
+def test_ase_systems_tool_counts_every_image_and_caps_hops():
+    """tools/ase_systems.py: L-BFGS-B relaxes a cell filter (its rows are
+    positions) and has no column for a band; a band's calls are summed over
+    its images; BasinHopping's local relaxations are capped at --steps."""
+    from ase.optimize import BFGS
+
+    from ase_maud import Maud
+    tool = runpy.run_path(str(Path(__file__).parent.parent / 'tools' / 'ase_systems.py'))
+    calls, _, energy, converged = tool['relax']('Au8 cell', 1, tool['scipy_lbfgsb'], 0.01, 200)
+    assert converged is True and calls > 1 and energy < 0.0
+    assert tool['relax']('Al/Au NEB', 1, tool['scipy_lbfgsb'], 0.05, 200) is None
+    calls, _, _, converged = tool['relax']('Al/Au NEB', 1, Maud, 0.05, 3)
+    assert not converged and calls == 3 * 4   # 3 inner images, 4 evaluations each
+    calls, _, lowest = tool['basin']('LJ13', 1, BFGS, 1, 0.01, 5)
+    assert lowest.endswith('(2 not converged in 5 steps)')

@@ -11,6 +11,8 @@ import io
 
 import numpy as np
 import pytest
+from ase import Atoms
+from ase.calculators.calculator import Calculator, all_changes
 from ase.constraints import FixAtoms, FixCartesian, FixedPlane
 from ase.optimize import BFGS
 
@@ -129,3 +131,39 @@ def test_the_proof_needs_every_component_held():
     assert minimum_proved(atoms, springs, loads * [1, 0, 0])   # ... unless balanced
     atoms.set_constraint([FixAtoms([0]), FixedPlane(1, [0, 0, 1])])
     assert not minimum_proved(atoms, springs, None)   # not a FixAtoms nor FixCartesian
+
+
+class _Repulsion(Calculator):
+    """Point charges repelling (E = sum 1/r), a calculator with forces only:
+    no finite minimum, but forces that fade as the points spread."""
+
+    implemented_properties = ['energy', 'forces']
+
+    def calculate(self, atoms=None, properties=('energy',), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        d = self.atoms.positions[:, None] - self.atoms.positions[None]
+        r = np.linalg.norm(d, axis=2)
+        np.fill_diagonal(r, np.inf)
+        self.results['energy'] = 0.5 * (1 / r).sum()
+        self.results['forces'] = (d / r[..., None] ** 3).sum(axis=1)
+
+
+@pytest.mark.parametrize('seed', [31, 32])
+def test_another_calculators_spreading_run_ends_by_fmax_as_with_bfgs(seed):
+    """Issue 32: the divergence test is for a MaudCalculator's scene. Charges
+    that repel under a calculator with forces only spread until their forces
+    fall below fmax, and BFGS stops there; Maud does too (it raised
+    DivergenceError at 8 times the start's size before)."""
+    start = np.random.default_rng(seed).normal(scale=0.5, size=(4, 3))
+    ends = {}
+    for opt in (BFGS, Maud):
+        atoms = Atoms('H4', positions=start)
+        atoms.calc = _Repulsion()
+        with opt(atoms, logfile=None) as dyn:
+            assert dyn.run(fmax=0.01, steps=2000)
+        ends[opt] = atoms
+    fresh = ends[Maud].copy()
+    fresh.calc = _Repulsion()
+    assert np.linalg.norm(fresh.get_forces(), axis=1).max() <= 0.01
+    size = np.linalg.norm(start - start.mean(axis=0), axis=1).max()
+    assert np.ptp(ends[Maud].positions, axis=0).max() > 8 * size   # it did spread

@@ -13,6 +13,7 @@ from ase_maud import Maud, MaudCalculator
 from ase_maud.precon import MaudPrecon
 from ase_maud.scenes import SCENES, build
 from ase_maud.stiffness import (
+    BFGSModel,
     ExactModel,
     GlobalModel,
     NodalModel,
@@ -167,6 +168,22 @@ def test_nodal_and_secant_models(seed):
     assert learnt == {'kappa': 3.0}
     assert np.allclose(secant.at(atoms, learnt).solve(forces), np.where(free, forces / 3, 0))
     assert secant.observe(np.ones((2, 3)), -np.ones((2, 3)), learnt) is learnt
+
+
+@pytest.mark.parametrize('seed', [5, 6])
+def test_bfgs_model_learns_the_mean_of_the_two_secant_curvatures(seed):
+    """kappa is |y| / |s|, the geometric mean of s.y / s.s and y.y / s.y,
+    between the two; a step with s.y <= 0 teaches nothing."""
+    rng = np.random.default_rng(seed)
+    s = rng.normal(size=(7, 3))
+    y = 2.0 * s + 0.5 * rng.normal(size=(7, 3))   # s.y > 0
+    model = BFGSModel(kappa0=70.0)
+    assert model.at(None).solve(np.ones((1, 3)))[0, 0] == pytest.approx(1 / 70.0)
+    learnt = model.observe(s, y, {})
+    small, large = np.vdot(s, y) / np.vdot(s, s), np.vdot(y, y) / np.vdot(s, y)
+    assert learnt['kappa'] == pytest.approx(np.sqrt(small * large), rel=1e-12)
+    assert small < learnt['kappa'] < large
+    assert model.observe(s, -y, learnt) is learnt
 
 
 def test_auto_picks_by_size_and_calculator():

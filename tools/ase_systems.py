@@ -2,19 +2,24 @@
 counted at the calculator, CPU time beside.
 
 Systems: :data:`ase_maud.bench.ase_systems.SYSTEMS` (Lennard-Jones clusters
-of 13 and 38 atoms from random starts, an EMT Au13 icosahedron, bulk Au32 and
-O on Au(111), rattled; seeded). Each optimizer
-relaxes each system from the same start to ``--fmax`` within ``--steps``;
-the table gives calculator calls, CPU seconds, the final energy, and whether
-it converged. ``--maud`` adds Maud variants as ``name=keyword=value,...``.
+of 7, 13 and 38 atoms from random starts and an LJ O4 molecule; EMT Pt13, an
+Au13 icosahedron, bulk Au32, Au8 under a cell filter, O on Au(111) and the
+NEB of Au on Al(100), rattled; seeded). Each optimizer relaxes each system
+from the same start to ``--fmax`` within ``--steps``; the table gives
+calculator calls (summed over a band's images), CPU seconds, the final
+energy (a band's highest image), and whether it converged; ``--csv`` writes
+every run as a row. ``--maud`` adds Maud variants as
+``name=keyword=value,...``. SciPy's L-BFGS-B minimises an energy, so it has
+no column for a band.
 
-    python tools/ase_systems.py --seeds 0 1 2 --fmax 0.01 --steps 2000
+    python tools/ase_systems.py --seeds 0 1 2 --fmax 0.01 --steps 2000 --csv runs.csv
     python tools/ase_systems.py --basin 20 --systems LJ13 LJ38 --seeds 0 1 2
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import time
 
 import numpy as np
@@ -23,51 +28,81 @@ from ase.optimize import BFGS, FIRE, LBFGS
 
 from ase_maud import Maud
 from ase_maud.bench.ase_systems import SYSTEMS
+from ase_maud.bench.optimizers import ScipyLBFGSB
 
 
 class Counted:
-    """Counts the calls to a calculator's ``calculate``."""
+    """Counts the calls to the calculators of ``images``' ``calculate``."""
 
-    def __init__(self, atoms: Atoms):
+    def __init__(self, images: list[Atoms]):
         self.calls = 0
-        calc = atoms.calc
-        inner = calc.calculate
+        for atoms in images:
+            calc = atoms.calc
+            calc.calculate = self._counting(calc.calculate)
 
+    def _counting(self, inner):
         def calculate(*args, **kwargs):
             self.calls += 1
             return inner(*args, **kwargs)
-        calc.calculate = calculate
+        return calculate
+
+
+def scipy_lbfgsb(target, logfile=None):
+    """SciPy's L-BFGS-B, made as the table makes an ASE optimizer."""
+    return ScipyLBFGSB(target)
 
 
 def relax(system: str, seed: int, opt, fmax: float, steps: int, **kwargs):
-    atoms = SYSTEMS[system](seed)
-    counter = Counted(atoms)
-    start = time.process_time()
+    """(calls, CPU s, final energy, converged: True, False or the error's
+    name) of ``opt`` on ``system`` from ``seed``; None for L-BFGS-B on a band."""
+    start = SYSTEMS[system](seed)
+    if start.band and opt is scipy_lbfgsb:
+        return None
+    counter = Counted(start.images)
+    clock = time.process_time()
     try:
-        with opt(atoms, logfile=None, **kwargs) as dyn:
+        with opt(start.target, logfile=None, **kwargs) as dyn:
             converged = dyn.run(fmax=fmax, steps=steps)
     except Exception as error:   # noqa: BLE001 (a row of the table says it)
         converged = f'{type(error).__name__}'
-    cpu = time.process_time() - start
-    return counter.calls, cpu, atoms.get_potential_energy(), converged
+    cpu = time.process_time() - clock
+    return counter.calls, cpu, start.energy(), converged
 
 
-def basin(system: str, seed: int, opt, hops: int, fmax: float):
-    """ASE's BasinHopping (kT 1, dr 0.5) of ``hops`` hops with ``opt`` from
-    the seeded start, its random moves seeded alike: (calls, CPU s, lowest
-    energy, or the error that stopped it)."""
+def capped(opt, steps: int, missed: list[int]):
+    """``opt`` whose ``run`` takes at most ``steps`` steps (BasinHopping asks
+    for 10**8), each local relaxation that does not converge in them noted
+    in ``missed``."""
+    class Capped(opt):
+        def run(self, fmax=0.05, steps_asked=None):
+            converged = super().run(fmax=fmax, steps=steps)
+            if not converged:
+                missed.append(self.nsteps)
+            return converged
+    return Capped
+
+
+def basin(system: str, seed: int, opt, hops: int, fmax: float, steps: int):
+    """ASE's BasinHopping (kT 1, dr 0.5) of ``hops`` hops with ``opt`` (each
+    local relaxation at most ``steps`` steps) from the seeded start, its
+    random moves seeded alike: (calls, CPU s, lowest energy, or the error
+    that stopped it, and how many local relaxations did not converge)."""
     from ase.optimize.basin import BasinHopping
-    atoms = SYSTEMS[system](seed)
-    counter = Counted(atoms)
+    atoms = SYSTEMS[system](seed).target
+    counter = Counted([atoms])
+    missed: list[int] = []
     np.random.seed(seed)   # BasinHopping draws from numpy's global generator
     start = time.process_time()
     try:
-        with BasinHopping(atoms, temperature=1.0, dr=0.5, optimizer=opt, fmax=fmax,
+        with BasinHopping(atoms, temperature=1.0, dr=0.5,
+                          optimizer=capped(opt, steps, missed), fmax=fmax,
                           logfile=None, trajectory=None, optimizer_logfile=None) as hopping:
             hopping.run(hops)
             lowest = f'{hopping.get_minimum()[0]:.4f}'
     except Exception as error:   # noqa: BLE001 (a row of the table says it)
         lowest = f'{type(error).__name__}: {error}'
+    if missed:
+        lowest += f' ({len(missed)} not converged in {steps} steps)'
     return counter.calls, time.process_time() - start, lowest
 
 
@@ -78,37 +113,54 @@ def main() -> None:
     parser.add_argument('--steps', type=int, default=2000)
     parser.add_argument('--systems', nargs='+', default=list(SYSTEMS))
     parser.add_argument('--basin', type=int, default=0,
-                        help='instead: BasinHopping of this many hops, Maud against BFGS')
+                        help='instead: BasinHopping of this many hops, Maud against BFGS '
+                        '(each local relaxation at most --steps steps)')
     parser.add_argument('--maud', nargs='*', default=[],
                         help='Maud variants: name=keyword=value,keyword=value')
+    parser.add_argument('--csv', help='write every run (system, seed, optimizer, '
+                        'calls, CPU s, energy, converged) to this file')
     args = parser.parse_args()
     optimizers = {'Maud': (Maud, {})}
     for variant in args.maud:
         name, _, settings = variant.partition('=')
         keywords = dict(item.split('=', 1) for item in settings.split(',') if item)
         optimizers[name] = (Maud, {k: _value(v) for k, v in keywords.items()})
-    optimizers.update({'BFGS': (BFGS, {}), 'LBFGS': (LBFGS, {}), 'FIRE': (FIRE, {})})
+    optimizers.update({'BFGS': (BFGS, {}), 'LBFGS': (LBFGS, {}), 'FIRE': (FIRE, {}),
+                       'L-BFGS-B': (scipy_lbfgsb, {})})
     if args.basin:
         print('| system | seed | Maud: calls, CPU, lowest | BFGS: calls, CPU, lowest |')
         print('|---|---|---|---|')
         for system in args.systems:
             for seed in args.seeds:
-                cells = [basin(system, seed, opt, args.basin, args.fmax) for opt in (Maud, BFGS)]
+                cells = [basin(system, seed, opt, args.basin, args.fmax, args.steps)
+                         for opt in (Maud, BFGS)]
                 print(f'| {system} | {seed} | ' + ' | '.join(
                     f'{c}, {t:.1f} s, {e}' for c, t, e in cells) + ' |', flush=True)
         return
+    rows = []
     print(f'| system | seed | {" | ".join(optimizers)} |')
     print('|---|---|' + '---|' * len(optimizers))
     for system in args.systems:
         for seed in args.seeds:
             cells = []
-            for opt, kwargs in optimizers.values():
-                calls, cpu, energy, converged = relax(system, seed, opt, args.fmax,
-                                                      args.steps, **kwargs)
+            for name, (opt, kwargs) in optimizers.items():
+                run = relax(system, seed, opt, args.fmax, args.steps, **kwargs)
+                if run is None:
+                    cells.append('n/a')
+                    continue
+                calls, cpu, energy, converged = run
+                rows.append({'system': system, 'seed': seed, 'optimizer': name,
+                             'calls': calls, 'cpu_s': f'{cpu:.3f}',
+                             'energy': f'{energy:.6f}', 'converged': converged})
                 mark = (f' ({converged})' if isinstance(converged, str)
                         else '' if converged else ' (no)')
                 cells.append(f'{calls}{mark}, {cpu:.2f} s, {energy:.4f}')
             print(f'| {system} | {seed} | ' + ' | '.join(cells) + ' |', flush=True)
+    if args.csv:
+        with open(args.csv, 'w', newline='') as file:
+            writer = csv.DictWriter(file, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
 
 
 def _value(text: str):

@@ -45,7 +45,8 @@ class ScipyLBFGSB:
     """SciPy's L-BFGS-B (``scipy.optimize.minimize``) on all 3N coordinates.
 
     The energy and gradient ``-forces`` come from ``atoms`` (constraints
-    applied, so fixed coordinates have zero gradient and do not move). SciPy's
+    applied, so fixed coordinates have zero gradient and do not move; or a
+    cell filter, whose rows are positions and cell alike). SciPy's
     own stopping tests are switched off; the run stops at the first
     evaluation with fmax <= ``fmax``, or when SciPy gives up (line-search
     failure) or has made ``steps`` iterations.
@@ -53,6 +54,12 @@ class ScipyLBFGSB:
 
     def __init__(self, atoms):
         self.atoms = atoms
+
+    def __enter__(self) -> ScipyLBFGSB:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
 
     def _energy_gradient(self, x, fmax):
         self.atoms.set_positions(x.reshape(-1, 3))
@@ -63,7 +70,7 @@ class ScipyLBFGSB:
 
     def run(self, fmax=0.05, steps=1000):
         try:
-            minimize(self._energy_gradient, self.atoms.positions.ravel(),
+            minimize(self._energy_gradient, self.atoms.get_positions().ravel(),
                      args=(fmax,), jac=True, method='L-BFGS-B',
                      options={'maxiter': steps, 'maxfun': 100 * steps,
                               'ftol': 0.0, 'gtol': 0.0})

@@ -21,7 +21,8 @@ specification's step with the whole scene's stiffness ``K``::
   for ``'stationary'``; :func:`~ase_maud.search.raised`) is taken back at no
   extra calculator call: the strategy returns to where the step began
   (whose forces and local model it kept), cuts gamma (halved, or with
-  ``interpolate`` by :func:`~ase_maud.search.cubic_cut`, gamma then scaling
+  ``interpolate`` by :func:`~ase_maud.search.cubic_cut` through the change
+  :func:`~ase_maud.search.merit_change` judged, gamma then scaling
   the move after its bound, as a line search) and drops the momentum.
   Gamma grows by ``gamma_growth`` after each accepted step, up to
   ``gamma_max``.
@@ -72,6 +73,7 @@ from .search import (
     Limits,
     bound,
     cubic_cut,
+    merit_change,
     merit_tolerance,
     raised,
     trust_fraction,
@@ -296,7 +298,7 @@ class Minimise(Strategy):
                                        energy=self.model.target == 'minimum'):
             if state.solver is None:   # resumed: the model where the step began
                 state.solver = local_at(last.x)
-            self._revert(state, merit, forces)
+            self._revert(state, x, merit, forces, noise)
         else:
             self._accept(state, x, forces)
             state.last = Point(x.copy(), merit, forces.copy(), noise)
@@ -307,12 +309,16 @@ class Minimise(Strategy):
         """A minimiser converges wherever the forces vanish."""
         return True
 
-    def _revert(self, state: MaudState, merit: float, forces: np.ndarray) -> None:
-        """Go back to where the last step began, with a smaller gamma."""
+    def _revert(self, state: MaudState, x: np.ndarray, merit: float, forces: np.ndarray,
+                noise: float) -> None:
+        """Go back to where the last step (to ``x``, of ``merit``, ``forces``
+        and relative error ``noise``) began, with a smaller gamma."""
         factor = 0.5
         if self.rule.interpolate and state.v is not None:
             last = state.last
-            factor = cubic_cut(last.merit, last.forces, state.v, merit, forces)
+            change, _ = merit_change(last.merit, last.noise, last.forces, x - last.x, merit,
+                                     forces, noise, energy=self.model.target == 'minimum')
+            factor = cubic_cut(last.forces, state.v, change, forces)
         state.gamma *= factor
         state.v = None
         state.k = 0

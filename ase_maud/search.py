@@ -10,7 +10,8 @@ a merit is the energy (``target='minimum'``) or ``|f|**2``.
   than their errors summed (rounding, or an approximate calculator's
   tolerance, each energy with its own) are told apart by the trapezoid
   estimate ``-(f_old + f) . dx / 2``, a directional-derivative test that
-  needs forces only; :func:`raised`: whether the step raised the merit.
+  needs forces only; the step raised the merit where the change exceeds
+  the slack.
 - :func:`cubic_cut`: the fraction of a step taken back at the minimum of
   the cubic through both ends' slopes and the merit's change (a safe
   line-search cut; the change judged by the forces within the noise).
@@ -59,7 +60,8 @@ def merit_change(last_merit: float, last_noise: float, last_forces: np.ndarray,
     """The change of the merit over the step ``move`` from a point of merit
     ``last_merit`` (forces ``last_forces``, relative error ``last_noise``) to
     one of ``merit`` and ``forces`` (error ``noise``), and the slack within
-    which it is no rise: ``(merit - last_merit, their errors)``; for an
+    which it is no rise (the step raised the merit where ``change >
+    slack``): ``(merit - last_merit, their errors)``; for an
     ``energy`` merit whose change is within the errors of both energies
     summed (each may be off by its own, so their difference by the sum),
     ``(-(last_forces + forces) . move / 2, 0)``: the trapezoid estimate from
@@ -71,16 +73,6 @@ def merit_change(last_merit: float, last_noise: float, last_forces: np.ndarray,
     if not energy or abs(change) > tol:
         return change, tol
     return -0.5 * np.vdot(last_forces + forces, move), 0.0
-
-
-def raised(last_merit: float, last_noise: float, last_forces: np.ndarray,
-           move: np.ndarray, merit: float, forces: np.ndarray, noise: float,
-           energy: bool) -> bool:
-    """Whether the step raised the merit, beyond its slack
-    (:func:`merit_change`, same arguments)."""
-    change, slack = merit_change(last_merit, last_noise, last_forces, move, merit,
-                                 forces, noise, energy)
-    return change > slack
 
 
 def cubic_cut(last_forces: np.ndarray, move: np.ndarray, change: float,

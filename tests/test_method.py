@@ -19,7 +19,7 @@ from ase_maud.descent import (
 )
 from ase_maud.monitor import ENERGY_PROGRESS, DivergenceError, RunMonitor, StagnationError
 from ase_maud.neighbours import NearestDistances
-from ase_maud.search import merit_change, raised, trust_region
+from ase_maud.search import merit_change, trust_region
 from ase_maud.stiffness import MODELS, DampedSolver, StiffnessModel
 from ase_maud.strategy import STEP_DEFAULTS, MaudState, Point, compose, step_rule
 
@@ -80,6 +80,13 @@ def method(target='minimum', model='exact', maxstep_nn=None, **keywords):
     stiffness = MODELS[model](target=target)
     rule = replace(step_rule(stiffness, **keywords), maxstep_nn=maxstep_nn)
     return compose(stiffness, rule, NearestDistances())
+
+
+def raised(last_merit, last_noise, last_forces, move, merit, forces, noise, energy):
+    """Whether the step raised the merit: its change beyond the slack."""
+    change, slack = merit_change(last_merit, last_noise, last_forces, move, merit, forces,
+                                 noise, energy)
+    return change > slack
 
 
 def uphill(rule, state, x, merit, forces, noise):

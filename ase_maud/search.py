@@ -5,12 +5,16 @@ from its descent).
 Moves are (N, 3) arrays of lengths; forces have ASE's sign (``-dE/dr``);
 a merit is the energy (``target='minimum'``) or ``|f|**2``.
 
-- :func:`raised`: whether a step raised the merit, beyond the noise of the
-  energies it compares (rounding, or an approximate calculator's
-  tolerance): energies that agree within it are told apart by the
-  trapezoid estimate ``-(f_old + f) . dx / 2``, which needs forces only.
+- :func:`merit_change`: the merit's change over a step, judged by the
+  forces where the energies cannot tell: two energies that differ by less
+  than their errors summed (rounding, or an approximate calculator's
+  tolerance, each energy with its own) are told apart by the trapezoid
+  estimate ``-(f_old + f) . dx / 2``, a directional-derivative test that
+  needs forces only; the step raised the merit where the change exceeds
+  the slack.
 - :func:`cubic_cut`: the fraction of a step taken back at the minimum of
-  the cubic through both ends' merits and slopes (a safe line-search cut).
+  the cubic through both ends' slopes and the merit's change (a safe
+  line-search cut; the change judged by the forces within the noise).
 - :class:`Limits`: the longest move of each point, as a fraction of its
   distance to its nearest other point, in length units, or as a fraction
   of the scene's size; :func:`bound` scales a move within them (each point
@@ -50,30 +54,36 @@ def merit_tolerance(merit: float, noise: float = 1e-12) -> float:
     return max(noise, 1e-12) * max(abs(merit), 1e-300)
 
 
-def raised(last_merit: float, last_noise: float, last_forces: np.ndarray,
-           move: np.ndarray, merit: float, forces: np.ndarray, noise: float,
-           energy: bool) -> bool:
-    """Whether the step ``move`` from a point of merit ``last_merit`` (with
-    forces ``last_forces`` and relative error ``last_noise``) to one of
-    ``merit`` and ``forces`` (error ``noise``) raised the merit. An
-    ``energy`` merit within the noise of both is judged by the trapezoid
-    estimate of its change from the forces (module docstring)."""
+def merit_change(last_merit: float, last_noise: float, last_forces: np.ndarray,
+                 move: np.ndarray, merit: float, forces: np.ndarray, noise: float,
+                 energy: bool) -> tuple[float, float]:
+    """The change of the merit over the step ``move`` from a point of merit
+    ``last_merit`` (forces ``last_forces``, relative error ``last_noise``) to
+    one of ``merit`` and ``forces`` (error ``noise``), and the slack within
+    which it is no rise (the step raised the merit where ``change >
+    slack``): ``(merit - last_merit, their errors)``; for an
+    ``energy`` merit whose change is within the errors of both energies
+    summed (each may be off by its own, so their difference by the sum),
+    ``(-(last_forces + forces) . move / 2, 0)``: the trapezoid estimate from
+    the forces, exact for a quadratic energy, where it is positive exactly
+    when the move went beyond twice the distance to the minimum along it
+    (the directional-derivative test ``g_new . p > |g_old . p|``)."""
     change = merit - last_merit
-    tol = merit_tolerance(last_merit, max(noise, last_noise))
+    tol = merit_tolerance(last_merit, noise + last_noise)
     if not energy or abs(change) > tol:
-        return change > tol
-    return -0.5 * np.vdot(last_forces + forces, move) > 0
+        return change, tol
+    return -0.5 * np.vdot(last_forces + forces, move), 0.0
 
 
-def cubic_cut(last_merit: float, last_forces: np.ndarray, move: np.ndarray,
-              merit: float, forces: np.ndarray) -> float:
-    """The fraction of ``move`` (from a point of ``last_merit`` and
-    ``last_forces``, ending at ``merit`` and ``forces``) at the minimum of
-    the cubic through both ends' merits and slopes along it, clipped to
-    [0.1, 0.5] (a safe line-search cut)."""
-    f0, f1 = last_merit, merit
+def cubic_cut(last_forces: np.ndarray, move: np.ndarray, change: float,
+              forces: np.ndarray) -> float:
+    """The fraction of ``move`` (from a point of forces ``last_forces`` to
+    one of ``forces``, over which the merit changed by ``change``:
+    :func:`merit_change`) at the minimum of the cubic through both ends'
+    slopes along it and that change, clipped to [0.1, 0.5] (a safe
+    line-search cut)."""
     g0, g1 = -np.vdot(last_forces, move), -np.vdot(forces, move)
-    d1 = g0 + g1 - 3.0 * (f1 - f0)
+    d1 = g0 + g1 - 3.0 * change
     radicand = d1 * d1 - g0 * g1
     if radicand < 0 or not np.isfinite(radicand):
         return 0.5

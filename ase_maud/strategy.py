@@ -18,10 +18,11 @@ specification's step with the whole scene's stiffness ``K``::
   dropped and gamma shrinks by ``overshoot_shrink`` (a kinetic-damping
   restart, as in FIRE and Barnes's form finding).
 - A step that raised the merit (the energy for ``'minimum'``, ``|f|**2``
-  for ``'stationary'``; :func:`~ase_maud.search.raised`) is taken back at no
+  for ``'stationary'``; :func:`~ase_maud.search.merit_change`) is taken back at no
   extra calculator call: the strategy returns to where the step began
   (whose forces and local model it kept), cuts gamma (halved, or with
-  ``interpolate`` by :func:`~ase_maud.search.cubic_cut`, gamma then scaling
+  ``interpolate`` by :func:`~ase_maud.search.cubic_cut` through the merit's
+  change as judged, gamma then scaling
   the move after its bound, as a line search) and drops the momentum.
   Gamma grows by ``gamma_growth`` after each accepted step, up to
   ``gamma_max``.
@@ -72,8 +73,8 @@ from .search import (
     Limits,
     bound,
     cubic_cut,
+    merit_change,
     merit_tolerance,
-    raised,
     trust_fraction,
     trust_region,
 )
@@ -313,12 +314,13 @@ class Minimise(Strategy):
         becomes where the move starts (``x``, or the last point if the step
         to ``x`` is taken back)."""
         last = state.last
-        if last is not None and raised(last.merit, last.noise, last.forces, x - last.x,
-                                       merit, forces, noise,
-                                       energy=self.model.target == 'minimum'):
+        change, slack = (0.0, 0.0) if last is None else merit_change(
+            last.merit, last.noise, last.forces, x - last.x, merit, forces, noise,
+            energy=self.model.target == 'minimum')
+        if change > slack:   # the step raised the merit
             if state.solver is None:   # resumed: the model where the step began
                 state.solver = local_at(last.x)
-            self._revert(state, merit, forces)
+            self._revert(state, change, forces)
         else:
             self._accept(state, x, forces)
             state.last = Point(x.copy(), merit, forces.copy(), noise)
@@ -329,12 +331,13 @@ class Minimise(Strategy):
         """A minimiser converges wherever the forces vanish."""
         return True
 
-    def _revert(self, state: MaudState, merit: float, forces: np.ndarray) -> None:
-        """Go back to where the last step began, with a smaller gamma."""
+    def _revert(self, state: MaudState, change: float, forces: np.ndarray) -> None:
+        """Go back to where the last step (which changed the merit by
+        ``change``, as judged, and ended at ``forces``) began, with a smaller
+        gamma."""
         factor = 0.5
         if self.rule.interpolate and state.v is not None:
-            last = state.last
-            factor = cubic_cut(last.merit, last.forces, state.v, merit, forces)
+            factor = cubic_cut(state.last.forces, state.v, change, forces)
         state.gamma *= factor
         state.v = None
         state.k = 0

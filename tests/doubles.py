@@ -3,6 +3,8 @@
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
+from ase_maud import MaudCalculator
+
 
 class PoisonedCalculator(Calculator):
     """Any ASE calculator ``inner``, except that its call number ``call``
@@ -29,3 +31,27 @@ class PoisonedCalculator(Calculator):
                 self.results['energy'] = self.results['free_energy'] = self.value
             else:
                 self.results['forces'][self.atom] = [self.value, 0.0, 0.0]
+
+
+class NoisyEnergy(MaudCalculator):
+    """A MaudCalculator (exact direct sum) whose energy carries seeded
+    random noise, uniform in ``[-noise, noise] |E|``, which it declares
+    (unless ``declare`` is False) as the relative error of its results
+    (``last_tolerance``, what :func:`ase_maud.accuracy.noise` reads); its
+    forces are exact. Each call's exact energy is kept in ``exact``."""
+
+    def __init__(self, noise: float, seed: int, declare: bool = True,
+                 **parameters) -> None:
+        super().__init__(**{**parameters, 'backend': 'numba'})
+        self.noise, self.rng, self.exact = noise, np.random.default_rng(seed), []
+        self.declare = declare
+
+    def calculate(self, atoms=None, properties=('energy',),
+                  system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        energy = self.results['energy']
+        self.exact.append(energy)
+        energy += self.noise * abs(energy) * self.rng.uniform(-1.0, 1.0)
+        self.results['energy'] = self.results['free_energy'] = energy
+        if self.declare:
+            self.last_tolerance = max(self.last_tolerance, self.noise)

@@ -19,7 +19,7 @@ from ase_maud.descent import (
 )
 from ase_maud.monitor import ENERGY_PROGRESS, DivergenceError, RunMonitor, StagnationError
 from ase_maud.neighbours import NearestDistances
-from ase_maud.search import raised, trust_region
+from ase_maud.search import merit_change, trust_region
 from ase_maud.stiffness import MODELS, DampedSolver, StiffnessModel
 from ase_maud.strategy import STEP_DEFAULTS, MaudState, Point, compose, step_rule
 
@@ -80,6 +80,13 @@ def method(target='minimum', model='exact', maxstep_nn=None, **keywords):
     stiffness = MODELS[model](target=target)
     rule = replace(step_rule(stiffness, **keywords), maxstep_nn=maxstep_nn)
     return compose(stiffness, rule, NearestDistances())
+
+
+def raised(last_merit, last_noise, last_forces, move, merit, forces, noise, energy):
+    """Whether the step raised the merit: its change beyond the slack."""
+    change, slack = merit_change(last_merit, last_noise, last_forces, move, merit, forces,
+                                 noise, energy)
+    return change > slack
 
 
 def uphill(rule, state, x, merit, forces, noise):
@@ -186,6 +193,56 @@ def test_energies_within_their_noise_are_decided_by_the_forces():
     looks_higher = quadratic.energy(x1) + 1e-6 * abs(quadratic.energy(x1))
     assert not uphill(rule, state, x1, looks_higher, quadratic.forces(x1), 1e-3)
     assert uphill(rule, state, x1, looks_higher, quadratic.forces(x1), 1e-9)
+
+
+def test_two_energies_are_compared_within_their_errors_summed():
+    """Each energy may be off by its own error, so their difference by the
+    sum: a merit that looks higher by 1.5 times either error, downhill by
+    the forces, is no rise when both carry that error; it is one when only
+    one does."""
+    quadratic = Quadratic(5)
+    x0 = quadratic.minimum + 1e-4
+    x1 = quadratic.minimum + 0.5e-4
+    last, forces0, forces1 = 1e6, quadratic.forces(x0), quadratic.forces(x1)
+    assert np.vdot(forces0 + forces1, x1 - x0) > 0          # downhill by the forces
+    looks_higher = last * (1 + 1.5e-3)
+    assert not raised(last, 1e-3, forces0, x1 - x0, looks_higher, forces1, 1e-3,
+                      energy=True)
+    assert raised(last, 0.0, forces0, x1 - x0, looks_higher, forces1, 1e-3, energy=True)
+    # judged by the forces, the change is the trapezoid estimate, no slack
+    change, slack = merit_change(last, 1e-3, forces0, x1 - x0, looks_higher, forces1,
+                                 1e-3, energy=True)
+    assert slack == 0.0
+    assert change == pytest.approx(quadratic.energy(x1) - quadratic.energy(x0), rel=1e-9)
+
+
+@pytest.mark.parametrize('seed', range(3))
+@pytest.mark.parametrize('error', [-0.9, 0.0, 0.9])
+def test_a_cut_within_the_noise_is_judged_by_the_forces(seed, error):
+    """A step that overshot the minimum along it threefold, whose energies
+    are within their noise (a large energy, 1e9 above the quadratic's, off
+    by ``error`` times the noise), is cut to the minimum along the move,
+    1/3, from the forces alone (the trapezoid estimate is exact for a
+    quadratic), whatever the energies' error."""
+    quadratic = Quadratic(seed)
+    rule = method(interpolate=True)
+    state = rule.start()
+    x0 = start(seed, quadratic)
+    noise, offset = 1e-3, 1e9
+    too_soft = MatrixSolver(quadratic.A / 3)   # three times the Newton move
+    move = rule.step(state, x0, offset + quadratic.energy(x0), quadratic.forces(x0),
+                     noise, lambda at: too_soft)
+    newton = np.linalg.solve(quadratic.A, quadratic.forces(x0).ravel()).reshape(-1, 3)
+    np.testing.assert_allclose(move, 3 * newton, rtol=1e-9)
+    x1 = x0 + move
+    rule.moved(state, x1)
+    reported = offset + quadratic.energy(x1) + error * noise * offset
+    assert abs(reported - state.last.merit) < 2 * noise * offset   # within the noise
+    again = rule.step(state, x1, reported, quadratic.forces(x1), noise,
+                      lambda at: pytest.fail('the solver of the start is kept'))
+    assert np.array_equal(state.last.x, x0)                # taken back
+    assert state.gamma == pytest.approx(1 / 3, rel=1e-9)
+    np.testing.assert_allclose(again, newton, rtol=1e-8)
 
 
 def test_nearly_degenerate_secant_pairs_are_not_kept():

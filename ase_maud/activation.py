@@ -20,7 +20,9 @@ minimum it makes, in order:
    held surroundings. The region then grows (twice, four times the radius,
    while it has at most :data:`~ase_maud.stiffness.EXACT_MAX_DOFS` free
    coordinates), each time climbed again from where the last left off along
-   its negative mode, and last the whole scene is released
+   its negative mode. The rest of the scene is then relaxed with the region
+   held, and the region climbed again, in turn, until the whole scene's
+   forces are small (:data:`SETTLE_FMAX`); last the whole scene is released
    (``Maud(target='saddle', mode=...)``, minimum-mode following on the
    springs model above 150 free coordinates, its first lowest modes started
    from the region's negative mode) and converged on a verified index-1
@@ -53,7 +55,7 @@ from scipy.spatial import cKDTree
 
 from .analysis import StationaryPoint, Work, classify
 from .bench.runner import CallRecorder, fresh_copy
-from .checks import check_all
+from .checks import check, check_all
 from .dofs import free_dofs
 from .monitor import MaudError
 from .optimizer import Maud
@@ -67,6 +69,11 @@ RADIUS = 2.0
 GROWTH = (2.0, 4.0)
 #: Steps of a region's climb (each a call and a Hessian of the region).
 REGION_STEPS = 60
+#: The surroundings of a region's saddle are relaxed with the region held, and
+#: the region climbed again, in turn (at most this many times, each run at
+#: most this many steps), until the whole scene's largest force is below
+#: this (force units) before the whole scene is released.
+SETTLE_CYCLES, SETTLE_STEPS, SETTLE_FMAX = 15, 20, 1e-3
 #: An attempt whose region's saddle lies this close in direction (cosine of
 #: the moves from the minimum) to a saddle found is rejected.
 SAME_DIRECTION = 0.9
@@ -160,10 +167,10 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     ``client``: a ``dask.distributed`` client whose workers run the
     attempts. Arguments are checked first (a ValueError names a bad one)."""
     from .landscape import same_point  # the landscape's rule; it imports this module
-    checked = check_all(modes=modes, local=local, budget=budget, fmax=fmax, steps=steps,
-                        seed=seed, energy_rtol=energy_rtol, distance_atol=distance_atol)
-    modes, local, budget = checked['modes'], checked['local'], checked['budget']
-    fmax, steps = checked['fmax'], checked['steps']
+    checked = check_all(local=local, budget=budget, fmax=fmax, steps=steps, seed=seed,
+                        energy_rtol=energy_rtol, distance_atol=distance_atol)
+    modes = check('modes', modes, 'search_modes')
+    local, budget, fmax, steps = (checked[k] for k in ('local', 'budget', 'fmax', 'steps'))
     if wanted is not None:
         wanted = check_all(count=wanted)['count']
     found = SaddleSearch()
@@ -284,9 +291,24 @@ def _activate(minimum: Atoms, centre: int, known: list[np.ndarray], fmax: float,
         why = tally.run(opt, atoms, fmax, REGION_STEPS)
         if why:
             return None, tally.end('no local saddle' if why == 'steps' else why, atoms)
-        mode = opt.found.modes[0]
+        mode, held = opt.found.modes[0], region
         if factor == 1.0 and _along(atoms.positions - x, known):
             return None, tally.end('known direction', atoms)
+    if mode is not None:   # the surroundings settled about the region's saddle
+        rest = np.setdiff1d(np.flatnonzero(movable), held)
+        for _ in range(SETTLE_CYCLES):
+            why = tally.run(Maud(Filter(atoms, indices=rest), logfile=None), atoms,
+                            max(fmax, 0.1 * SETTLE_FMAX), SETTLE_STEPS)
+            if why == 'budget':
+                return None, tally.end(why, atoms)
+            opt = Maud(Filter(atoms, indices=held), target='saddle', mode=mode[held],
+                       logfile=None)
+            why = tally.run(opt, atoms, fmax, SETTLE_STEPS)
+            if why:
+                return None, tally.end(f'region lost while settling ({why})', atoms)
+            mode = opt.found.modes[0]
+            if np.linalg.norm(atoms.get_forces(), axis=1).max() < SETTLE_FMAX:
+                break
     opt = Maud(atoms, target='saddle', mode=mode, logfile=None)
     why = tally.run(opt, atoms, fmax, steps)
     return (None if why else atoms), tally.end(why or 'saddle', atoms)

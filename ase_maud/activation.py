@@ -21,8 +21,9 @@ minimum it makes, in order:
    while it has at most :data:`~ase_maud.stiffness.EXACT_MAX_DOFS` free
    coordinates), each time climbed again from where the last left off along
    its negative mode. The rest of the scene is then relaxed with the region
-   held, and the region climbed again, in turn, until the whole scene's
-   forces are small (:data:`SETTLE_FMAX`); last the whole scene is released
+   held, and the region climbed again, in turn, while that converges: to a
+   saddle of the whole scene (verified: ``classify``), or else, where it
+   stops converging, the whole scene is released
    (``Maud(target='saddle', mode=...)``, minimum-mode following on the
    springs model above 150 free coordinates, its first lowest modes started
    from the region's negative mode) and converged on a verified index-1
@@ -69,11 +70,11 @@ RADIUS = 2.0
 GROWTH = (2.0, 4.0)
 #: Steps of a region's climb (each a call and a Hessian of the region).
 REGION_STEPS = 60
-#: The surroundings of a region's saddle are relaxed with the region held, and
-#: the region climbed again, in turn (at most this many times, each run at
-#: most this many steps), until the whole scene's largest force is below
-#: this (force units) before the whole scene is released.
-SETTLE_CYCLES, SETTLE_STEPS, SETTLE_FMAX = 15, 20, 1e-3
+#: The surroundings of a region's saddle are relaxed with the region held (to
+#: this fraction of the largest force before), and the region climbed again,
+#: in turn (at most this many times, each run at most this many steps),
+#: while each turn cuts the largest force by this factor at least.
+SETTLE_RATIO, SETTLE_CYCLES, SETTLE_STEPS, SETTLE_GAIN = 0.1, 40, 20, 0.8
 #: An attempt whose region's saddle lies this close in direction (cosine of
 #: the moves from the minimum) to a saddle found is rejected.
 SAME_DIRECTION = 0.9
@@ -172,7 +173,7 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     modes = check('modes', modes, 'search_modes')
     local, budget, fmax, steps = (checked[k] for k in ('local', 'budget', 'fmax', 'steps'))
     if wanted is not None:
-        wanted = check_all(count=wanted)['count']
+        wanted = check('wanted', wanted, 'count')
     found = SaddleSearch()
     if point is None:
         point = classify(minimum, ftol=np.inf, work=found.work)
@@ -227,6 +228,8 @@ class _Tally:
 
     def __init__(self, attempt: Attempt, budget: int | None):
         self.attempt = attempt
+        #: the negative mode the attempt follows (N, 3), once it has one
+        self.mode: np.ndarray | None = None
         self.budget = np.inf if budget is None else budget
         self.cpu = time.process_time()
 
@@ -294,24 +297,51 @@ def _activate(minimum: Atoms, centre: int, known: list[np.ndarray], fmax: float,
         mode, held = opt.found.modes[0], region
         if factor == 1.0 and _along(atoms.positions - x, known):
             return None, tally.end('known direction', atoms)
-    if mode is not None:   # the surroundings settled about the region's saddle
-        rest = np.setdiff1d(np.flatnonzero(movable), held)
-        for _ in range(SETTLE_CYCLES):
-            why = tally.run(Maud(Filter(atoms, indices=rest), logfile=None), atoms,
-                            max(fmax, 0.1 * SETTLE_FMAX), SETTLE_STEPS)
-            if why == 'budget':
-                return None, tally.end(why, atoms)
-            opt = Maud(Filter(atoms, indices=held), target='saddle', mode=mode[held],
-                       logfile=None)
-            why = tally.run(opt, atoms, fmax, SETTLE_STEPS)
-            if why:
-                return None, tally.end(f'region lost while settling ({why})', atoms)
-            mode = opt.found.modes[0]
-            if np.linalg.norm(atoms.get_forces(), axis=1).max() < SETTLE_FMAX:
-                break
+    if mode is not None:
+        saddle = _settle(atoms, tally, held, np.setdiff1d(np.flatnonzero(movable), held),
+                         mode, fmax)
+        if isinstance(saddle, str):
+            return None, tally.end(saddle, atoms)
+        if saddle is not None:
+            return atoms, tally.end('saddle', atoms)
+        mode = tally.mode
     opt = Maud(atoms, target='saddle', mode=mode, logfile=None)
     why = tally.run(opt, atoms, fmax, steps)
     return (None if why else atoms), tally.end(why or 'saddle', atoms)
+
+
+def _settle(atoms: Atoms, tally: _Tally, held: np.ndarray, rest: np.ndarray,
+            mode: np.ndarray, fmax: float) -> Atoms | str | None:
+    """From the saddle of the region ``held`` (its negative mode ``mode``),
+    the ``rest`` relaxed with the region held and the region climbed again,
+    in turn, at most :data:`SETTLE_CYCLES` times: ``atoms`` if that
+    converges (largest force below ``fmax``) on a verified index-1 saddle,
+    why not if it fails (the budget spent, the region's saddle lost), else
+    None (the whole scene is then released from there along
+    ``tally.mode``)."""
+    largest = np.linalg.norm(atoms.get_forces(), axis=1).max()
+    tally.mode = mode
+    for _ in range(SETTLE_CYCLES):
+        if tally.run(Maud(Filter(atoms, indices=rest), logfile=None), atoms,
+                     max(fmax, SETTLE_RATIO * largest), SETTLE_STEPS) == 'budget':
+            return 'budget'
+        opt = Maud(Filter(atoms, indices=held), target='saddle', mode=tally.mode[held],
+                   logfile=None)
+        why = tally.run(opt, atoms, fmax, SETTLE_STEPS)
+        if why:
+            return f'region lost while settling ({why})'
+        tally.mode = opt.found.modes[0]
+        settled = np.linalg.norm(atoms.get_forces(), axis=1).max()
+        if settled < fmax:
+            work = Work()
+            point = classify(atoms, ftol=fmax, work=work)
+            tally.attempt.hvp_vectors += work.hvp_vectors
+            tally.attempt.hessians += work.hessians
+            return atoms if point.index == 1 and not point.n_zero else None
+        if settled > SETTLE_GAIN * largest:   # no longer converging: release
+            return None
+        largest = settled
+    return None
 
 
 def _along(move: np.ndarray, known: list[np.ndarray]) -> bool:

@@ -80,12 +80,23 @@ def one(start: str, seed: int, args: argparse.Namespace) -> dict:
     return row
 
 
+def winning(row: dict) -> int | None:
+    """The force-call equivalents of the attempt that found the row's saddle (its
+    ``outcomes``: ``kind where: saddle (cost)``), or None."""
+    for outcome in str(row['outcomes']).split('; '):
+        if ': saddle (' in outcome:
+            return int(outcome.rsplit('(', 1)[1].rstrip(')'))
+    return None
+
+
 def summary(rows: list[dict], fmax: float) -> str:
     """Per start and in all: searches that found a verified index-1 saddle, and the median
-    force-call equivalents and CPU seconds of those (and of all searches)."""
+    force-call equivalents and CPU seconds of those (and of all searches), and of the
+    attempt that found the saddle alone."""
     lines = ['| start | N | verified index 1 | median equivalents (found) | '
-             'median CPU s (found) | median equivalents (all) | median CPU s (all) |',
-             '|---|---|---|---|---|---|---|']
+             'median CPU s (found) | median equivalents (all) | median CPU s (all) | '
+             'median equivalents of the finding attempt |',
+             '|---|---|---|---|---|---|---|---|']
     groups = {s: [r for r in rows if r['start'] == s]
               for s in dict.fromkeys(r['start'] for r in rows)}
     for name, mine in [*groups.items(), ('all', rows)]:
@@ -94,9 +105,11 @@ def summary(rows: list[dict], fmax: float) -> str:
         def med(key, of):
             return f"{np.median([float(r[key]) for r in of]):.0f}" if of else '-'
         cpu = (f"{np.median([float(r['cpu_s']) for r in hits]):.2f}" if hits else '-')
+        alone = [winning(r) for r in hits]
         lines.append(f"| {name} | {mine[0]['natoms'] if name != 'all' else ''} | "
                      f"{len(hits)} of {len(mine)} | {med('cost', hits)} | {cpu} | "
-                     f"{med('cost', mine)} | {np.median([float(r['cpu_s']) for r in mine]):.2f} |")
+                     f"{med('cost', mine)} | {np.median([float(r['cpu_s']) for r in mine]):.2f} | "
+                     f"{f'{np.median(alone):.0f}' if alone else '-'} |")
     return '\n'.join(lines) + '\n'
 
 
@@ -111,8 +124,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--fmax', type=float, default=1e-6)
     parser.add_argument('--steps', type=int, default=1000)
     parser.add_argument('--out', type=Path, default=Path('activation'))
+    parser.add_argument('--tables-from', type=Path, metavar='CSV',
+                        help='write the table of the rows of a CSV this tool wrote, running '
+                        'nothing')
     args = parser.parse_args(argv)
     rows = []
+    if args.tables_from is not None:
+        with open(args.tables_from, newline='') as fh:
+            rows = [{**r, 'found': r['found'] == 'True',
+                     'index': int(r['index']) if r['index'] else ''}
+                    for r in csv.DictReader(fh)]
+        args.starts = []
     for start in args.starts:
         for seed in args.seeds:
             try:

@@ -41,8 +41,8 @@ def verified(search: SaddleSearch) -> bool:
 def test_local_activation_reaches_a_verified_saddle_on_a_chord_ring():
     """Local attempts only (no mode climb) on a chord ring of 30 points: a
     verified index-1 saddle from at least 5 of 6 seeded minima (measured:
-    tools/activation.py --modes 0 --local 6 --budget 500, chords:30 seeds
-    30-35 6 of 6, chords:36 seeds 10-19 10 of 10; 2026-12-03)."""
+    tools/activation.py --modes 0 --local 6 --budget 500, chords:30 and
+    chords:36 seeds 10-19 10 of 10 each; 2026-12-03)."""
     reached = 0
     for seed in range(40, 46):
         search = search_saddles(relaxed('chords', 30, seed), modes=0, local=6, wanted=1,
@@ -56,7 +56,7 @@ def test_local_activation_reaches_a_verified_saddle_on_a_chord_ring():
 def test_local_activation_reaches_a_verified_saddle_on_a_dome():
     """A net of 8 x 8 with its whole rim fixed (a dome), local attempts
     only: a verified saddle from at least 5 of 8 seeds (measured 8 of 10,
-    rim:8 seeds 10-19, and 4 of 6 for rim:7)."""
+    rim:8 seeds 10-19)."""
     reached = sum(verified(search_saddles(relaxed('rim', 8, seed), modes=0, local=6,
                                           wanted=1, budget=500, seed=seed))
                   for seed in range(20, 28))
@@ -67,8 +67,8 @@ def test_local_activation_reaches_a_verified_saddle_on_a_dome():
 def test_local_activation_on_the_springs_model():
     """A chord ring of 100 points (200 free coordinates: the whole scene is
     released on the springs model): a verified saddle from 2 of 4 seeds at
-    least (measured 2 of 3, seeds 0-2, and 3 of 6, seeds 3-8, with
-    --budget 1000: the springs model's release spends most budgets)."""
+    least (measured 2 of 3, seeds 0-2, --modes 0 --local 6 --budget 1000:
+    the springs model's release spends many budgets)."""
     reached = sum(verified(search_saddles(relaxed('chords', 100, seed), modes=0, local=6,
                                           wanted=1, budget=1000, seed=seed))
                   for seed in (10, 11, 12, 13))

@@ -80,7 +80,8 @@ def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
                'gradient of its energy)\n'] if chosen and model.target == 'stationary' else [])
              + ([f'Maud: the calculator gives no stiffness; it is learnt from the forces '
                  f'({model.name} model)\n'] if isinstance(model, SecantModel) else []))
-    return Assembly(model, compose(model, rule, nearest, check_mode(mode, scene)),
+    points = None if scene is None else len(scene) if subset is None else len(subset.index)
+    return Assembly(model, compose(model, rule, nearest, check_mode(mode, points)),
                     subset, scene is not None, tuple(notes))
 
 
@@ -117,9 +118,10 @@ def check_free(scene: Atoms | None) -> None:
                          'along; free some atoms')
 
 
-def check_mode(mode: Any, scene: Atoms | None) -> int | np.ndarray | None:
+def check_mode(mode: Any, points: int | None) -> int | np.ndarray | None:
     """``mode`` (see :class:`Maud`) checked: None, a whole number >= 0, or a
-    finite move of ``scene``'s N points, shape (N, 3) or (3 N,)."""
+    finite move of the N ``points`` the run moves (a Filter's atoms, else
+    the scene's; None: no scene), shape (N, 3) or (3 N,)."""
     if mode is None:
         return None
     if isinstance(mode, (int, np.integer)) and not isinstance(mode, bool):
@@ -127,7 +129,7 @@ def check_mode(mode: Any, scene: Atoms | None) -> int | np.ndarray | None:
             raise ValueError(f'mode must be an index >= 0 of the Hessian\'s modes, '
                              f'got {mode!r}')
         return int(mode)
-    n = 0 if scene is None else len(scene)
+    n = points or 0
     try:
         move = np.asarray(mode, dtype=float)
     except (TypeError, ValueError):

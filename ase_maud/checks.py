@@ -123,6 +123,14 @@ RULES: dict[str, Rule] = {
     'modes': Rule('a whole number >= 1 (the lowest modes climbed, each both ways)',
                   lambda v: v >= 1, whole=True),
     'distance_atol': Rule('a finite number >= 0 (length units)', lambda v: v >= 0),
+    # the saddle search (ase_maud.activation)
+    'search_modes': Rule('a whole number >= 0 (the lowest modes climbed, each both ways, '
+                         'before the local activations)', lambda v: v >= 0, whole=True),
+    'local': Rule('a whole number >= 0 (local activations after the mode climbs)',
+                  lambda v: v >= 0, whole=True),
+    'budget': Rule('a whole number >= 1 (force-call equivalents of one attempt), '
+                   'or None (no bound but the steps)', lambda v: v >= 1, whole=True,
+                   none=True),
     # the command line's own
     'count': Rule('a whole number >= 1', lambda v: v >= 1, whole=True),
     'seed': Rule('a whole number >= 0', lambda v: v >= 0, whole=True),

@@ -259,7 +259,9 @@ def saddles(args: argparse.Namespace) -> int:
     Maud(atoms, logfile=None).run(fmax=args.fmax, steps=args.steps)
     with _dask_client(args.workers, args.scheduler) as client:
         found = landscape(atoms, modes=args.modes, fmax=args.fmax, steps=args.steps,
-                          client=client)
+                          client=client, local=args.local, budget=args.budget,
+                          seed=args.seed)
+    print(found.search.report())
     energies = [m.get_potential_energy() for m in found.minima]
     barriers = [s.get_potential_energy() for s in found.saddles]
     for s, ((i, j), (up_i, up_j)) in enumerate(zip(found.joins, found.barriers(),
@@ -267,7 +269,7 @@ def saddles(args: argparse.Namespace) -> int:
         print(f'saddle {s}: energy {barriers[s]:.10g}, joins minimum {i} '
               f'(barrier {up_i:.6g}) and minimum {j} (barrier {up_j:.6g})')
     print(f'{len(energies)} minima (lowest {min(energies):.10g}), {len(barriers)} saddles, '
-          f'{found.failed} failed climbs or descents; {args.out} and '
+          f'{found.failed} failed attempts or descents; {args.out} and '
           f'{_graph_json(args)}')
     replace_with(args.out, lambda temporary: save_disconnectivity(
         energies, barriers, found.joins, temporary))
@@ -624,16 +626,27 @@ def build_parser() -> argparse.ArgumentParser:
         commands, 'saddles', COMMANDS['saddles'],
         'Relax the net of FILE to a minimum (Maud, to --fmax), then climb from it along '
         'each of its --modes lowest Hessian modes, both ways, to index-1 saddles '
-        "(Maud(target='saddle')), relax each saddle's two sides to the minima it joins, "
-        'and keep the distinct minima and saddles (ase_maud.landscape). Prints each '
-        'saddle with its barriers, draws the disconnectivity graph (--out) and writes '
-        'the graph as JSON beside it (--out with .json). Exit status 0, or 1 if a '
-        'climb or descent failed.',
+        "(Maud(target='saddle')), then make --local local activations (a point's "
+        'neighbourhood climbed with the rest held, then the whole net released; '
+        "ase_maud.activation), relax each saddle's two sides to the minima it joins, "
+        'and keep the distinct minima and saddles (ase_maud.landscape). Prints what '
+        'each attempt did and each saddle with its barriers, draws the '
+        'disconnectivity graph (--out) and writes the graph as JSON beside it (--out '
+        'with .json). Exit status 0, or 1 if an attempt or descent failed.',
         ['ase-maud saddles cluster.traj --modes 3 --out graph.png',
+         'ase-maud saddles net.obj --fix boundary --modes 1 --local 8 --budget 1000',
          'ase-maud saddles points.xyz --edges edges.txt --dim 2'])
     _add_file(p)
     p.add_argument('--modes', type=_ruled('count', int), default=2,
                    help='lowest modes climbed, each both ways (default: %(default)s)')
+    p.add_argument('--local', type=_ruled('local', int), default=0,
+                   help='local activations after the mode climbs, at points drawn with '
+                   '--seed (default: %(default)s)')
+    p.add_argument('--budget', type=_ruled('budget', int), default=None,
+                   help='force-call equivalents (calls, Hessian-vector products, '
+                   'Hessians) of each attempt (default: no bound but --steps)')
+    p.add_argument('--seed', type=_ruled('seed', int), default=0,
+                   help='seed of the points activated (default: %(default)s)')
     p.add_argument('--fmax', type=_ruled('fmax'), default=1e-6,
                    help='fmax of every relaxation and climb (default: %(default)s)')
     p.add_argument('--steps', type=_ruled('steps', int), default=1000,

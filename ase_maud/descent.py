@@ -164,6 +164,15 @@ class ModeFollowing:
         signs = np.sign(np.einsum('kij,kij->k', reference, modes[picked]))
         return picked, modes[picked] * np.where(signs == 0, 1.0, signs)[:, None, None]
 
+    def guess(self) -> np.ndarray | None:
+        """The move given as ``mode`` (1, N, 3), unit length, from which the
+        first step's lowest modes are sought (None: an index or no mode
+        given, a cold start)."""
+        if self.mode is None or isinstance(self.mode, (int, np.integer)):
+            return None
+        norm = np.linalg.norm(self.mode)
+        return self.mode[None] / norm if norm > 0 else None
+
     def _start(self, modes: np.ndarray) -> np.ndarray:
         order, mode = self.order, self.mode
         if mode is None or order == 0:

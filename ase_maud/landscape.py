@@ -1,19 +1,22 @@
-"""The landscape around a minimum: the saddles its lowest modes climb to, and
+"""The landscape around a minimum: the saddles a search from it finds, and
 the minima each saddle joins.
 
-:func:`landscape` climbs from a minimum along each of its ``modes`` lowest
-Hessian modes, both ways (``Maud(target='saddle', mode=...)``), relaxes from
-each index-1 saddle found to the minimum on either side of its unstable mode
+:func:`landscape` searches for saddles from a minimum
+(:func:`ase_maud.activation.search_saddles`: climbs along each of its
+``modes`` lowest Hessian modes, both ways, then ``local`` local
+activations), relaxes from each index-1 saddle found to the minimum on
+either side of its unstable mode
 (:func:`ase_maud.analysis.displace_along_mode`), and returns a
 :class:`Landscape`: the distinct minima and saddles and which minima each
 saddle joins. Two configurations are the same (:func:`same_point`) when their
 energies agree to ``energy_rtol`` (relative) and their sorted pair distances
 to ``distance_atol`` (length units): that is blind to rigid motion and to
-relabelling of the points (and takes mirror images as one). A climb or
-descent that fails (a :class:`~ase_maud.monitor.MaudError`, or no convergence
-in ``steps``) is counted in :attr:`Landscape.failed`, never silently dropped.
+relabelling of the points (and takes mirror images as one). An attempt or
+descent that fails (a :class:`~ase_maud.monitor.MaudError`, no convergence
+in ``steps``, its budget spent) is counted in :attr:`Landscape.failed`, never
+silently dropped; :attr:`Landscape.search` tells what each attempt did.
 
-The climbs are independent tasks, and so are the descents from the saddles
+The attempts are independent tasks, and so are the descents from the saddles
 they find: with a ``dask.distributed`` ``Client`` (a ``LocalCluster`` on this
 machine, or a scheduler of a cluster of machines) they run on its workers,
 otherwise one after another in this process; the graph is the same either
@@ -22,7 +25,6 @@ way (the results are merged in the order of the tasks).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,6 +32,7 @@ import numpy as np
 from ase import Atoms
 from scipy.spatial.distance import pdist
 
+from .activation import SaddleSearch, run_tasks, search_saddles
 from .analysis import classify, displace_along_mode
 from .bench.runner import fresh_copy
 from .checks import check_all
@@ -63,13 +66,15 @@ class Landscape:
     """Distinct ``minima`` and index-1 ``saddles`` (Atoms with their own
     calculators, the first minimum the start), ``joins``: for each saddle
     the indices of the two minima it joins (the same one twice if both sides
-    fall back into it), and ``failed``: climbs and descents that ended
-    elsewhere or raised."""
+    fall back into it), ``failed``: attempts and descents that ended
+    elsewhere, ran out of budget or raised, and ``search``: what the saddle
+    search tried (:class:`~ase_maud.activation.SaddleSearch`)."""
 
     minima: list[Atoms] = field(default_factory=list)
     saddles: list[Atoms] = field(default_factory=list)
     joins: list[tuple[int, int]] = field(default_factory=list)
     failed: int = 0
+    search: SaddleSearch | None = None
 
     def todict(self) -> dict:
         """The graph as plain data (JSON): energies and positions of the
@@ -92,13 +97,17 @@ class Landscape:
 
 def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 1000,
               energy_rtol: float = ENERGY_RTOL, distance_atol: float = DISTANCE_ATOL,
-              client: Any = None) -> Landscape:
+              client: Any = None, local: int = 0, budget: int | None = None,
+              seed: int = 0) -> Landscape:
     """The :class:`Landscape` around the minimum ``atoms`` (a MaudCalculator
-    scene relaxed to ``fmax``; a ValueError if it is not a minimum): climbs
-    along its ``modes`` lowest modes both ways, each saddle's two sides
+    scene relaxed to ``fmax``; a ValueError if it is not a minimum): the
+    saddles of :func:`~ase_maud.activation.search_saddles` (climbs along its
+    ``modes`` lowest modes both ways, then ``local`` local activations at
+    points drawn with ``seed``, each attempt within ``budget`` force-call
+    equivalents, None: no bound but the steps), each saddle's two sides
     relaxed, all to ``fmax`` in at most ``steps`` steps; points compared by
-    :func:`same_point` with ``energy_rtol`` and ``distance_atol``. The climbs
-    and descents run on the workers of ``client`` (a
+    :func:`same_point` with ``energy_rtol`` and ``distance_atol``. The
+    attempts and descents run on the workers of ``client`` (a
     ``dask.distributed.Client``) if given, else in this process. Each
     argument is checked first (:data:`~ase_maud.checks.RULES`): a ValueError
     names a bad one."""
@@ -121,14 +130,12 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
         points.append(candidate)
         return len(points) - 1
 
-    directions = [sign * mode for mode in point.modes[:modes] for sign in (1.0, -1.0)]
-    distinct: list[Atoms] = []   # the saddles climbed to, each once
-    for saddle in _map(client, _climb, [(start, d, fmax, steps) for d in directions]):
-        if saddle is None:
-            found.failed += 1
-        else:
-            index_of(distinct, saddle)
-    descents = _map(client, _descend, [(s, fmax, steps) for s in distinct])
+    found.search = search_saddles(start, modes=modes, local=local, budget=budget,
+                                  fmax=fmax, steps=steps, seed=seed, energy_rtol=energy_rtol,
+                                  distance_atol=distance_atol, client=client, point=point)
+    distinct = found.search.saddles   # the saddles found, each once
+    found.failed += sum(a.outcome not in _NOT_FAILED for a in found.search.attempts)
+    descents = run_tasks(client, _descend, [(s, fmax, steps) for s in distinct])
     for saddle, ends in zip(distinct, descents, strict=True):
         if None in ends:   # a saddle joins what its two sides reached
             found.failed += ends.count(None)
@@ -138,20 +145,9 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
     return found
 
 
-def _map(client: Any, task: Callable, arguments: list[tuple]) -> list:
-    """``task(*a)`` for each ``a`` of ``arguments``, in their order: on the
-    workers of ``client`` if given, else here."""
-    if client is None:
-        return [task(*a) for a in arguments]
-    return client.gather([client.submit(task, *a, pure=False) for a in arguments])
-
-
-def _climb(start: Atoms, direction: np.ndarray, fmax: float, steps: int) -> Atoms | None:
-    """The index-1 saddle Maud climbs to from ``start`` along ``direction``,
-    or None if the climb fails."""
-    saddle = fresh_copy(start)
-    opt = Maud(saddle, target='saddle', mode=direction, logfile=None)
-    return saddle if _run(opt, fmax, steps) else None
+#: Outcomes of a saddle search's attempts that are not failures: a saddle,
+#: or one found before (:class:`~ase_maud.activation.Attempt`).
+_NOT_FAILED = ('saddle', 'known saddle', 'known direction')
 
 
 def _descend(saddle: Atoms, fmax: float, steps: int) -> list[Atoms | None]:

@@ -444,7 +444,8 @@ class Saddle(Strategy):
 
     def _move(self, state: MaudState) -> np.ndarray:
         solver, forces = state.solver, state.last.forces
-        values, modes = solver.eigenpairs(self.kept_modes, state.modes)
+        guess = state.modes if state.modes is not None else self.following.guess()
+        values, modes = solver.eigenpairs(self.kept_modes, guess)
         up, followed = self.following.pick(state.modes, values, modes)
         modes = modes.copy()
         modes[up] = followed

@@ -389,7 +389,10 @@ def test_saddles_prints_draws_and_writes_the_landscape(tmp_path, capsys, seed):
     Maud(atoms, logfile=None).run(fmax=1e-6, steps=1000)
     found = landscape(atoms, modes=2)
     assert len(graph['minima']) == len(found.minima)
-    assert len(graph['saddles']) == len(found.saddles) == len(lines) - 1
+    saddle_lines = [line for line in lines if line.startswith('saddle ')]
+    assert len(graph['saddles']) == len(found.saddles) == len(saddle_lines)
+    assert lines[0].endswith('CPU s:')   # the search's report: one line an attempt
+    assert sum(line.startswith('  mode ') for line in lines) == 4
     assert sorted(s['energy'] for s in graph['saddles']) == pytest.approx(
         sorted(s.get_potential_energy() for s in found.saddles), rel=1e-9)
     assert graph['failed'] == 0 and lines[-1].startswith(f"{len(found.minima)} minima")

@@ -13,6 +13,7 @@ from ase.io.jsonio import read_json, write_json
 from ase_maud.descent import (
     MIN_PAIR_COSINE,
     NEWTON_RTOL,
+    ModeFollowing,
     lbfgs,
     mode_steps,
     truncated_newton,
@@ -569,3 +570,15 @@ def test_exact_models_solver_is_cholesky_where_definite_and_eigen_where_not():
     safe = np.maximum(np.abs(values), model.floor * np.abs(values).max())
     np.testing.assert_allclose(move, vectors @ ((vectors.T @ forces.ravel()) / safe),
                                rtol=1e-7, atol=1e-9)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_move_given_as_mode_starts_the_first_lowest_modes(seed):
+    """``ModeFollowing.guess``: the move given as ``mode``, of unit length, in a
+    block of one (the first LOBPCG's start); nothing for an index or no mode."""
+    move = np.random.default_rng(seed).normal(size=(7, 3))
+    guess = ModeFollowing(1, move).guess()
+    assert guess.shape == (1, 7, 3)
+    assert np.linalg.norm(guess) == pytest.approx(1.0)
+    assert np.allclose(guess[0] * np.linalg.norm(move), move)
+    assert ModeFollowing(1, 2).guess() is None and ModeFollowing(1).guess() is None

@@ -1,0 +1,352 @@
+"""Saddles around a minimum at any size: whole-scene climbs along its lowest
+modes, then local activation (in the manner of ART nouveau), each attempt
+bounded by a budget of force-call equivalents.
+
+:func:`search_saddles` is the saddle search the landscape
+(:func:`ase_maud.landscape.landscape`) and ``ase-maud saddles`` use. From a
+minimum it makes, in order:
+
+1. **Mode climbs**: ``Maud(target='saddle', mode=...)`` along each of the
+   minimum's ``modes`` lowest Hessian modes, both ways (what the landscape
+   did before local activation).
+2. **Local activations** from ``local`` points drawn (seeded) among the
+   free ones. The point and its neighbourhood (the free points within
+   :data:`RADIUS` times the point's nearest-neighbour distance) are climbed
+   along their lowest curvature with the rest of the scene held
+   (``Maud(Filter(atoms, indices=region), target='saddle')``: eigenvector
+   following on the region's exact Hessian, the trust length a fraction of
+   the neighbour distance per step), until that curvature has turned
+   negative and the region's forces vanish: a saddle of the region in its
+   held surroundings. The region then grows (twice, four times the radius,
+   while it has at most :data:`~ase_maud.stiffness.EXACT_MAX_DOFS` free
+   coordinates), each time climbed again from where the last left off along
+   its negative mode. The rest of the scene is then relaxed with the region
+   held, and the region climbed again, in turn, while that converges: to a
+   saddle of the whole scene (verified: ``classify``), or else, where it
+   stops converging, the whole scene is released
+   (``Maud(target='saddle', mode=...)``, minimum-mode following on the
+   springs model above 150 free coordinates, its first lowest modes started
+   from the region's negative mode) and converged on a verified index-1
+   saddle.
+
+An attempt is rejected, and said so, when the region's saddle lies along the
+direction of a saddle already found (the cosine between the two moves from
+the minimum above :data:`SAME_DIRECTION`), or when its end point is a saddle
+already found (:func:`ase_maud.landscape.same_point`). Each attempt stops
+once its calls, Hessian-vector product vectors and Hessians
+(:class:`~ase_maud.analysis.Work`) reach ``budget``; every attempt is
+reported (:class:`Attempt`), and a search that found nothing says what it
+tried (:meth:`SaddleSearch.report`). The mode climbs, and the local
+activations, are independent tasks: with a ``dask.distributed`` client they
+run on its workers (the direction of a saddle found by another task of the
+same batch is then not known to an attempt: the point it reaches still is).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from ase import Atoms
+from ase.filters import Filter
+from scipy.spatial import cKDTree
+
+from .analysis import StationaryPoint, Work, classify
+from .bench.runner import CallRecorder, fresh_copy
+from .checks import check, check_all
+from .dofs import free_dofs
+from .monitor import MaudError
+from .optimizer import Maud
+from .stiffness import EXACT_MAX_DOFS
+
+#: A local region: the free points within this many times the centre
+#: point's nearest-neighbour distance.
+RADIUS = 2.0
+#: The region grows by these factors of :data:`RADIUS` (while the exact
+#: model takes it) before the whole scene is released.
+GROWTH = (2.0, 4.0)
+#: Steps of a region's climb (each a call and a Hessian of the region).
+REGION_STEPS = 60
+#: The surroundings of a region's saddle are relaxed with the region held (to
+#: this fraction of the largest force before), and the region climbed again,
+#: in turn (at most this many times, each run at most this many steps),
+#: while each turn cuts the largest force by this factor at least.
+SETTLE_RATIO, SETTLE_CYCLES, SETTLE_STEPS, SETTLE_GAIN = 0.1, 40, 20, 0.8
+#: An attempt whose region's saddle lies this close in direction (cosine of
+#: the moves from the minimum) to a saddle found is rejected.
+SAME_DIRECTION = 0.9
+#: Default budget of one attempt, force-call equivalents (calls, Hessians,
+#: Hessian-vector product vectors).
+BUDGET = 500
+
+
+@dataclass
+class Attempt:
+    """One attempt of a :func:`search_saddles`: its ``kind`` ('mode': a
+    whole-scene climb along mode ``where`` of the minimum, ``sign`` +1 or
+    -1; 'local': an activation around point ``where``), how it ended
+    (``outcome``: 'saddle', 'known saddle', 'known direction', 'budget', 'no
+    local saddle', 'steps', or the error that stopped it), the points of its
+    last region (``region``, local ones), what it computed (``calls``,
+    ``hvp_vectors``, ``hessians``) and its CPU seconds, and the energy it
+    ended at (a saddle's, or where it stopped)."""
+
+    kind: str
+    where: int
+    sign: float = 1.0
+    outcome: str = ''
+    region: int = 0
+    calls: int = 0
+    hvp_vectors: int = 0
+    hessians: int = 0
+    cpu_s: float = 0.0
+    energy: float = float('nan')
+
+    @property
+    def cost(self) -> int:
+        """Calls, Hessian-vector product vectors and Hessians: force-call
+        equivalents."""
+        return self.calls + self.hvp_vectors + self.hessians
+
+    def describe(self) -> str:
+        """One line: what was tried, how it ended and what it cost."""
+        what = (f"mode {self.where} {'+' if self.sign > 0 else '-'}" if self.kind == 'mode'
+                else f'local at point {self.where} ({self.region} points)')
+        return (f'{what}: {self.outcome}, {self.calls} calls + {self.hvp_vectors} HVP '
+                f'vectors + {self.hessians} Hessians = {self.cost}, {self.cpu_s:.2f} CPU s')
+
+
+@dataclass
+class SaddleSearch:
+    """What :func:`search_saddles` found: the distinct verified index-1
+    ``saddles`` (Atoms with their own calculators, in the order found), each
+    :class:`Attempt` in the order made, and the minimum's classification
+    (``work``: what it computed, beside the attempts')."""
+
+    saddles: list[Atoms] = field(default_factory=list)
+    attempts: list[Attempt] = field(default_factory=list)
+    work: Work = field(default_factory=Work)
+
+    @property
+    def cost(self) -> int:
+        """Force-call equivalents of every attempt and of the minimum's modes."""
+        return sum(a.cost for a in self.attempts) + self.work.total
+
+    @property
+    def cpu_s(self) -> float:
+        """CPU seconds of the attempts."""
+        return sum(a.cpu_s for a in self.attempts)
+
+    def report(self) -> str:
+        """What was found and tried, one attempt a line; a search that found
+        no saddle says so first."""
+        head = (f'{len(self.saddles)} index-1 saddles' if self.saddles
+                else 'no index-1 saddle found')
+        lines = [f'{head} in {len(self.attempts)} attempts, {self.cost} force-call '
+                 f'equivalents ({self.work.total} for the minimum\'s modes), '
+                 f'{self.cpu_s:.2f} CPU s:']
+        return '\n'.join(lines + ['  ' + a.describe() for a in self.attempts])
+
+
+def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int | None = None,
+                   budget: int | None = BUDGET, fmax: float = 1e-6, steps: int = 1000,
+                   seed: int = 0, energy_rtol: float = 1e-8, distance_atol: float = 1e-4,
+                   client: Any = None, point: StationaryPoint | None = None) -> SaddleSearch:
+    """The :class:`SaddleSearch` from the minimum ``minimum`` (a MaudCalculator
+    scene relaxed to ``fmax``; see the module docstring): climbs along its
+    ``modes`` lowest modes both ways, then ``local`` activations at points
+    drawn with ``seed``, each attempt to ``fmax`` within ``steps`` steps
+    and ``budget`` force-call equivalents (None: no bound but the steps); it
+    stops once ``wanted`` distinct saddles are found (None: every attempt
+    is made). Saddles are compared by
+    :func:`~ase_maud.landscape.same_point` with ``energy_rtol`` and
+    ``distance_atol``. ``point``: the minimum's classification if known
+    (else computed here, its work counted in :attr:`SaddleSearch.work`).
+    ``client``: a ``dask.distributed`` client whose workers run the
+    attempts. Arguments are checked first (a ValueError names a bad one)."""
+    from .landscape import same_point  # the landscape's rule; it imports this module
+    checked = check_all(local=local, budget=budget, fmax=fmax, steps=steps, seed=seed,
+                        energy_rtol=energy_rtol, distance_atol=distance_atol)
+    modes = check('modes', modes, 'search_modes')
+    local, budget, fmax, steps = (checked[k] for k in ('local', 'budget', 'fmax', 'steps'))
+    if wanted is not None:
+        wanted = check('wanted', wanted, 'count')
+    found = SaddleSearch()
+    if point is None:
+        point = classify(minimum, ftol=np.inf, work=found.work)
+
+    def enough() -> bool:
+        return wanted is not None and len(found.saddles) >= wanted
+
+    def merge(results: list[tuple[Atoms | None, Attempt]]) -> None:
+        for saddle, attempt in results:
+            if saddle is not None:
+                if any(same_point(s, saddle, energy_rtol, distance_atol)
+                       for s in found.saddles):
+                    attempt.outcome = 'known saddle'
+                elif not enough():
+                    found.saddles.append(saddle)
+            found.attempts.append(attempt)
+
+    climbs = [(minimum, sign * point.modes[k], Attempt('mode', k, sign), fmax, steps, budget)
+              for k in range(min(modes, len(point.modes))) for sign in (1.0, -1.0)]
+    for batch in _batches(climbs, client, enough):
+        merge(run_tasks(client, _climb, batch))
+    free = np.flatnonzero(free_dofs(minimum, minimum.calc.potential.dim).any(axis=1))
+    centres = np.random.default_rng(seed).permutation(free)[:local]
+    for batch in _batches(list(centres), client, enough):
+        known = [s.positions - minimum.positions for s in found.saddles]
+        merge(run_tasks(client, _activate, [(minimum, int(c), known, fmax, steps, budget)
+                                       for c in batch]))
+    return found
+
+
+def _batches(tasks: list, client: Any, enough: Callable[[], bool]):
+    """``tasks`` in batches, one task each in this process, as many as the
+    workers of ``client`` otherwise, until ``enough()``."""
+    size = 1 if client is None else max(len(client.scheduler_info()['workers']), 1)
+    for start in range(0, len(tasks), size):
+        if enough():
+            return
+        yield tasks[start:start + size]
+
+
+def run_tasks(client: Any, task: Callable, arguments: list[tuple]) -> list:
+    """``task(*a)`` for each ``a`` of ``arguments``, in their order: on the
+    workers of ``client`` if given, else here."""
+    if client is None:
+        return [task(*a) for a in arguments]
+    return client.gather([client.submit(task, *a, pure=False) for a in arguments])
+
+
+class _Tally:
+    """The calls, products, Hessians and CPU seconds of one attempt, and
+    whether it is over its budget."""
+
+    def __init__(self, attempt: Attempt, budget: int | None):
+        self.attempt = attempt
+        #: the negative mode the attempt follows (N, 3), once it has one
+        self.mode: np.ndarray | None = None
+        self.budget = np.inf if budget is None else budget
+        self.cpu = time.process_time()
+
+    def run(self, opt: Maud, atoms: Atoms, fmax: float, steps: int) -> str:
+        """Run ``opt`` to ``fmax`` in at most ``steps`` steps within the
+        budget; '' if it converged on the index sought, else why not."""
+        attempt, why = self.attempt, 'steps'
+        with CallRecorder(atoms.calc) as calls:
+            try:
+                for converged in opt.irun(fmax=fmax, steps=steps):
+                    if converged:
+                        why = ''
+                        break
+                    if attempt.cost + len(calls.samples) + opt.work.total >= self.budget:
+                        why = 'budget'
+                        break
+            except MaudError as error:
+                why = f'{type(error).__name__}: {str(error).splitlines()[0][:100]}'
+        attempt.calls += len(calls.samples)
+        attempt.hvp_vectors += opt.work.hvp_vectors
+        attempt.hessians += opt.work.hessians
+        return why
+
+    def end(self, outcome: str, atoms: Atoms) -> Attempt:
+        attempt = self.attempt
+        attempt.outcome = outcome
+        attempt.cpu_s = time.process_time() - self.cpu
+        attempt.energy = atoms.get_potential_energy()
+        return attempt
+
+
+def _climb(minimum: Atoms, direction: np.ndarray, attempt: Attempt, fmax: float,
+           steps: int, budget: int | None) -> tuple[Atoms | None, Attempt]:
+    """A whole-scene climb from ``minimum`` along ``direction``."""
+    atoms = fresh_copy(minimum)
+    tally = _Tally(attempt, budget)
+    why = tally.run(Maud(atoms, target='saddle', mode=direction, logfile=None),
+                    atoms, fmax, steps)
+    return (None if why else atoms), tally.end(why or 'saddle', atoms)
+
+
+def _activate(minimum: Atoms, centre: int, known: list[np.ndarray], fmax: float,
+              steps: int, budget: int | None) -> tuple[Atoms | None, Attempt]:
+    """A local activation around point ``centre`` of ``minimum`` (module
+    docstring); ``known``: the moves from the minimum to the saddles found."""
+    atoms = fresh_copy(minimum)
+    tally = _Tally(Attempt('local', centre), budget)
+    x = minimum.positions
+    free = free_dofs(atoms, atoms.calc.potential.dim)
+    movable = free.any(axis=1)
+    tree = cKDTree(x)
+    reach = tree.query(x[centre], k=2)[0][1]
+    mode = None
+    for factor in (1.0, *GROWTH):
+        region = np.array(sorted(tree.query_ball_point(x[centre], factor * RADIUS * reach)))
+        region = region[movable[region]]
+        if free[region].sum() > EXACT_MAX_DOFS or region.size == movable.sum():
+            break
+        opt = Maud(Filter(atoms, indices=region), target='saddle', logfile=None,
+                   mode=None if mode is None else mode[region])
+        tally.attempt.region = int(region.size)
+        why = tally.run(opt, atoms, fmax, REGION_STEPS)
+        if why:
+            return None, tally.end('no local saddle' if why == 'steps' else why, atoms)
+        mode, held = opt.found.modes[0], region
+        if factor == 1.0 and _along(atoms.positions - x, known):
+            return None, tally.end('known direction', atoms)
+    if mode is not None:
+        saddle = _settle(atoms, tally, held, np.setdiff1d(np.flatnonzero(movable), held),
+                         mode, fmax)
+        if isinstance(saddle, str):
+            return None, tally.end(saddle, atoms)
+        if saddle is not None:
+            return atoms, tally.end('saddle', atoms)
+        mode = tally.mode
+    opt = Maud(atoms, target='saddle', mode=mode, logfile=None)
+    why = tally.run(opt, atoms, fmax, steps)
+    return (None if why else atoms), tally.end(why or 'saddle', atoms)
+
+
+def _settle(atoms: Atoms, tally: _Tally, held: np.ndarray, rest: np.ndarray,
+            mode: np.ndarray, fmax: float) -> Atoms | str | None:
+    """From the saddle of the region ``held`` (its negative mode ``mode``),
+    the ``rest`` relaxed with the region held and the region climbed again,
+    in turn, at most :data:`SETTLE_CYCLES` times: ``atoms`` if that
+    converges (largest force below ``fmax``) on a verified index-1 saddle,
+    why not if it fails (the budget spent, the region's saddle lost), else
+    None (the whole scene is then released from there along
+    ``tally.mode``)."""
+    largest = np.linalg.norm(atoms.get_forces(), axis=1).max()
+    tally.mode = mode
+    for _ in range(SETTLE_CYCLES):
+        if tally.run(Maud(Filter(atoms, indices=rest), logfile=None), atoms,
+                     max(fmax, SETTLE_RATIO * largest), SETTLE_STEPS) == 'budget':
+            return 'budget'
+        opt = Maud(Filter(atoms, indices=held), target='saddle', mode=tally.mode[held],
+                   logfile=None)
+        why = tally.run(opt, atoms, fmax, SETTLE_STEPS)
+        if why:
+            return f'region lost while settling ({why})'
+        tally.mode = opt.found.modes[0]
+        settled = np.linalg.norm(atoms.get_forces(), axis=1).max()
+        if settled < fmax:
+            work = Work()
+            point = classify(atoms, ftol=fmax, work=work)
+            tally.attempt.hvp_vectors += work.hvp_vectors
+            tally.attempt.hessians += work.hessians
+            return atoms if point.index == 1 and not point.n_zero else None
+        if settled > SETTLE_GAIN * largest:   # no longer converging: release
+            return None
+        largest = settled
+    return None
+
+
+def _along(move: np.ndarray, known: list[np.ndarray]) -> bool:
+    """Whether ``move`` points (cosine above :data:`SAME_DIRECTION`) along one
+    of the ``known`` moves."""
+    size = np.linalg.norm(move)
+    return any(np.vdot(move, k) > SAME_DIRECTION * size * np.linalg.norm(k) for k in known)
+

@@ -32,7 +32,7 @@ minimum it makes, in order:
 An attempt is rejected, and said so, when the region's saddle lies along the
 direction of a saddle already found (the cosine between the two moves from
 the minimum above :data:`SAME_DIRECTION`), or when its end point is a saddle
-already found (:func:`ase_maud.landscape.same_point`). Each attempt stops
+already found (:func:`ase_maud.analysis.same_point`). Each attempt stops
 once its calls, Hessian-vector product vectors and Hessians
 (:class:`~ase_maud.analysis.Work`) reach ``budget``; every attempt is
 reported (:class:`Attempt`), and a search that found nothing says what it
@@ -54,7 +54,7 @@ from ase import Atoms
 from ase.filters import Filter
 from scipy.spatial import cKDTree
 
-from .analysis import StationaryPoint, Work, classify
+from .analysis import StationaryPoint, Work, classify, same_point
 from .bench.runner import CallRecorder, fresh_copy
 from .checks import check, check_all
 from .dofs import free_dofs
@@ -162,12 +162,11 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     and ``budget`` force-call equivalents (None: no bound but the steps); it
     stops once ``wanted`` distinct saddles are found (None: every attempt
     is made). Saddles are compared by
-    :func:`~ase_maud.landscape.same_point` with ``energy_rtol`` and
+    :func:`~ase_maud.analysis.same_point` with ``energy_rtol`` and
     ``distance_atol``. ``point``: the minimum's classification if known
     (else computed here, its work counted in :attr:`SaddleSearch.work`).
     ``client``: a ``dask.distributed`` client whose workers run the
     attempts. Arguments are checked first (a ValueError names a bad one)."""
-    from .landscape import same_point  # the landscape's rule; it imports this module
     checked = check_all(local=local, budget=budget, fmax=fmax, steps=steps, seed=seed,
                         energy_rtol=energy_rtol, distance_atol=distance_atol)
     modes = check('modes', modes, 'search_modes')

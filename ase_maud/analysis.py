@@ -49,6 +49,7 @@ from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian
 from scipy.sparse.linalg import LinearOperator, eigsh, lobpcg, splu
 from scipy.spatial import cKDTree
+from scipy.spatial.distance import pdist
 
 from . import physics
 from .dofs import free_dofs, rigid_body_modes
@@ -349,3 +350,20 @@ def displace_along_mode(atoms: Atoms, point: StationaryPoint, mode: int = 0,
         copy.calc = type(calc)(**calc.parameters)
         copies.append(copy)
     return tuple(copies)
+
+
+#: Default tolerances of :func:`same_point`: energies relative, pair
+#: distances in length units (for scenes relaxed to fmax 1e-6 ``Q a``, whose
+#: energies agree to ~1e-12 and distances to ~1e-7 a).
+ENERGY_RTOL, DISTANCE_ATOL = 1e-8, 1e-4
+
+def same_point(a: Atoms, b: Atoms, energy_rtol: float = ENERGY_RTOL,
+               distance_atol: float = DISTANCE_ATOL) -> bool:
+    """Whether ``a`` and ``b`` are the same configuration up to rigid motion and
+    relabelling: energies within ``energy_rtol`` (relative) and sorted pair
+    distances within ``distance_atol`` (length units)."""
+    ea, eb = a.get_potential_energy(), b.get_potential_energy()
+    if abs(ea - eb) > energy_rtol * max(abs(ea), abs(eb)):
+        return False
+    return bool(np.abs(np.sort(pdist(a.positions)) - np.sort(pdist(b.positions))).max()
+                <= distance_atol)

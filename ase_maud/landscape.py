@@ -30,35 +30,17 @@ from typing import Any
 
 import numpy as np
 from ase import Atoms
-from scipy.spatial.distance import pdist
 
 from .activation import SaddleSearch, run_tasks, search_saddles
-from .analysis import classify, displace_along_mode
+from .analysis import DISTANCE_ATOL, ENERGY_RTOL, classify, displace_along_mode, same_point
 from .bench.runner import fresh_copy
 from .checks import check_all
 from .monitor import MaudError
 from .optimizer import Maud
 
-#: Default tolerances of :func:`same_point`: energies relative, pair
-#: distances in length units (for scenes relaxed to fmax 1e-6 ``Q a``, whose
-#: energies agree to ~1e-12 and distances to ~1e-7 a).
-ENERGY_RTOL, DISTANCE_ATOL = 1e-8, 1e-4
-
 #: The keys of :meth:`Landscape.todict`, in order (``ase-maud saddles``
 #: replaces a JSON file of these keys only).
 GRAPH_KEYS = ('minima', 'saddles', 'joins', 'barriers', 'failed')
-
-
-def same_point(a: Atoms, b: Atoms, energy_rtol: float = ENERGY_RTOL,
-               distance_atol: float = DISTANCE_ATOL) -> bool:
-    """Whether ``a`` and ``b`` are the same configuration up to rigid motion and
-    relabelling: energies within ``energy_rtol`` (relative) and sorted pair
-    distances within ``distance_atol`` (length units)."""
-    ea, eb = a.get_potential_energy(), b.get_potential_energy()
-    if abs(ea - eb) > energy_rtol * max(abs(ea), abs(eb)):
-        return False
-    return bool(np.abs(np.sort(pdist(a.positions)) - np.sort(pdist(b.positions))).max()
-                <= distance_atol)
 
 
 @dataclass

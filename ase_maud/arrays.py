@@ -32,20 +32,21 @@ from .calculator import MaudCalculator
 from .dofs import free_dofs
 from .monitor import MaudError, RunMonitor
 from .search import merit_tolerance
-from .stiffness import ExactModel, StiffnessModel
+from .stiffness import ExactModel
 from .strategy import LocalAt, MaudState, Strategy
 
 
-def applies(atoms: Any, model: StiffnessModel, observed: bool) -> bool:
-    """Whether a run of ``model`` on ``atoms`` (the optimizer's system) can
-    go on arrays: plain Atoms with a MaudCalculator (it computes the results
-    of positions it is handed, :meth:`~ase_maud.MaudCalculator.compute`),
-    held by coordinate masks only, the exact model
-    seeking a minimum, and nothing ``observed`` per step (a trajectory, a
-    restart file, an attached observer)."""
+def applies(opt: Any) -> bool:
+    """Whether the run of the optimizer ``opt`` (a
+    :class:`~ase_maud.optimizer.Maud`) can go on arrays: its system plain
+    Atoms with a MaudCalculator (it computes the results of positions it is
+    handed, :meth:`~ase_maud.MaudCalculator.compute`), held by coordinate
+    masks only, the exact model seeking a minimum, and nothing watching it
+    per step (a trajectory, a restart file, an attached observer)."""
+    atoms, model = opt.atoms, opt.model
     return (type(atoms) is Atoms and isinstance(atoms.calc, MaudCalculator)
-            and isinstance(model, ExactModel)
-            and model.target == 'minimum' and not observed
+            and isinstance(model, ExactModel) and model.target == 'minimum'
+            and not opt.observers and opt.restart is None
             and all(isinstance(c, (FixAtoms, FixCartesian)) for c in atoms.constraints))
 
 

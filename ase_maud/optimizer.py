@@ -81,18 +81,16 @@ class Maud(Resumable):
         model's relative eigenvalue floor, ``kappa0`` the secant and bfgs models' start.
     target : 'minimum', 'stationary', 'saddle' or None
         Only downhill, any stationary point, or one with exactly ``order``
-        negative curvatures (``mode``: which Hessian mode, by index or by a
-        move (N, 3), to climb first; :attr:`found` holds the converged point,
-        a WrongIndexError says it is of another index). None: 'minimum', or
-        'stationary' for a band of images (ASE's ``NEB``).
+        negative curvatures (``mode``: the Hessian mode, by index or as a move
+        (N, 3), to climb first; :attr:`found`: the point, classified; a
+        WrongIndexError if of another index). None: 'minimum' ('stationary'
+        for a band of images, ASE's ``NEB``).
     gamma, gamma_max, gamma_growth, overshoot_shrink, beta_max, memory, maxstep_nn, maxstep
         The step rule (:data:`ase_maud.strategy.STEP_DEFAULTS`; None: the model's).
     divergence_factor, patience
-        On a MaudCalculator's scene where no finite minimum is proved (no test
-        on another calculator's): the growth of the scene between two
-        looks at its forces (default 2; inf: no divergence test;
-        :class:`ase_maud.monitor.RunMonitor`); steps without progress after
-        which the run stops as stagnant (default 2000).
+        The growth of a MaudCalculator's scene between two looks at its forces
+        that stops the run as diverging (default 2; inf: never), and the steps
+        without progress that stop it as stagnant (:class:`~ase_maud.monitor.RunMonitor`).
     restart, logfile, trajectory, append_trajectory, **kwargs
         As for every ASE optimizer.
     """
@@ -112,7 +110,6 @@ class Maud(Resumable):
         steps = check_all(gamma=gamma, gamma_max=gamma_max, gamma_growth=gamma_growth,
                           beta_max=beta_max, memory=memory, maxstep_nn=maxstep_nn,
                           maxstep=maxstep, overshoot_shrink=overshoot_shrink)
-        run = check_all(divergence_factor=divergence_factor, patience=patience)
         self._lock = open_run(restart, logfile, trajectory, append_trajectory)
         parts = assemble(atoms, model, target, steps, check('order', order), mode,
                          method=method, floor=floor, kappa0=kappa0)
@@ -121,13 +118,13 @@ class Maud(Resumable):
         #: For ``target='saddle'``: the converged point's classification.
         self.found: Any = None
         self._stopped_by: MaudError | None = None
-        self.divergence_factor, self.patience = run['divergence_factor'], run['patience']
+        self.divergence_factor, self.patience = check_all(
+            divergence_factor=divergence_factor, patience=patience).values()
         super().__init__(atoms, restart, logfile, trajectory,
                          append_trajectory=append_trajectory, **kwargs)
         self.optimizable = CheckedOptimizable(in_rows_of_3(self.optimizable),
                                               lambda: self.nsteps, self._stop)
-        for note in parts.notes:
-            self.logfile.write(note)
+        self.logfile.write(''.join(parts.notes))
 
     @property
     def target(self) -> str:
@@ -156,19 +153,15 @@ class Maud(Resumable):
                                          self.patience, self._points)
         self.fmax_now = np.inf   # largest force at the last step
 
-    # -- the step ---------------------------------------------------------------
-
     def _atoms(self) -> Atoms | None:
-        """The Atoms the model and the calculator see: those behind the
-        optimizable, the whole scene behind a Filter, or None (a band of
-        images, a cell filter)."""
+        """The Atoms the model and the calculator see: the optimizable's, the
+        whole scene behind a Filter, or None (a band of images, a cell filter)."""
         if self._subset is not None:
             return self._subset.current()
         return getattr(getattr(self, 'optimizable', None), 'atoms', None)
 
     def _evaluate(self) -> None:
-        """One calculator call for the energy, the forces and what the model
-        needs (the Hessian, say), at the accuracy the run needs now."""
+        """One call: energy, forces and what the model needs, at the accuracy needed now."""
         atoms = self._atoms()
         if atoms is None:
             return
@@ -178,15 +171,12 @@ class Maud(Resumable):
             self.work.hessians += prop == 'hessian'
 
     def _afresh_if_changed(self) -> None:
-        """Start afresh if the atoms, the calculator or its potential changed
-        since the last step (between two runs, or by an observer)."""
-        if self._handoff is not None and self._handoff != self._handoff_now():
+        """Start afresh if the atoms or the calculator changed since the last step."""
+        now = Handoff.of(self.optimizable.get_x(), self._atoms())
+        if self._handoff is not None and self._handoff != now:
             self.initialize()
             self.logfile.write(f'Maud: the atoms or the calculator changed after step '
                                f'{self.nsteps}: the step rule starts afresh\n')
-
-    def _handoff_now(self) -> Handoff:
-        return Handoff.of(self.optimizable.get_x(), self._atoms())
 
     def step(self) -> None:
         self._afresh_if_changed()
@@ -204,11 +194,10 @@ class Maud(Resumable):
         opt.set_x(x.ravel())
         self.maud.moved(self.state, opt.get_x().reshape(-1, 3))
         self._evaluate()
-        self._handoff = self._handoff_now()
+        self._handoff = Handoff.of(opt.get_x(), self._atoms())
 
     def _local_at(self, x: np.ndarray) -> Any:
-        """The local model at positions ``x`` (the atoms are moved there
-        first if they are elsewhere: back to a point of a restart file)."""
+        """The local model at ``x`` (the atoms moved there first if elsewhere)."""
         if not np.array_equal(self.optimizable.get_x().reshape(-1, 3), x):
             self.optimizable.set_x(x.ravel())
         try:
@@ -221,13 +210,10 @@ class Maud(Resumable):
         """Stop: no finite step from here (:func:`~ase_maud.evaluation.no_step_error`)."""
         self._stop(no_step_error(self.nsteps, why, self.model, self._atoms()))
 
-    def irun(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS):
+    def irun(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS) -> Iterator[bool]:
         steps = self._preflight(fmax, steps)
-        return self._locked(super().irun(self.fmax, steps))
-
-    def _locked(self, steps: Iterator[bool]) -> Iterator[bool]:
         with self._lock, accuracy.kept(getattr(self._atoms(), 'calc', None)):
-            for converged in steps:
+            for converged in super().irun(self.fmax, steps):
                 if converged:
                     self._verify()
                 yield converged
@@ -236,43 +222,37 @@ class Maud(Resumable):
         """ASE's ``run``; on arrays (:mod:`ase_maud.arrays`, the same steps)
         where nothing watches the run step by step."""
         steps = self._preflight(fmax, steps)
-        observed = bool(self.observers) or self.restart is not None
         with self._lock, accuracy.kept(getattr(self._atoms(), 'calc', None)):
             try:
                 converged = (arrays.run(self, steps, self._no_step, self._stop)
-                             if arrays.applies(self.atoms, self.model, observed)
+                             if arrays.applies(self)
                              else super().run(self.fmax, steps))
             finally:   # the atoms moved outside the optimizable
                 self.optimizable.held = None
-                self._handoff = self._handoff_now()
+                self._handoff = Handoff.of(self.optimizable.get_x(), self._atoms())
         if converged:
             self._verify()
         return converged
 
     def gradient_converged(self, gradient: np.ndarray) -> bool:
         """ASE's test (``fmax``), and a saddle search's: its index reached."""
-        return super().gradient_converged(gradient) and (
-            self.target != 'saddle' or self.maud.index_reached(
-                self.state, self._local_at(self.optimizable.get_x().reshape(-1, 3))))
+        return super().gradient_converged(gradient) and self.maud.index_reached(
+            self.state, lambda: self._local_at(self.optimizable.get_x().reshape(-1, 3)))
 
     def _verify(self) -> None:
-        """For ``target='saddle'``: the point found classified (:attr:`found`;
-        :meth:`~ase_maud.strategy.Saddle.verify`); the exact model's Hessian
-        there is the calculator's, counted already."""
+        """For ``target='saddle'``: the point found, classified (:attr:`found`)."""
         if self.target == 'saddle':
-            work = None if self.model.complete_modes else self.work
             self.found, error = self.maud.verify(self._atoms(), max(self.fmax, self.fmax_now),
-                                                 self.nsteps, work)
+                                                 self.nsteps, self.work)
             self.logfile.write(f'Maud: converged on a {self.found.verdict} of index '
                                f'{self.found.index} (order {self.rule.order} sought)\n')
             if error is not None:
                 self._stop(error)
 
     def _preflight(self, fmax: float, steps: int) -> int:
-        """Before the first step: ``fmax`` and ``steps`` checked (``steps``
-        returned); a NoEquilibriumError if the calculator proves there is no
-        finite equilibrium; results held from an earlier run dropped; the
-        step rule started afresh if the scene changed; an evaluation."""
+        """Before the first step: the arguments checked (``steps`` returned),
+        no proof of no equilibrium, held results dropped, the step rule
+        afresh if the scene changed, an evaluation."""
         self.fmax, steps = check('fmax', fmax, 'run_fmax'), check('steps', steps)
         self.optimizable.held = None
         self._afresh_if_changed()
@@ -282,8 +262,7 @@ class Maud(Resumable):
         return steps
 
     def _stop(self, error: MaudError) -> None:
-        """Write ``error``'s message to the log (once: it may pass here again
-        on its way out) and raise it."""
+        """Log ``error`` (once: it may pass here again on its way out), raise it."""
         if error is not self._stopped_by:
             self.logfile.write(f'Maud: stopped: {error}\n')
             self._stopped_by = error

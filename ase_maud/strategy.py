@@ -327,7 +327,7 @@ class Minimise(Strategy):
             state.solver = local_at(x)
         return self._move(state)
 
-    def index_reached(self, state: MaudState, local: Solver) -> bool:
+    def index_reached(self, state: MaudState, local: Callable[[], Solver]) -> bool:
         """A minimiser converges wherever the forces vanish."""
         return True
 
@@ -413,25 +413,27 @@ class Saddle(Strategy):
         state.solver = local_at(x)
         return self._move(state)
 
-    def index_reached(self, state: MaudState, local: Solver) -> bool:
-        """Whether the local model at a point where the forces vanish has
-        exactly ``order`` negative curvatures (beyond
+    def index_reached(self, state: MaudState, local: Callable[[], Solver]) -> bool:
+        """Whether the local model (built by ``local()``) at a point where the
+        forces vanish has exactly ``order`` negative curvatures (beyond
         :data:`ase_maud.analysis.RTOL` of the largest): the minimum a search
         starts from is left, not reported."""
         from .analysis import RTOL
         order = self.rule.order
         guess = None if state.modes is None else state.modes[:order + 1]
-        values = local.eigenpairs(order + 1, guess)[0]
+        values = local().eigenpairs(order + 1, guess)[0]
         return int(np.sum(values < -RTOL * np.abs(values).max(initial=0.0))) == order
 
     def verify(self, atoms: Atoms, ftol: float, step: int,
                work: Any = None) -> tuple[Any, WrongIndexError | None]:
         """The converged point of ``atoms`` classified from the analytic
         Hessian (:func:`ase_maud.analysis.classify`, forces below ``ftol``,
-        its products counted in ``work`` if given), and a WrongIndexError
+        its products counted in ``work`` if given, unless the model's
+        Hessian is the calculator's, counted already), and a WrongIndexError
         (else None) if its index is not ``order`` or a zero curvature leaves
         it unknown (``step``: where it converged)."""
         from .analysis import classify
+        work = None if self.model.complete_modes else work
         point, order = classify(atoms, ftol=ftol, work=work), self.rule.order
         if point.index == order and not point.n_zero:
             return point, None

@@ -22,7 +22,8 @@ a merit is the energy (``target='minimum'``) or ``|f|**2``.
   far along a move the first point meets its limit.
 - :func:`trust_region`: a Newton move cut to the limits by the dogleg path
   (a definite model) or damped to ``(K + mu I)^-1 f`` with the smallest
-  ``mu`` that keeps every point within its limit (Levenberg-Marquardt).
+  ``mu`` that keeps every point within its limit (Levenberg-Marquardt,
+  :func:`damping`).
 - :func:`trust_fraction`: a trust fraction grown or cut by the ratio of the
   energy change to the change a quadratic model predicted.
 """
@@ -41,11 +42,13 @@ from .stiffness import DampedSolver
 #: for a trust fraction to grow (by half), and beyond which it halves.
 TRUST_GOOD, TRUST_BAD = 0.25, 0.75
 
-#: Bisections (in log mu) of the Levenberg-Marquardt damping: each halves
-#: the logarithm of the bracket, so 14 take a bracket of 10**12 to within
-#: 0.2 % of the smallest damping that keeps the limits (fewer cost steps:
-#: docs/optimizer.md).
-DAMPING_BISECTIONS = 14
+#: The damped move is taken once its longest point is within this fraction
+#: of its limit, or the bracket of ``mu`` this narrow (in log), and
+#: :data:`DAMPING_TRIALS` damped solves at most once the bracket is found
+#: (false position in log mu: about 5 solves, where 14 bisections pinned
+#: ``mu`` to 0.2 %; a coarser ``mu`` took more steps: docs/optimizer.md).
+DAMPING_TOLERANCE = 2e-3
+DAMPING_TRIALS = 14
 
 
 def merit_tolerance(merit: float, noise: float = 1e-12) -> float:
@@ -155,14 +158,14 @@ def trust_region(model: DampedSolver, forces: np.ndarray, newton: np.ndarray, ga
     ``newton`` (the model's move, or its L-BFGS correction) if it does; else,
     for a definite model, the longest such move along the dogleg path (from 0
     to the Cauchy point ``(f.f / f.K f) f``, then to ``newton``); else the
-    damped move ``(K + mu I)^-1 f`` with the smallest ``mu`` found by
-    :data:`DAMPING_BISECTIONS` bisections of ``log mu`` (far from a minimum
-    this turns the step towards the forces instead of shortening it)."""
+    damped move ``(K + mu I)^-1 f`` with the smallest such ``mu``
+    (:func:`damping`; far from a minimum this turns the step towards the
+    forces instead of shortening it)."""
     if gamma * longest(newton, limit) <= 1:
         return newton
     if model.definite:
         return _dogleg(model, forces, newton, gamma, limit)
-    return damping(lambda mu: model.damped(forces, mu), gamma, limit, model.scale)
+    return damping(model.damped(forces), gamma, limit, model.scale)
 
 
 def _dogleg(model: DampedSolver, forces: np.ndarray, newton: np.ndarray, gamma: float,
@@ -181,23 +184,36 @@ def _dogleg(model: DampedSolver, forces: np.ndarray, newton: np.ndarray, gamma: 
 def damping(moves: Callable[[float], np.ndarray | None], gamma: float,
             limit: np.ndarray, scale: float) -> np.ndarray:
     """The move ``moves(mu)`` (None where the damped model is not definite)
-    of the smallest damping ``mu`` found whose ``gamma`` times keeps every
-    point within ``limit``: ``mu`` grows tenfold from ``scale`` until it
-    does, then :data:`DAMPING_BISECTIONS` bisections of ``log mu`` between
-    ``1e-12`` of that and it."""
+    of the smallest damping ``mu`` whose ``gamma`` times keeps every point
+    within ``limit``: ``mu`` grows tenfold from ``scale`` until it does, then
+    the bracket from ``1e-12`` of that is narrowed by false position in
+    ``log mu`` on the log of the longest point's ratio to its limit
+    (Illinois; a bisection while the lower end is not definite) to
+    :data:`DAMPING_TOLERANCE`."""
+    def excess(move: np.ndarray | None) -> float:
+        return np.inf if move is None else float(np.log(max(gamma * longest(move, limit),
+                                                            np.finfo(float).tiny)))
+
     high = max(scale, np.finfo(float).tiny)
     best = moves(high)
-    while best is None or gamma * longest(best, limit) > 1:
+    while (f_high := excess(best)) > 0:
         high *= 10.0
         best = moves(high)
-    low = high * 1e-12
-    for _ in range(DAMPING_BISECTIONS):
-        mid = np.sqrt(low * high)
+    low, f_low, kept = high * 1e-12, np.inf, None
+    for _ in range(DAMPING_TRIALS):
+        if f_high >= -DAMPING_TOLERANCE or np.log(high / low) <= DAMPING_TOLERANCE:
+            break
+        weight = 0.5 if np.isinf(f_low) else f_high / (f_high - f_low)
+        mid = high * (low / high) ** weight
         move = moves(mid)
-        if move is None or gamma * longest(move, limit) > 1:
-            low = mid
+        if (f := excess(move)) > 0:
+            low, f_low = mid, f
+            f_high *= 0.5 if kept == 'high' else 1.0   # Illinois
+            kept = 'high'
         else:
-            high, best = mid, move
+            high, f_high, best = mid, f, move
+            f_low *= 0.5 if kept == 'low' else 1.0
+            kept = 'low'
     return best
 
 

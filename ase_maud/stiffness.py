@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import warnings
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -112,8 +113,10 @@ class DampedSolver(Solver):
         """``K v`` (N, 3) for a move (N, 3)."""
 
     @abstractmethod
-    def damped(self, forces: np.ndarray, mu: float) -> np.ndarray | None:
-        """``(K + mu I)^-1 f`` (N, 3), or None if ``K + mu I`` is not definite."""
+    def damped(self, forces: np.ndarray) -> Callable[[float], np.ndarray | None]:
+        """The damped solve of ``forces``: ``mu`` to ``(K + mu I)^-1 f`` (N, 3),
+        or None if ``K + mu I`` is not definite (what every ``mu`` shares is
+        done once)."""
 
 
 class ModeSolver(Solver):
@@ -389,6 +392,7 @@ class ExactModel(StiffnessModel):
     def __init__(self, target: str = 'minimum', floor: float | None = None):
         super().__init__(target, floor)
         self._basis: tuple[Any, np.ndarray | None] | None = None
+        self._held: np.ndarray | None = None
 
     def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
         return self.local(atoms.calc.get_property('hessian', atoms), atoms)
@@ -400,12 +404,16 @@ class ExactModel(StiffnessModel):
             raise np.linalg.LinAlgError('the Hessian is not finite')
         dim = hessian.shape[0] // len(atoms)
         basis = self.basis(atoms, dim)
-        matrix = hessian if basis is None else basis.T @ hessian @ basis
         free = np.ones((len(atoms), dim), dtype=bool)
         if self.target == 'saddle':
             internal = internal_basis(atoms.positions, dim, basis)
             return _EigenSolver(internal.T @ hessian @ internal, internal, free,
                                 np.asarray)
+        if (held := self._held) is not None:   # whole coordinates: a selection
+            free = ~held
+            matrix, basis = hessian[np.ix_(free.ravel(), free.ravel())], None
+        else:
+            matrix = hessian if basis is None else basis.T @ hessian @ basis
         eigen = _EigenSolver(matrix, basis, free, self._absolute)
         if self.target == 'minimum':
             return _CholeskySolver.of(matrix, basis, free, self.floor) or eigen
@@ -413,12 +421,18 @@ class ExactModel(StiffnessModel):
 
     def basis(self, atoms: Atoms, dim: int) -> np.ndarray | None:
         """:func:`allowed_basis`, kept while the constraints are the same;
-        None if every move is allowed."""
+        None if every move is allowed. Where its columns are coordinates (up
+        to sign: the constraints hold whole coordinates, as FixAtoms and
+        FixCartesian do), :attr:`_held` marks the held ones (N, dim), for a
+        selection of the Hessian's rows and columns in place of products."""
         key = (len(atoms), dim, [(type(c).__name__, repr(c.todict()))
                                  for c in atoms.constraints])
         if self._basis is None or self._basis[0] != key:
             basis = allowed_basis(atoms, dim) if atoms.constraints else None
-            self._basis = key, basis
+            self._basis, self._held = (key, basis), None
+            if basis is not None and (np.abs(basis).sum(axis=0) == 1).all() and (
+                    np.count_nonzero(basis, axis=0) == 1).all():
+                self._held = ~np.abs(basis).sum(axis=1).astype(bool).reshape(-1, dim)
         return self._basis[1]
 
 
@@ -475,12 +489,14 @@ class _CholeskySolver(_DenseSolver, DampedSolver):
         return self._out(scipy.linalg.cho_solve(self.factor, self._into(rhs),
                                                 check_finite=False))
 
-    def damped(self, forces: np.ndarray, mu: float) -> np.ndarray | None:
-        factor = _cholesky(self.matrix, mu)
-        if factor is None:
-            return None
-        return self._moves(scipy.linalg.cho_solve(
-            factor, self._into(self._gather(forces)), check_finite=False))
+    def damped(self, forces: np.ndarray) -> Callable[[float], np.ndarray | None]:
+        rhs = self._into(self._gather(forces))
+
+        def move(mu: float) -> np.ndarray | None:
+            factor = _cholesky(self.matrix, mu)
+            return None if factor is None else self._moves(
+                scipy.linalg.cho_solve(factor, rhs, check_finite=False))
+        return move
 
 
 def _cholesky(matrix: np.ndarray, shift: float) -> Any:
@@ -528,10 +544,10 @@ class _EigenSolver(_DenseSolver, DampedSolver, ModeSolver):
         values, vectors = self._decomposed()
         return self._out(vectors @ ((vectors.T @ self._into(rhs)) / values))
 
-    def damped(self, forces: np.ndarray, mu: float) -> np.ndarray:
+    def damped(self, forces: np.ndarray) -> Callable[[float], np.ndarray]:
         values, vectors = self._decomposed()
-        coefficients = vectors.T @ self._into(self._gather(forces))
-        return self._moves(vectors @ (coefficients / (values + np.sign(values) * mu)))
+        coefficients, signs = vectors.T @ self._into(self._gather(forces)), np.sign(values)
+        return lambda mu: self._moves(vectors @ (coefficients / (values + signs * mu)))
 
 
 # -- global sparse -------------------------------------------------------------

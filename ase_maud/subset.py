@@ -11,6 +11,8 @@ the atoms left out) and the move back to the filter's atoms.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms
@@ -96,9 +98,13 @@ class _SubsetDamped(SubsetSolver, DampedSolver):
     def dot(self, move: np.ndarray) -> np.ndarray:
         return self.whole.dot(self._scene(move))[self.index]
 
-    def damped(self, forces: np.ndarray, mu: float) -> np.ndarray | None:
-        move = self.whole.damped(self._scene(forces), mu)
-        return None if move is None else move[self.index]
+    def damped(self, forces: np.ndarray) -> Callable[[float], np.ndarray | None]:
+        moves = self.whole.damped(self._scene(forces))
+
+        def move(mu: float) -> np.ndarray | None:
+            whole = moves(mu)
+            return None if whole is None else whole[self.index]
+        return move
 
 
 class _SubsetModes(SubsetSolver, ModeSolver):

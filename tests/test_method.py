@@ -20,7 +20,7 @@ from ase_maud.descent import (
 )
 from ase_maud.monitor import ENERGY_PROGRESS, DivergenceError, RunMonitor, StagnationError
 from ase_maud.neighbours import NearestDistances
-from ase_maud.search import merit_change, trust_region
+from ase_maud.search import DAMPING_TOLERANCE, damping, merit_change, trust_region
 from ase_maud.stiffness import MODELS, DampedSolver, StiffnessModel
 from ase_maud.strategy import STEP_DEFAULTS, MaudState, Point, compose, step_rule
 
@@ -60,11 +60,13 @@ class MatrixSolver(DampedSolver):
     def dot(self, move):
         return (self.K @ np.ravel(move)).reshape(-1, 3)
 
-    def damped(self, forces, mu):
-        shifted = self.K + mu * np.eye(len(self.K))
-        if np.linalg.eigvalsh(shifted).min() <= 0:
-            return None
-        return np.linalg.solve(shifted, np.ravel(forces)).reshape(-1, 3)
+    def damped(self, forces):
+        def move(mu):
+            shifted = self.K + mu * np.eye(len(self.K))
+            if np.linalg.eigvalsh(shifted).min() <= 0:
+                return None
+            return np.linalg.solve(shifted, np.ravel(forces)).reshape(-1, 3)
+        return move
 
 
 class FakeModel(StiffnessModel):
@@ -533,7 +535,8 @@ def test_dogleg_of_a_definite_model_reaches_the_limit_downhill(seed, gamma):
 def test_damping_of_an_indefinite_model_is_the_smallest_that_fits(seed):
     """An indefinite model is damped to ``(K + mu I)^-1 f`` with ``K + mu I``
     definite, the move within the limits, and no ``mu`` 1 % smaller that
-    fits (the bisections pin ``mu`` to 0.2 %)."""
+    fits unless the move is already within ``DAMPING_TOLERANCE`` of its
+    limit (the search stops there)."""
     model, forces, values = _quadratic_model(seed, negative=3)
     model.definite = False
     newton = model.solve(forces)
@@ -545,8 +548,32 @@ def test_damping_of_an_indefinite_model_is_the_smallest_that_fits(seed):
     assert mu > -values.min()
     np.testing.assert_allclose((model.K + mu * np.eye(len(flat))) @ flat, forces.ravel(),
                                rtol=1e-8, atol=1e-10)
-    smaller = model.damped(forces, 0.99 * mu)
-    assert smaller is None or np.linalg.norm(smaller, axis=1).max() > 0.3
+    smaller = model.damped(forces)(0.99 * mu)
+    longest = np.linalg.norm(move, axis=1).max()
+    assert (smaller is None or np.linalg.norm(smaller, axis=1).max() > 0.3
+            or longest >= 0.3 * (1 - DAMPING_TOLERANCE))
+
+
+@pytest.mark.parametrize('seed', range(8))
+def test_damping_finds_its_move_in_a_few_solves(seed):
+    """False position in log mu: a move within 1 % of the longest that fits
+    the limits, in at most 12 damped solves with the bracket's growth (14
+    bisections took 15 or more), on indefinite quadratics whose limits are
+    a tenth to half of Newton's move."""
+    model, forces, _ = _quadratic_model(seed, negative=2)
+    rng = np.random.default_rng(seed)
+    limit = rng.uniform(0.1, 0.5, len(forces)) * np.linalg.norm(model.solve(forces), axis=1)
+    solve, mus = model.damped(forces), []
+
+    def counted(mu):
+        mus.append(mu)
+        return solve(mu)
+
+    move = damping(counted, 1.0, limit, model.scale)
+    ratio = np.linalg.norm(move, axis=1) / limit
+    assert ratio.max() <= 1 + 1e-12
+    assert ratio.max() >= 0.99
+    assert len(mus) <= 12
 
 
 def test_exact_models_solver_is_cholesky_where_definite_and_eigen_where_not():

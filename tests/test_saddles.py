@@ -38,7 +38,10 @@ def _search(start, optimiser):
 
 @pytest.mark.parametrize('start', [
     'six:6:0',            # 2D: the guess of examples/saddle_and_minima.py
-    'all_pairs2d:9:0.3',  # 2D: a 9-point minimum left along its lowest mode
+    # 2D: a 9-point minimum left along its lowest mode by 0.25 (from 0.15-0.2 the
+    # signed step and Sella reach another saddle, both of index 1; 0.3 is on the
+    # edge of this saddle's basin, where the damping's last digits decide)
+    'all_pairs2d:9:0.25',
     'all_pairs:6:0.3',    # 3D: a 6-point minimum left along its lowest mode
 ])
 def test_exact_model_reaches_a_collective_saddle_that_sella_finds(start):

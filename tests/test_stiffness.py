@@ -380,3 +380,30 @@ def test_springs_saddle_model_curvature_is_the_hessian_on_internal_moves(
     np.testing.assert_allclose(got[:, :dim][free], expected,
                                atol=1e-10 * np.abs(expected).max())
     assert not got[:, :dim][~free].any() and not got[:, dim:].any()
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_exact_model_selects_held_coordinates_and_projects_other_constraints(seed):
+    """FixAtoms and FixCartesian hold whole coordinates: the exact model
+    marks them held (its Hessian's free block is selected, not projected:
+    the Newton move itself is test_exact_step_is_newtons_step's). With a
+    FixedPlane too (a general basis) the move stays in the plane and is
+    Newton's on the projected Hessian, to the floor's shift."""
+    from ase.constraints import FixedPlane
+    atoms = near_minimum(random_scene(seed), seed)
+    model = ExactModel()
+    model.at(atoms)
+    free = free_dofs(atoms, 3)
+    assert (model._held == ~free).all()
+    normal = np.random.default_rng(seed).normal(size=3)
+    planar = int(np.flatnonzero(free.all(axis=1))[0])
+    atoms.set_constraint(atoms.constraints + [FixedPlane(planar, normal)])
+    forces = atoms.get_forces()
+    move = model.at(atoms).solve(forces)
+    assert model._held is None
+    basis = allowed_basis(atoms, 3)
+    projected = basis.T @ atoms.calc.get_hessian(atoms) @ basis
+    newton = basis @ np.linalg.solve(projected, basis.T @ forces.ravel())
+    condition = np.abs(projected).sum(axis=1).max() / np.linalg.eigvalsh(projected).min()
+    assert np.linalg.norm(move.ravel() - newton) <= 2e-8 * condition * np.linalg.norm(newton)
+    assert abs(np.dot(move[planar], normal)) <= 1e-9 * np.abs(move).max()

@@ -439,13 +439,15 @@ class MaudCalculator(Calculator):
     def unbounded_components(self, atoms: Atoms) -> list[list[int]]:
         """Spring components of ``atoms`` proved to fly away for ever
         (:func:`.topology.unbounded_components`); empty if there are none."""
-        return topology.unbounded_components(atoms, self.springs, self.dim)
+        return topology.unbounded_components(
+            atoms, self.potential.spring_components(len(atoms)), self.dim)
 
     def minimum_proved(self, atoms: Atoms) -> bool:
         """True if ``atoms`` are proved to have a finite minimum, however far
         out (:func:`.topology.minimum_proved`): then a run that spreads far is
         on its way there, not diverging."""
-        return topology.minimum_proved(atoms, self.springs, self.potential.loads, self.dim)
+        return topology.minimum_proved(atoms, self.potential.spring_components(len(atoms)),
+                                       self.potential.loads, self.dim)
 
     def no_equilibrium(self, atoms: Atoms, minimum: bool = True) -> str | None:
         """Why ``atoms`` can have no finite equilibrium, in words, or None if

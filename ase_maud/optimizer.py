@@ -142,8 +142,7 @@ class Maud(Resumable):
         return self.maud.rule
 
     def todict(self) -> dict[str, Any]:
-        return {**super().todict(), **self.model.todict(), 'target': self.target,
-                **self.rule.todict()}
+        return {**super().todict(), **self.model.todict(), **self.rule.todict()}
 
     def initialize(self) -> None:
         check_calculator(self._atoms())   # after a restart file was read, as ASE's
@@ -156,9 +155,8 @@ class Maud(Resumable):
     def _atoms(self) -> Atoms | None:
         """The Atoms the model and the calculator see: the optimizable's, the
         whole scene behind a Filter, or None (a band of images, a cell filter)."""
-        if self._subset is not None:
-            return self._subset.current()
-        return getattr(getattr(self, 'optimizable', None), 'atoms', None)
+        return (self._subset.current() if self._subset is not None
+                else getattr(getattr(self, 'optimizable', None), 'atoms', None))
 
     def _evaluate(self) -> None:
         """One call: energy, forces and what the model needs, at the accuracy needed now."""
@@ -211,9 +209,12 @@ class Maud(Resumable):
         self._stop(no_step_error(self.nsteps, why, self.model, self._atoms()))
 
     def irun(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS) -> Iterator[bool]:
-        steps = self._preflight(fmax, steps)
+        steps = self._preflight(fmax, steps)   # bad arguments refused here, not when iterated
+        return self._locked(super().irun(self.fmax, steps))
+
+    def _locked(self, steps: Iterator[bool]) -> Iterator[bool]:
         with self._lock, accuracy.kept(getattr(self._atoms(), 'calc', None)):
-            for converged in super().irun(self.fmax, steps):
+            for converged in steps:
                 if converged:
                     self._verify()
                 yield converged
@@ -250,9 +251,8 @@ class Maud(Resumable):
                 self._stop(error)
 
     def _preflight(self, fmax: float, steps: int) -> int:
-        """Before the first step: the arguments checked (``steps`` returned),
-        no proof of no equilibrium, held results dropped, the step rule
-        afresh if the scene changed, an evaluation."""
+        """Before the first step: arguments checked (``steps`` returned), no proof of
+        no equilibrium, held results dropped, a changed scene afresh, an evaluation."""
         self.fmax, steps = check('fmax', fmax, 'run_fmax'), check('steps', steps)
         self.optimizable.held = None
         self._afresh_if_changed()

@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
-from . import backends, physics
+from . import backends, physics, topology
 from .checks import check, check_each
 from .springs import check_range, check_springs
 
@@ -174,6 +174,12 @@ class MaudPotential:
         by point; built once per N."""
         return self._kept(('hessian', natoms), lambda: physics.spring_hessian(
             self._springs_within(natoms), natoms, self.Q * self.stiffnesses, self.dim))
+
+    def spring_components(self, natoms: int) -> np.ndarray:
+        """The spring graph's component of every atom, (N,) labels
+        (:func:`.topology.spring_components`); found once per N."""
+        return self._kept(('components', natoms), lambda: topology.spring_components(
+            natoms, self._springs_within(natoms)))
 
     def _springs_within(self, natoms: int) -> np.ndarray:
         check_range(self.springs, natoms)

@@ -170,7 +170,7 @@ class StiffnessModel(ABC):
 
     def todict(self) -> dict[str, Any]:
         """The model's settings, for an optimizer's ``todict``."""
-        return {'model': self.name, 'floor': self.floor}
+        return {'model': self.name, 'target': self.target, 'floor': self.floor}
 
     def needs(self, atoms: Atoms) -> str | None:
         """The calculator property :meth:`at` will ask for at ``atoms``'

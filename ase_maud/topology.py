@@ -175,17 +175,17 @@ def net_load(atoms: Atoms, loads: np.ndarray | None, dim: int = 3) -> np.ndarray
     return total
 
 
-def minimum_proved(atoms: Atoms, springs: ArrayLike, loads: np.ndarray | None,
+def minimum_proved(atoms: Atoms, labels: np.ndarray, loads: np.ndarray | None,
                    dim: int = 3) -> bool:
     """True if the scene is proved to have a finite minimum (module
     docstring): every constraint a FixAtoms or FixCartesian, and either
-    every spring component held along each of the first ``dim`` directions
-    by one of its atoms, or one component whose loads sum to zero along the
-    directions nothing holds (:func:`net_load`). False: not proved (which
-    does not mean there is none)."""
+    every spring component (``labels``: :func:`spring_components`) held
+    along each of the first ``dim`` directions by one of its atoms, or one
+    component whose loads sum to zero along the directions nothing holds
+    (:func:`net_load`). False: not proved (which does not mean there is
+    none)."""
     if any(not isinstance(c, (FixAtoms, FixCartesian)) for c in atoms.constraints):
         return False
-    labels = spring_components(len(atoms), springs)
     if labels.max(initial=0) == 0:
         return net_load(atoms, loads, dim) is None
     held = held_directions(atoms)[:, :dim]
@@ -216,14 +216,14 @@ def constrained_atoms(atoms: Atoms) -> np.ndarray:
     return touched
 
 
-def unbounded_components(atoms: Atoms, springs: ArrayLike,
+def unbounded_components(atoms: Atoms, labels: np.ndarray,
                          dim: int = 3) -> list[list[int]]:
-    """Components (lists of atom indices) proved to fly away for ever.
+    """Components (lists of atom indices) proved to fly away for ever, of
+    the spring components ``labels`` (:func:`spring_components`).
 
     Empty unless ``dim == 3`` and there are several spring components: then
     the components with no constrained atom (:func:`constrained_atoms`).
     """
-    labels = spring_components(len(atoms), springs)
     if dim != 3 or labels.max(initial=0) < 1:
         return []
     held = constrained_atoms(atoms)

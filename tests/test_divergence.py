@@ -21,7 +21,7 @@ from ase_maud.analysis import classify
 from ase_maud.cli import main
 from ase_maud.hardcases import heavy_net
 from ase_maud.scenes import chain
-from ase_maud.topology import minimum_proved
+from ase_maud.topology import minimum_proved, spring_components
 
 
 def loaded_net(seed, load, plane=None):
@@ -54,7 +54,7 @@ def test_a_loaded_net_far_below_its_supports_converges(seed):
     # On 5f059dc: DivergenceError at step ~255 (spread 3 x a N); its minimum
     # lies at about 4.7 x a N. The fixed boundary proves the minimum.
     atoms = loaded_net(seed, -100.0)
-    assert minimum_proved(atoms, atoms.calc.springs, atoms.calc.potential.loads)
+    assert atoms.calc.minimum_proved(atoms)
     converged, dyn, log = relax(atoms)
     assert converged, log[-400:]
     assert dyn.monitor.bounded and dyn.monitor.marks == 0
@@ -71,7 +71,7 @@ def test_an_unproved_net_that_grows_far_converges(seed):
     # balance ahead (on 5f059dc: DivergenceError).
     make = lambda: loaded_net(seed, -1e3, plane=20)  # noqa: E731
     atoms = make()
-    assert not minimum_proved(atoms, atoms.calc.springs, atoms.calc.potential.loads)
+    assert not atoms.calc.minimum_proved(atoms)
     converged, dyn, log = relax(atoms, fmax=1e-4)
     assert converged, log[-400:]
     assert not dyn.monitor.bounded and dyn.monitor.marks >= 3
@@ -123,14 +123,18 @@ def test_a_repulsive_pair_with_nothing_holding_it_stops(seed):
 def test_the_proof_needs_every_component_held():
     atoms = chain(6, seed=0)   # ends fixed: proved
     springs, loads = atoms.calc.springs, np.ones((6, 3))
-    assert minimum_proved(atoms, springs, loads)
-    assert minimum_proved(atoms, springs[1:], loads)   # [0] and [1..5]: each held
-    assert not minimum_proved(atoms, springs[1:-1], loads)   # [1..4] free
+
+    def proved(springs, loads):
+        return minimum_proved(atoms, spring_components(6, springs), loads)
+
+    assert proved(springs, loads)
+    assert proved(springs[1:], loads)   # [0] and [1..5]: each held
+    assert not proved(springs[1:-1], loads)   # [1..4] free
     atoms.set_constraint(FixCartesian([1, 2, 3], [True, False, False]))
-    assert not minimum_proved(atoms, springs, loads)   # y and z unheld, loads there
-    assert minimum_proved(atoms, springs, loads * [1, 0, 0])   # ... unless balanced
+    assert not proved(springs, loads)   # y and z unheld, loads there
+    assert proved(springs, loads * [1, 0, 0])   # ... unless balanced
     atoms.set_constraint([FixAtoms([0]), FixedPlane(1, [0, 0, 1])])
-    assert not minimum_proved(atoms, springs, None)   # not a FixAtoms nor FixCartesian
+    assert not proved(springs, None)   # not a FixAtoms nor FixCartesian
 
 
 class _Repulsion(Calculator):

@@ -14,7 +14,8 @@ points, seeds no test or tuning used), each relaxed to ``--fmax`` from the same 
 
 Calls are energy-and-forces evaluations (Maud's are Hessian evaluations too: each step's
 one calculator call gives the energy, forces and Hessian together). CPU seconds are the
-process's (``time.process_time``), after every kernel was compiled and run once. Every end
+process's (``time.process_time``), after every kernel was compiled and run once, the median
+of ``--repeat`` runs from fresh copies (default 3; the calls are the same each time). Every end
 point is checked to be a minimum by the analytic Hessian (``ase_maud.analysis.classify``).
 ``--profile`` gives the share of a Maud step spent in the kernel and the factorisations
 (cProfile over repeated runs of one scene). Run with one thread and save the raw numbers::
@@ -128,16 +129,27 @@ def run_arrays(atoms, fmax, steps):
     return converged, calls[0], time.process_time() - start
 
 
-def measure(name, size, seed, fmax, steps):
-    """One scene's row: calls and CPU of every optimiser, and Maud's verdict."""
+def repeated(runner, atoms, fmax, steps, repeat, relaxed=None):
+    """``runner``'s (converged, calls, CPU seconds) from ``atoms``: the first
+    run's convergence and calls (every run makes the same), the median CPU of
+    ``repeat`` runs, each from a fresh copy (the first into ``relaxed`` if
+    given): one run's CPU varies by tens of per cent on a busy machine."""
+    runs = [runner(relaxed if relaxed is not None and k == 0 else fresh(atoms), fmax, steps)
+            for k in range(repeat)]
+    return runs[0][0], runs[0][1], float(np.median([cpu for _, _, cpu in runs]))
+
+
+def measure(name, size, seed, fmax, steps, repeat=3):
+    """One scene's row: calls and CPU of every optimiser (CPU the median of
+    ``repeat`` runs), and Maud's verdict."""
     atoms = build(name, size, seed=seed)
     row = {'scene': f'{name}:{size}', 'seed': seed, 'points': len(atoms)}
     relaxed = fresh(atoms)
-    ok, calls, cpu = run_maud(relaxed, fmax, steps)
+    ok, calls, cpu = repeated(run_maud, atoms, fmax, steps, repeat, relaxed)
     row.update({'Maud calls': calls, 'Maud CPU s': cpu, 'Maud converged': ok,
                 'Maud verdict': classify(relaxed).verdict if ok else 'not converged'})
     for label, runner in (('L-BFGS-B (ASE)', run_lbfgsb), ('L-BFGS-B (arrays)', run_arrays)):
-        ok, calls, cpu = runner(fresh(atoms), fmax, steps)
+        ok, calls, cpu = repeated(runner, atoms, fmax, steps, repeat)
         row.update({f'{label} calls': calls, f'{label} CPU s': cpu,
                     f'{label} converged': ok})
     for label in ASE:
@@ -181,10 +193,12 @@ def main() -> None:
     parser.add_argument('--steps', type=int, default=5000)
     parser.add_argument('--out', default=None, help='CSV file of the raw numbers')
     parser.add_argument('--profile', action='store_true')
+    parser.add_argument('--repeat', type=int, default=3,
+                        help='runs of each optimiser whose median CPU is reported')
     args = parser.parse_args()
     for name, size in SCENES[:3]:   # compile and warm every kernel
-        measure(name, size, 0, 1e-2, 50)
-    rows = [measure(name, size, seed, args.fmax, args.steps)
+        measure(name, size, 0, 1e-2, 50, 1)
+    rows = [measure(name, size, seed, args.fmax, args.steps, args.repeat)
             for seed in args.seeds for name, size in SCENES]
     columns = ['scene', 'seed', 'points', 'Maud calls', 'Maud CPU s', 'Maud verdict',
                'best ASE calls', 'L-BFGS-B (ASE) calls', 'L-BFGS-B (ASE) CPU s',

@@ -199,20 +199,21 @@ def damping(moves: Callable[[float], np.ndarray | None], gamma: float,
     while (f_high := excess(best)) > 0:
         high *= 10.0
         best = moves(high)
-    low, f_low, kept = high * 1e-12, np.inf, None
+    low, kept = high * 1e-12, None
+    g_high, g_low = f_high, np.inf   # what false position weighs: Illinois halves an end kept twice
     for _ in range(DAMPING_TRIALS):
         if f_high >= -DAMPING_TOLERANCE or np.log(high / low) <= DAMPING_TOLERANCE:
             break
-        weight = 0.5 if np.isinf(f_low) else f_high / (f_high - f_low)
+        weight = 0.5 if np.isinf(g_low) else g_high / (g_high - g_low)
         mid = high * (low / high) ** weight
         move = moves(mid)
         if (f := excess(move)) > 0:
-            low, f_low = mid, f
-            f_high *= 0.5 if kept == 'high' else 1.0   # Illinois
+            low, g_low = mid, f
+            g_high *= 0.5 if kept == 'high' else 1.0
             kept = 'high'
         else:
-            high, f_high, best = mid, f, move
-            f_low *= 0.5 if kept == 'low' else 1.0
+            high, f_high, g_high, best = mid, f, f, move
+            g_low *= 0.5 if kept == 'low' else 1.0
             kept = 'low'
     return best
 

@@ -18,7 +18,10 @@ specification's step with the whole scene's stiffness ``K``::
   dropped and gamma shrinks by ``overshoot_shrink`` (a kinetic-damping
   restart, as in FIRE and Barnes's form finding).
 - A step that raised the merit (the energy for ``'minimum'``, ``|f|**2``
-  for ``'stationary'``; :func:`~ase_maud.search.merit_change`) is taken back at no
+  for ``'stationary'``; :func:`~ase_maud.search.merit_change`; for a band of
+  images seeking ``'stationary'``, whose forces are the gradient of no
+  merit, a step the forces did negative work over:
+  :func:`~ase_maud.search.work_change`) is taken back at no
   extra calculator call: the strategy returns to where the step began
   (whose forces and local model it kept), cuts gamma (halved, or with
   ``interpolate`` by :func:`~ase_maud.search.cubic_cut` through the merit's
@@ -77,6 +80,7 @@ from .search import (
     merit_tolerance,
     trust_fraction,
     trust_region,
+    work_change,
 )
 from .stiffness import (
     BFGSModel,
@@ -314,9 +318,14 @@ class Minimise(Strategy):
         becomes where the move starts (``x``, or the last point if the step
         to ``x`` is taken back)."""
         last = state.last
-        change, slack = (0.0, 0.0) if last is None else merit_change(
-            last.merit, last.noise, last.forces, x - last.x, merit, forces, noise,
-            energy=self.model.target == 'minimum')
+        if last is None:
+            change, slack = 0.0, 0.0
+        elif self.rule.image_size is not None and self.model.target == 'stationary':
+            change, slack = work_change(last.forces, x - last.x, forces)
+        else:
+            change, slack = merit_change(last.merit, last.noise, last.forces, x - last.x,
+                                         merit, forces, noise,
+                                         energy=self.model.target == 'minimum')
         if change > slack:   # the step raised the merit
             if state.solver is None:   # resumed: the model where the step began
                 state.solver = local_at(last.x)

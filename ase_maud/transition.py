@@ -115,12 +115,14 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
     """The :class:`Transition` between the minima ``first`` and ``second``
     (module docstring): a band of ``images`` moving images, springs of
     ``spring`` (force per length; None: the scene's ``Q``) between them,
-    interpolated by ``interpolation`` ('linear' or ASE's 'idpp'), relaxed
-    with a climbing image until its largest force is below ``band_fmax``
-    (force units; None: :data:`BAND_FMAX` ``Q a``; at most ``band_steps``
-    steps), then its highest image refined to ``fmax``
-    in at most ``steps`` steps. Neither minimum is changed. A ValueError
-    names a bad argument, or what the two scenes do not share."""
+    interpolated by ``interpolation`` ('linear' or ASE's 'idpp'), their
+    free coordinates moved by up to :data:`JITTER` ``a`` (seeded by
+    ``seed``), relaxed without and then with a climbing image until its
+    largest force is below ``band_fmax`` (force units; None:
+    :data:`BAND_FMAX` ``Q a``; at most ``band_steps`` steps each time), then
+    its highest image refined to ``fmax`` in at most ``steps`` steps.
+    Neither minimum is changed. A ValueError names a bad argument, or what
+    the two scenes do not share."""
     checked = check_all(fmax=fmax, steps=steps)
     fmax, steps = checked['fmax'], checked['steps']
     if not (isinstance(images, int) and images >= 1):

@@ -29,6 +29,12 @@ minimum it makes, in order:
    from the region's negative mode) and converged on a verified index-1
    saddle.
 
+3. **A path**, if none of these found a saddle and a second minimum of the
+   scene is given (``partner``): a band of images between the two, its
+   highest image refined to a verified index-1 saddle
+   (:func:`ase_maud.transition.saddle_between`): a dome's snap-through, a
+   whole-scene path no local push reaches.
+
 An attempt is rejected, and said so, when the region's saddle lies along the
 direction of a saddle already found (the cosine between the two moves from
 the minimum above :data:`SAME_DIRECTION`), or when its end point is a saddle
@@ -61,6 +67,7 @@ from .dofs import free_dofs
 from .monitor import MaudError
 from .optimizer import Maud
 from .stiffness import EXACT_MAX_DOFS
+from .transition import saddle_between
 
 #: A local region: the free points within this many times the centre
 #: point's nearest-neighbour distance.
@@ -87,7 +94,8 @@ BUDGET = 500
 class Attempt:
     """One attempt of a :func:`search_saddles`: its ``kind`` ('mode': a
     whole-scene climb along mode ``where`` of the minimum, ``sign`` +1 or
-    -1; 'local': an activation around point ``where``), how it ended
+    -1; 'local': an activation around point ``where``; 'path': a band to
+    the second minimum given, :func:`~ase_maud.transition.saddle_between`), how it ended
     (``outcome``: 'saddle', 'known saddle', 'known direction', 'budget', 'no
     local saddle', 'steps', or the error that stopped it), the points of its
     last region (``region``, local ones), what it computed (``calls``,
@@ -113,8 +121,9 @@ class Attempt:
 
     def describe(self) -> str:
         """One line: what was tried, how it ended and what it cost."""
-        what = (f"mode {self.where} {'+' if self.sign > 0 else '-'}" if self.kind == 'mode'
-                else f'local at point {self.where} ({self.region} points)')
+        what = {'mode': f"mode {self.where} {'+' if self.sign > 0 else '-'}",
+                'path': 'path to the second minimum'}.get(
+                    self.kind, f'local at point {self.where} ({self.region} points)')
         return (f'{what}: {self.outcome}, {self.calls} calls + {self.hvp_vectors} HVP '
                 f'vectors + {self.hessians} Hessians = {self.cost}, {self.cpu_s:.2f} CPU s')
 
@@ -154,7 +163,8 @@ class SaddleSearch:
 def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int | None = None,
                    budget: int | None = BUDGET, fmax: float = 1e-6, steps: int = 1000,
                    seed: int = 0, energy_rtol: float = 1e-8, distance_atol: float = 1e-4,
-                   client: Any = None, point: StationaryPoint | None = None) -> SaddleSearch:
+                   client: Any = None, point: StationaryPoint | None = None,
+                   partner: Atoms | None = None) -> SaddleSearch:
     """The :class:`SaddleSearch` from the minimum ``minimum`` (a MaudCalculator
     scene relaxed to ``fmax``; see the module docstring): climbs along its
     ``modes`` lowest modes both ways, then ``local`` activations at points
@@ -166,7 +176,11 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     ``distance_atol``. ``point``: the minimum's classification if known
     (else computed here, its work counted in :attr:`SaddleSearch.work`).
     ``client``: a ``dask.distributed`` client whose workers run the
-    attempts. Arguments are checked first (a ValueError names a bad one)."""
+    attempts. ``partner``: a second minimum of the scene (a dome's mirror
+    image, :func:`~ase_maud.transition.mirrored`, say); if the attempts
+    found no saddle, a last one joins the two by a band of images
+    (:func:`~ase_maud.transition.saddle_between`; no budget but its own
+    steps). Arguments are checked first (a ValueError names a bad one)."""
     checked = check_all(local=local, budget=budget, fmax=fmax, steps=steps, seed=seed,
                         energy_rtol=energy_rtol, distance_atol=distance_atol)
     modes = check('modes', modes, 'search_modes')
@@ -200,6 +214,8 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
         known = [s.positions - minimum.positions for s in found.saddles]
         merge(run_tasks(client, _activate, [(minimum, int(c), known, fmax, steps, budget)
                                        for c in batch]))
+    if partner is not None and not found.saddles:
+        merge([_path(minimum, partner, fmax)])
     return found
 
 
@@ -341,6 +357,17 @@ def _settle(atoms: Atoms, tally: _Tally, held: np.ndarray, rest: np.ndarray,
             return None
         largest = settled
     return None
+
+
+def _path(minimum: Atoms, partner: Atoms, fmax: float) -> tuple[Atoms | None, Attempt]:
+    """The saddle between ``minimum`` and ``partner`` by a band of images."""
+    found = saddle_between(minimum, partner, fmax=fmax)
+    attempt = Attempt('path', 0, outcome=found.outcome or 'saddle', calls=found.calls,
+                      hvp_vectors=found.work.hvp_vectors, hessians=found.work.hessians,
+                      cpu_s=found.cpu_s)
+    if found.saddle is not None:
+        attempt.energy = found.saddle.get_potential_energy()
+    return found.saddle, attempt
 
 
 def _along(move: np.ndarray, known: list[np.ndarray]) -> bool:

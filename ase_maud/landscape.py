@@ -4,7 +4,8 @@ the minima each saddle joins.
 :func:`landscape` searches for saddles from a minimum
 (:func:`ase_maud.activation.search_saddles`: climbs along each of its
 ``modes`` lowest Hessian modes, both ways, then ``local`` local
-activations), relaxes from each index-1 saddle found to the minimum on
+activations, and a band of images to a second minimum if one is given and
+nothing else found a saddle), relaxes from each index-1 saddle found to the minimum on
 either side of its unstable mode
 (:func:`ase_maud.analysis.displace_along_mode`), and returns a
 :class:`Landscape`: the distinct minima and saddles and which minima each
@@ -80,7 +81,7 @@ class Landscape:
 def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 1000,
               energy_rtol: float = ENERGY_RTOL, distance_atol: float = DISTANCE_ATOL,
               client: Any = None, local: int = 0, budget: int | None = None,
-              seed: int = 0) -> Landscape:
+              seed: int = 0, partner: Atoms | None = None) -> Landscape:
     """The :class:`Landscape` around the minimum ``atoms`` (a MaudCalculator
     scene relaxed to ``fmax``; a ValueError if it is not a minimum): the
     saddles of :func:`~ase_maud.activation.search_saddles` (climbs along its
@@ -90,7 +91,11 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
     relaxed, all to ``fmax`` in at most ``steps`` steps; points compared by
     :func:`same_point` with ``energy_rtol`` and ``distance_atol``. The
     attempts and descents run on the workers of ``client`` (a
-    ``dask.distributed.Client``) if given, else in this process. Each
+    ``dask.distributed.Client``) if given, else in this process.
+    ``partner``: a second minimum of the scene (a dome's mirror image,
+    :func:`~ase_maud.transition.mirrored`): if the search found no saddle,
+    the one a band of images between the two reaches
+    (:func:`~ase_maud.transition.saddle_between`). Each
     argument is checked first (:data:`~ase_maud.checks.RULES`): a ValueError
     names a bad one."""
     checked = check_all(modes=modes, fmax=fmax, steps=steps, energy_rtol=energy_rtol,
@@ -114,7 +119,8 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
 
     found.search = search_saddles(start, modes=modes, local=local, budget=budget,
                                   fmax=fmax, steps=steps, seed=seed, energy_rtol=energy_rtol,
-                                  distance_atol=distance_atol, client=client, point=point)
+                                  distance_atol=distance_atol, client=client, point=point,
+                                  partner=partner)
     distinct = found.search.saddles   # the saddles found, each once
     found.failed += sum(a.outcome not in _NOT_FAILED for a in found.search.attempts)
     descents = run_tasks(client, _descend, [(s, fmax, steps) for s in distinct])

@@ -12,6 +12,10 @@ a merit is the energy (``target='minimum'``) or ``|f|**2``.
   estimate ``-(f_old + f) . dx / 2``, a directional-derivative test that
   needs forces only; the step raised the merit where the change exceeds
   the slack.
+- :func:`work_change`: that trapezoid estimate alone, for forces that are
+  the gradient of no merit (a band of images, ASE's NEB): a step is judged
+  by the work the forces did over it, by the forces alone as FIRE's and
+  MDMin's power test judges it.
 - :func:`cubic_cut`: the fraction of a step taken back at the minimum of
   the cubic through both ends' slopes and the merit's change (a safe
   line-search cut; the change judged by the forces within the noise).
@@ -75,6 +79,20 @@ def merit_change(last_merit: float, last_noise: float, last_forces: np.ndarray,
     tol = merit_tolerance(last_merit, noise + last_noise)
     if not energy or abs(change) > tol:
         return change, tol
+    return work_change(last_forces, move, forces)
+
+
+def work_change(last_forces: np.ndarray, move: np.ndarray,
+                forces: np.ndarray) -> tuple[float, float]:
+    """``(-(last_forces + forces) . move / 2, 0)``: minus the work the
+    forces did over ``move`` (the trapezoid rule), and no slack. It is
+    positive (an overshoot) where the forces at the end oppose the move more
+    than those at its start drove it: beyond twice the distance to where
+    the forces along the move balance. For forces that are the gradient of
+    no merit (a band of images: the spring and tangent projections make
+    ``|f|**2`` rise along ``f`` itself, so no step along the model's
+    direction lowers it and a run judged by it stagnates) this is the test
+    that needs the forces only."""
     return -0.5 * np.vdot(last_forces + forces, move), 0.0
 
 

@@ -17,8 +17,14 @@ specification's step with the whole scene's stiffness ``K``::
   off. A move that points against the new direction (an overshoot) is
   dropped and gamma shrinks by ``overshoot_shrink`` (a kinetic-damping
   restart, as in FIRE and Barnes's form finding).
-- A step that raised the merit (the energy for ``'minimum'``, ``|f|**2``
-  for ``'stationary'``; :func:`~ase_maud.search.merit_change`) is taken back at no
+- A band of images (ASE's NEB) seeking ``'stationary'`` has forces that
+  are the gradient of no merit (``|f|**2`` rises along ``f`` itself) and
+  that jump where its tangents switch: a step the forces did negative work
+  over (:func:`~ase_maud.search.work_change`, an overshoot) is kept, as
+  FIRE keeps it, with gamma halved and the momentum dropped; no step is
+  taken back.
+- Otherwise a step that raised the merit (the energy for ``'minimum'``,
+  ``|f|**2`` for ``'stationary'``; :func:`~ase_maud.search.merit_change`) is taken back at no
   extra calculator call: the strategy returns to where the step began
   (whose forces and local model it kept), cuts gamma (halved, or with
   ``interpolate`` by :func:`~ase_maud.search.cubic_cut` through the merit's
@@ -77,6 +83,7 @@ from .search import (
     merit_tolerance,
     trust_fraction,
     trust_region,
+    work_change,
 )
 from .stiffness import (
     BFGSModel,
@@ -314,15 +321,25 @@ class Minimise(Strategy):
         becomes where the move starts (``x``, or the last point if the step
         to ``x`` is taken back)."""
         last = state.last
-        change, slack = (0.0, 0.0) if last is None else merit_change(
-            last.merit, last.noise, last.forces, x - last.x, merit, forces, noise,
-            energy=self.model.target == 'minimum')
-        if change > slack:   # the step raised the merit
+        band = self.rule.image_size is not None and self.model.target == 'stationary'
+        if last is None:
+            change, slack = 0.0, 0.0
+        elif band:
+            change, slack = work_change(last.forces, x - last.x, forces)
+        else:
+            change, slack = merit_change(last.merit, last.noise, last.forces, x - last.x,
+                                         merit, forces, noise,
+                                         energy=self.model.target == 'minimum')
+        if change > slack and not band:   # the step raised the merit
             if state.solver is None:   # resumed: the model where the step began
                 state.solver = local_at(last.x)
             self._revert(state, change, forces)
         else:
             self._accept(state, x, forces)
+            if change > slack:   # a band's overshoot: kept, as FIRE keeps it
+                state.gamma *= 0.5
+                state.v = None
+                state.k = 0
             state.last = Point(x.copy(), merit, forces.copy(), noise)
             state.solver = local_at(x)
         return self._move(state)

@@ -26,7 +26,9 @@ def relaxed(name, size, seed, fmax=1e-7):
     """Scene ``name`` of ``size`` (seeded), its start moved by a seeded
     jiggle, relaxed by the exact model: a minimum, where ``P`` is definite."""
     atoms = build(name, size, seed=seed)
-    free = free_dofs(atoms, 3)
+    dim = atoms.calc.potential.dim
+    free = np.zeros((len(atoms), 3), bool)
+    free[:, :dim] = free_dofs(atoms, dim)
     atoms.positions += np.where(free, np.random.default_rng(seed).uniform(
         -0.1, 0.1, atoms.positions.shape), 0.0)
     assert Maud(atoms, model='exact', logfile=None).run(fmax=fmax, steps=500)
@@ -34,30 +36,34 @@ def relaxed(name, size, seed, fmax=1e-7):
 
 
 def dense_hessian(atoms):
-    """The calculator's dense Hessian on the free degrees of freedom."""
-    keep = np.flatnonzero(free_dofs(atoms, 3).ravel())
+    """The calculator's dense Hessian on the free degrees of freedom, and
+    their indices into the (N, dim) coordinates."""
+    keep = np.flatnonzero(free_dofs(atoms, atoms.calc.potential.dim).ravel())
     return atoms.calc.potential.hessian(atoms.positions)[np.ix_(keep, keep)], keep
 
 
-@pytest.mark.parametrize('seed', [3, 11])
-def test_without_a_cutoff_p_is_the_dense_hessian_and_solves_newton(seed):
-    atoms = relaxed('hanging_net', 5, seed)
+@pytest.mark.parametrize('scene, seed', [('hanging_net', 3), ('hanging_net', 11),
+                                         ('net2d', 4)])
+def test_without_a_cutoff_p_is_the_dense_hessian_and_solves_newton(scene, seed):
+    atoms = relaxed(scene, 5, seed)
+    dim = atoms.calc.potential.dim
     hessian, keep = dense_hessian(atoms)
     model = NearFieldModel(cutoff=1e9)
     np.testing.assert_allclose(model.matrix(atoms).toarray(), hessian,
                                rtol=1e-10, atol=1e-12 * np.abs(hessian).max())
     solver = model.factor(atoms)
     assert solver is not None   # a minimum: definite
-    forces = np.random.default_rng(seed).standard_normal((len(atoms), 3))
+    forces = np.zeros((len(atoms), 3))
+    forces[:, :dim] = np.random.default_rng(seed).standard_normal((len(atoms), dim))
     move = solver.solve(forces)
-    assert not move[~free_dofs(atoms, 3)].any()
-    np.testing.assert_allclose(move.ravel()[keep],
-                               np.linalg.solve(hessian, forces.ravel()[keep]), rtol=1e-8,
-                               atol=1e-10 * np.abs(move).max())
+    assert not move[:, :dim][~free_dofs(atoms, dim)].any() and not move[:, dim:].any()
+    np.testing.assert_allclose(move[:, :dim].ravel()[keep],
+                               np.linalg.solve(hessian, forces[:, :dim].ravel()[keep]),
+                               rtol=1e-8, atol=1e-10 * np.abs(move).max())
     # the quadratic model's energy change along the move against the energy's
     t = 1e-3
     predicted = -t * np.vdot(atoms.get_forces(), move) + 0.5 * t * t * np.vdot(
-        move.ravel()[keep], forces.ravel()[keep])   # P move = forces
+        move, forces)   # P move = forces
     energy = atoms.get_potential_energy()
     atoms.positions += t * move
     assert atoms.get_potential_energy() - energy == pytest.approx(

@@ -1,7 +1,8 @@
-"""tools/repulsion_models.py's near-field prototype (the springs' Hessian
-plus the repulsion's near pair blocks, signed) against the dense Hessian and
-finite differences of the forces on small scenes, and a run of it to
-L-BFGS-B's minimum."""
+"""tools/repulsion_models.py's near-field prototypes (the springs' Hessian
+plus the repulsion's near pair blocks, signed; factorised, or solved
+matrix-free by truncated CG) against the dense Hessian and finite
+differences of the forces on small scenes, and runs of them to L-BFGS-B's
+minimum."""
 
 import itertools
 import runpy

@@ -81,6 +81,7 @@ from .search import (
     cubic_cut,
     merit_change,
     merit_tolerance,
+    reach,
     trust_fraction,
     trust_region,
 )
@@ -361,7 +362,8 @@ class Minimise(Strategy):
         that step's secant pair in the L-BFGS memory (if :func:`keeps_pair`;
         the model's own state, e.g. the bfgs model's ``kappa``, is not
         changed by a step taken back), no point moving further than the
-        longest point move of that step times its :func:`cubic_cut`."""
+        longest point move of that step times its :func:`cubic_cut`, nor
+        further from ``x`` (where the points are) than its limit."""
         last, rejected = state.last, state.v
         radius = cubic_cut(last.forces, rejected, change, forces) * float(
             np.linalg.norm(rejected, axis=1).max())
@@ -372,7 +374,10 @@ class Minimise(Strategy):
         state.k = 0
         move = self._move(state)
         length = float(np.linalg.norm(move, axis=1).max())
-        return move * (radius / length) if length > radius else move
+        if length > radius:
+            move = move * (radius / length)
+        # from x, the points jump by move - rejected: within their limits too
+        return move * min(1.0, reach(-rejected, move, self.limits(last.x)))
 
     def _accept(self, state: MaudState, x: np.ndarray, forces: np.ndarray) -> None:
         """Learn from the accepted step that ended at ``x``."""

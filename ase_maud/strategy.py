@@ -30,6 +30,12 @@ specification's step with the whole scene's stiffness ``K``::
   ``interpolate`` by :func:`~ase_maud.search.cubic_cut` through the merit's
   change as judged, gamma then scaling
   the move after its bound, as a line search) and drops the momentum.
+  With ``learn_rises`` (the bfgs model) the step taken back is learnt
+  from instead: its secant pair joins the L-BFGS memory (the curvature
+  along it is the one thing the rise measured) and the next move is the
+  model's new move from where the step began, no longer than the cubic
+  cut of the step taken back (a trust radius, so the curvature learnt and
+  the cut do not shorten the move twice).
   Gamma grows by ``gamma_growth`` after each accepted step, up to
   ``gamma_max``.
 - No point moves further than its limit (:class:`~ase_maud.search.Limits`);
@@ -81,6 +87,7 @@ from .search import (
     cubic_cut,
     merit_change,
     merit_tolerance,
+    reach,
     trust_fraction,
     trust_region,
     work_change,
@@ -109,19 +116,22 @@ from .stiffness import (
 #: the step of ASE's BFGS: the whole move scaled by one factor so that no
 #: point moves more than 0.2 (A; nor the common 0.45 of its nearest-neighbour
 #: distance, on atoms), gamma back to 1 after every accepted step
-#: and a cubic cut on a rise, as a line search; chosen by measurement on ASE's
+#: and, on a rise, the pair of the step taken back learnt and the model's new
+#: move cut to the cubic cut's length; chosen by measurement on ASE's
 #: systems (docs/benchmarks.md).
 STEP_DEFAULTS: dict[Any, dict[str, Any]] = {
     'common': {'gamma': 1.0, 'gamma_growth': 1.1, 'overshoot_shrink': 0.6,
                'maxstep_nn': 0.45, 'maxstep': None, 'maxstep_size': None,
-               'trust_region': False, 'interpolate': False, 'bound': 'each'},
+               'trust_region': False, 'interpolate': False, 'bound': 'each',
+               'learn_rises': False},
     ExactModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 0, 'trust_region': True,
                  'gamma_growth': 2.0},
     GlobalModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 30, 'bound': 'whole'},
     NodalModel: {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0},
     SecantModel: {'gamma_max': 1.5, 'beta_max': 0.98, 'memory': 0},
     BFGSModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 100, 'maxstep': 0.2,
-                'bound': 'whole', 'gamma_growth': 1e3, 'interpolate': True},
+                'bound': 'whole', 'gamma_growth': 1e3, 'interpolate': True,
+                'learn_rises': True},
     SpringsModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 20, 'maxstep_nn': None,
                    'maxstep_size': 1.0, 'bound': 'whole', 'gamma_growth': 1e3,
                    'interpolate': True},
@@ -156,6 +166,7 @@ class StepRule:
     trust_region: bool
     interpolate: bool
     bound: str
+    learn_rises: bool
     #: Points per image when the positions are a chain of images (ASE's NEB):
     #: the nearest other point is sought within the same image only (the same
     #: atom in the next image is not a neighbour). None: one scene.
@@ -333,6 +344,8 @@ class Minimise(Strategy):
         if change > slack and not band:   # the step raised the merit
             if state.solver is None:   # resumed: the model where the step began
                 state.solver = local_at(last.x)
+            if self.rule.learn_rises and state.v is not None:
+                return self._retake(state, x, change, forces)
             self._revert(state, change, forces)
         else:
             self._accept(state, x, forces)
@@ -358,6 +371,30 @@ class Minimise(Strategy):
         state.gamma *= factor
         state.v = None
         state.k = 0
+
+    def _retake(self, state: MaudState, x: np.ndarray, change: float,
+                forces: np.ndarray) -> np.ndarray:
+        """The move from where the last step (to ``x``, which changed the
+        merit by ``change``, as judged, and ended at ``forces``) began, with
+        that step's secant pair in the L-BFGS memory (if :func:`keeps_pair`;
+        the model's own state, e.g. the bfgs model's ``kappa``, is not
+        changed by a step taken back), no point moving further than the
+        longest point move of that step times its :func:`cubic_cut`, nor
+        further from ``x`` (where the points are) than its limit."""
+        last, rejected = state.last, state.v
+        radius = cubic_cut(last.forces, rejected, change, forces) * float(
+            np.linalg.norm(rejected, axis=1).max())
+        s, y = x - last.x, last.forces - forces
+        if self.rule.memory and keeps_pair(s, y):
+            state.pairs = [*state.pairs, (s, y)][-self.rule.memory:]
+        state.v = None
+        state.k = 0
+        move = self._move(state)
+        length = float(np.linalg.norm(move, axis=1).max())
+        if length > radius:
+            move = move * (radius / length)
+        # from x, the points jump by move - rejected: within their limits too
+        return move * min(1.0, reach(-rejected, move, self.limits(last.x)))
 
     def _accept(self, state: MaudState, x: np.ndarray, forces: np.ndarray) -> None:
         """Learn from the accepted step that ended at ``x``."""

@@ -159,6 +159,62 @@ def test_an_uphill_step_is_taken_back_with_half_the_gamma():
     np.testing.assert_allclose(again, 0.5 * move)
 
 
+def bfgs_rule(learn_rises=True):
+    """The bfgs model's strategy with no length bound (the tests hand the
+    local model down)."""
+    stiffness = MODELS['bfgs']()
+    rule = replace(step_rule(stiffness), maxstep_nn=None, maxstep=None,
+                   learn_rises=learn_rises)
+    return compose(stiffness, rule, NearestDistances())
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_a_rise_is_learnt_from_and_retaken_within_the_cut(seed):
+    """The bfgs model's rule takes a step that raised the energy back to
+    where it began and learns from it: its secant pair joins the memory,
+    the model's kappa and gamma are unchanged, and the next move, the
+    L-BFGS move with that pair, is no longer than the cubic cut (1/3 for a
+    threefold overshoot along the step on a quadratic) of the step."""
+    quadratic = Quadratic(seed)
+    rule = bfgs_rule()
+    state = rule.start()
+    x0 = start(seed, quadratic)
+    too_soft = MatrixSolver(quadratic.A / 3)   # three times the Newton move
+    move = rule.step(state, x0, quadratic.energy(x0), quadratic.forces(x0), 0.0,
+                     lambda at: too_soft)
+    x1 = x0 + move
+    rule.moved(state, x1)
+    assert uphill(rule, state, x1, quadratic.energy(x1), quadratic.forces(x1), 0.0)
+    model, gamma = dict(state.model), state.gamma
+    again = rule.step(state, x1, quadratic.energy(x1), quadratic.forces(x1), 0.0,
+                      lambda at: pytest.fail('the solver of the start is kept'))
+    assert np.array_equal(state.last.x, x0)                # taken back
+    assert state.model == model and state.gamma == gamma
+    (s, y), = state.pairs
+    np.testing.assert_allclose(s, x1 - x0)
+    np.testing.assert_allclose(y, quadratic.forces(x0) - quadratic.forces(x1))
+    longest = np.linalg.norm(again, axis=1).max()
+    assert longest <= np.linalg.norm(move, axis=1).max() / 3 * (1 + 1e-9)
+    assert quadratic.energy(x0 + again) < quadratic.energy(x0)
+
+
+@pytest.mark.parametrize('seed', range(3))
+@pytest.mark.parametrize('kappa', [0.3, 3.0])
+def test_learning_from_rises_saves_evaluations_of_a_poor_model(seed, kappa):
+    """On a quadratic (curvatures 1 to 100) from the model ``kappa I``
+    (soft: its moves overshoot), learning the pairs of the steps taken back
+    reaches the minimum in at most 0.85 of the evaluations of the plain
+    cut (measured: 28-31 against 36-57)."""
+    quadratic = Quadratic(seed)
+    K = np.eye(3 * quadratic.n) * kappa
+    runs = [relax(bfgs_rule(learn), quadratic, start(seed, quadratic), K, fmax=1e-6)
+            for learn in (False, True)]
+    (_, plain, _), (x, learnt, energies) = runs
+    np.testing.assert_allclose(x, quadratic.minimum, atol=1e-5)
+    assert learnt <= 0.85 * plain
+    assert np.all(np.diff(energies) <= 1e-12 * np.abs(energies[1:]))   # downhill only
+
+
 @pytest.mark.parametrize('seed', range(3))
 def test_a_line_search_cut_shortens_a_move_the_bound_clipped(seed):
     """The springs rule (a line search over a bounded move): a move the

@@ -14,6 +14,10 @@ no column for a band.
 
     python tools/ase_systems.py --seeds 0 1 2 --fmax 0.01 --steps 2000 --csv runs.csv
     python tools/ase_systems.py --basin 20 --systems LJ13 LJ38 --seeds 0 1 2
+    python tools/ase_systems.py --hops 8 --systems LJ38 --seeds 0 1 2 3 4 5 \
+        --optimizers Maud BFGS --csv hops.csv
+    python tools/ase_systems.py --systems LJ7 LJ13 LJ38 --seeds $(seq 0 19) \
+        --optimizers Maud BFGS --csv lj.csv
 """
 
 from __future__ import annotations
@@ -106,6 +110,34 @@ def basin(system: str, seed: int, opt, hops: int, fmax: float, steps: int):
     return counter.calls, time.process_time() - start, lowest
 
 
+def hops(system: str, seed: int, count: int, optimizers: dict, fmax: float, steps: int):
+    """Rows (system, seed, hop, optimizer, calls, energy, converged) of
+    ``count`` BasinHopping moves (each coordinate moved uniformly within
+    +-0.5, as BasinHopping's ``dr=0.5``; drawn by ``RandomState(1000 seed +
+    hop)``) from the minimum BFGS reaches from the seeded start, each
+    relaxed by every one of ``optimizers`` ({name: (class, keywords)}): the
+    same hops, without BasinHopping's chain of them."""
+    minimum = SYSTEMS[system](seed).target
+    with BFGS(minimum, logfile=None) as dyn:
+        dyn.run(fmax=fmax, steps=steps)
+    rows = []
+    for hop in range(count):
+        move = np.random.RandomState(1000 * seed + hop).uniform(-0.5, 0.5, (len(minimum), 3))
+        for name, (opt, kwargs) in optimizers.items():
+            atoms = minimum.copy()
+            atoms.calc = type(minimum.calc)(**minimum.calc.parameters)
+            atoms.positions += move
+            counter = Counted([atoms])
+            with opt(atoms, logfile=None, **kwargs) as dyn:
+                converged = dyn.run(fmax=fmax, steps=steps)
+            rows.append({'system': system, 'seed': seed, 'hop': hop, 'optimizer': name,
+                         'calls': counter.calls,
+                         'energy': f'{atoms.get_potential_energy():.6f}',
+                         'converged': converged})
+            print(rows[-1], flush=True)
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--seeds', type=int, nargs='+', default=[0, 1, 2])
@@ -115,8 +147,14 @@ def main() -> None:
     parser.add_argument('--basin', type=int, default=0,
                         help='instead: BasinHopping of this many hops, Maud against BFGS '
                         '(each local relaxation at most --steps steps)')
+    parser.add_argument('--hops', type=int, default=0,
+                        help='instead: this many BasinHopping moves from the minimum BFGS '
+                        'reaches from each start, each relaxed by every optimizer (--csv)')
     parser.add_argument('--maud', nargs='*', default=[],
                         help='Maud variants: name=keyword=value,keyword=value')
+    parser.add_argument('--optimizers', nargs='+',
+                        help='only these columns (default: Maud, its --maud variants, BFGS, '
+                        'LBFGS, FIRE, L-BFGS-B)')
     parser.add_argument('--csv', help='write every run (system, seed, optimizer, '
                         'calls, CPU s, energy, converged) to this file')
     args = parser.parse_args()
@@ -127,6 +165,16 @@ def main() -> None:
         optimizers[name] = (Maud, {k: _value(v) for k, v in keywords.items()})
     optimizers.update({'BFGS': (BFGS, {}), 'LBFGS': (LBFGS, {}), 'FIRE': (FIRE, {}),
                        'L-BFGS-B': (scipy_lbfgsb, {})})
+    if args.optimizers:
+        unknown = set(args.optimizers) - set(optimizers)
+        if unknown:
+            parser.error(f'--optimizers: unknown {sorted(unknown)}; known {list(optimizers)}')
+        optimizers = {name: optimizers[name] for name in args.optimizers}
+    if args.hops:
+        rows = [row for system in args.systems for seed in args.seeds
+                for row in hops(system, seed, args.hops, optimizers, args.fmax, args.steps)]
+        _write(args.csv, rows)
+        return
     if args.basin:
         print('| system | seed | Maud: calls, CPU, lowest | BFGS: calls, CPU, lowest |')
         print('|---|---|---|---|')
@@ -156,8 +204,13 @@ def main() -> None:
                         else '' if converged else ' (no)')
                 cells.append(f'{calls}{mark}, {cpu:.2f} s, {energy:.4f}')
             print(f'| {system} | {seed} | ' + ' | '.join(cells) + ' |', flush=True)
-    if args.csv:
-        with open(args.csv, 'w', newline='') as file:
+    _write(args.csv, rows)
+
+
+def _write(path: str | None, rows: list[dict]) -> None:
+    """``rows`` as CSV to ``path`` (nothing if None)."""
+    if path:
+        with open(path, 'w', newline='') as file:
             writer = csv.DictWriter(file, fieldnames=list(rows[0]))
             writer.writeheader()
             writer.writerows(rows)

@@ -332,16 +332,9 @@ class Minimise(Strategy):
         becomes where the move starts (``x``, or the last point if the step
         to ``x`` is taken back)."""
         last = state.last
-        band = self.rule.image_size is not None and self.model.target == 'stationary'
-        if last is None:
-            change, slack = 0.0, 0.0
-        elif band:
-            change, slack = work_change(last.forces, x - last.x, forces)
-        else:
-            change, slack = merit_change(last.merit, last.noise, last.forces, x - last.x,
-                                         merit, forces, noise,
-                                         energy=self.model.target == 'minimum')
-        if change > slack and not band:   # the step raised the merit
+        change, slack = (0.0, 0.0) if last is None else self._change(last, x, merit, forces,
+                                                                     noise)
+        if change > slack and not self.band:   # the step raised the merit
             if state.solver is None:   # resumed: the model where the step began
                 state.solver = local_at(last.x)
             if self.rule.learn_rises and state.v is not None:
@@ -360,6 +353,23 @@ class Minimise(Strategy):
     def index_reached(self, state: MaudState, local: Callable[[], Solver]) -> bool:
         """A minimiser converges wherever the forces vanish."""
         return True
+
+    @property
+    def band(self) -> bool:
+        """Whether this is a band of images seeking a stationary point (ASE's
+        NEB): its forces are the gradient of no merit, so a step is judged by
+        the work they did over it, and an overshoot is kept, as FIRE keeps it."""
+        return self.rule.image_size is not None and self.model.target == 'stationary'
+
+    def _change(self, last: Point, x: np.ndarray, merit: float, forces: np.ndarray,
+                noise: float) -> tuple[float, float]:
+        """The merit's change over the step from ``last`` to ``x`` and the slack
+        within which it is no rise (:func:`merit_change`; a band's
+        :func:`work_change`)."""
+        if self.band:
+            return work_change(last.forces, x - last.x, forces)
+        return merit_change(last.merit, last.noise, last.forces, x - last.x, merit, forces,
+                            noise, energy=self.model.target == 'minimum')
 
     def _revert(self, state: MaudState, change: float, forces: np.ndarray) -> None:
         """Go back to where the last step (which changed the merit by

@@ -49,8 +49,8 @@ TRUST_GOOD, TRUST_BAD = 0.25, 0.75
 #: The damped move is taken once its longest point is within this fraction
 #: of its limit, or the bracket of ``mu`` this narrow (in log), and
 #: :data:`DAMPING_TRIALS` damped solves at most once the bracket is found
-#: (false position in log mu: about 5 solves, where 14 bisections pinned
-#: ``mu`` to 0.2 %; a coarser ``mu`` took more steps: docs/optimizer.md).
+#: (false position in log mu, where 14 bisections pinned ``mu`` to 0.2 %;
+#: a coarser ``mu`` took more steps: docs/optimizer.md).
 DAMPING_TOLERANCE = 2e-3
 DAMPING_TRIALS = 14
 

@@ -144,7 +144,9 @@ class RunMonitor:
 
     ``merit_name``: what the merit is in messages (``'energy'`` for
     ``target='minimum'``, else ``'|f|^2'``, which is not watched for
-    progress); ``length_scale``: the scene's ``a`` (0 if unknown);
+    progress); ``band``: a band of images, whose steps are judged by the
+    work of its forces (:attr:`~ase_maud.strategy.Strategy.band`);
+    ``length_scale``: the scene's ``a`` (0 if unknown);
     ``bounded``: a finite minimum is proved (no divergence test);
     ``divergence_factor`` inf: no divergence test either. The divergence
     test's record: ``marks`` (growths seen), ``passes`` (successive ones
@@ -157,6 +159,7 @@ class RunMonitor:
     divergence_factor: float
     patience: int
     merit_name: str = 'energy'
+    band: bool = False
     length_scale: float = 0.0
     size0: float | None = None
     centre0: np.ndarray | None = None
@@ -170,15 +173,16 @@ class RunMonitor:
 
     @classmethod
     def of_run(cls, atoms: Atoms | None, target: str, divergence_factor: float,
-               patience: int, points: bool) -> RunMonitor:
+               patience: int, points: bool, band: bool = False) -> RunMonitor:
         """The monitor of a run seeking ``target`` on ``atoms`` (None: a band
-        of images or a cell filter); the divergence test only where the
+        of images or a cell filter; ``band``: a band judged by its forces'
+        work); the divergence test only where the
         coordinates are ``points`` (a cell filter's rows do not spread like
         points), the scene is a MaudCalculator's (:func:`divergence_judged`)
         and no finite minimum is proved."""
         return cls(divergence_factor if points and divergence_judged(atoms) else np.inf,
                    patience,
-                   merit_name='energy' if target == 'minimum' else '|f|^2',
+                   merit_name='energy' if target == 'minimum' else '|f|^2', band=band,
                    length_scale=getattr(getattr(atoms, 'calc', None), 'length_scale', 0.0),
                    bounded=minimum_proved(atoms, target))
 
@@ -209,12 +213,13 @@ class RunMonitor:
                 f'falling by less than {ENERGY_PROGRESS:g} fmax times the size of '
                 'the scene)')
         if gamma < GAMMA_UNDERFLOW * gamma0:
+            rose = ("overshot (the band's forces did negative work over it)" if self.band
+                    else f'raised the {self.merit_name}')
             raise StagnationError(
                 f'stagnant at step {step}: the step factor gamma fell to '
                 f'{gamma:.3g} ({gamma / gamma0:.3g} of its start): every step '
-                f'since step {max(self.best[1], self.lowest[1])} raised the '
-                f'{self.merit_name}, even the shortest along the model\'s direction '
-                f'(fmax {fmax:.3g})')
+                f'since step {max(self.best[1], self.lowest[1])} {rose}, even the '
+                f'shortest along the model\'s direction (fmax {fmax:.3g})')
 
     def _judge_growth(self, step: int, x: np.ndarray, forces: np.ndarray,
                       size: float, drift: float) -> None:

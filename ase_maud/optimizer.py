@@ -149,7 +149,7 @@ class Maud(Resumable):
         self._handoff: Handoff | None = None
         self.state = self.maud.start()
         self.monitor = RunMonitor.of_run(self._atoms(), self.target, self.divergence_factor,
-                                         self.patience, self._points)
+                                         self.patience, self._points, self.maud.band)
         self.fmax_now = np.inf   # largest force at the last step
 
     def _atoms(self) -> Atoms | None:

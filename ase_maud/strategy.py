@@ -300,6 +300,13 @@ class Strategy:
     rule: StepRule
     limits: Limits
 
+    @property
+    def band(self) -> bool:
+        """Whether this is a band of images seeking a stationary point (ASE's
+        NEB): its forces are the gradient of no merit, so a step is judged by
+        the work they did over it, and an overshoot is kept, as FIRE keeps it."""
+        return self.rule.image_size is not None and self.model.target == 'stationary'
+
     def start(self) -> MaudState:
         """The state before the first step."""
         return MaudState(gamma=self.rule.gamma)
@@ -353,13 +360,6 @@ class Minimise(Strategy):
     def index_reached(self, state: MaudState, local: Callable[[], Solver]) -> bool:
         """A minimiser converges wherever the forces vanish."""
         return True
-
-    @property
-    def band(self) -> bool:
-        """Whether this is a band of images seeking a stationary point (ASE's
-        NEB): its forces are the gradient of no merit, so a step is judged by
-        the work they did over it, and an overshoot is kept, as FIRE keeps it."""
-        return self.rule.image_size is not None and self.model.target == 'stationary'
 
     def _change(self, last: Point, x: np.ndarray, merit: float, forces: np.ndarray,
                 noise: float) -> tuple[float, float]:

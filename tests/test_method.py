@@ -441,8 +441,12 @@ def test_monitor_names_stagnation_and_an_underflowed_gamma():
     with pytest.raises(StagnationError, match='no progress for 5 steps'):
         monitor.check(6, x, 1.0, forces, 1.0, 1.0, 1e-12)
     fresh = RunMonitor(divergence_factor=3.0, patience=5)
-    with pytest.raises(StagnationError, match='gamma fell to 1e-13'):
+    with pytest.raises(StagnationError, match='gamma fell to 1e-13.*raised the energy'):
         fresh.check(0, x, 1.0, forces, 1e-13, 1.0, 1e-12)
+    # a band of images: its steps are judged by its forces' work, and say so
+    band = RunMonitor(divergence_factor=np.inf, patience=5, merit_name='|f|^2', band=True)
+    with pytest.raises(StagnationError, match="overshot \\(the band's forces did negative"):
+        band.check(0, x, 1.0, forces, 1e-13, 1.0, 1e-12)
 
 
 def test_monitor_state_counts_steps_from_the_restart():

@@ -90,11 +90,12 @@ def test_a_landscape_on_two_workers_is_the_one_in_process(scene, size, seed):
 @pytest.mark.integration
 @pytest.mark.parametrize('seed', range(2))
 def test_a_large_landscape_on_two_workers_is_the_one_in_process(seed):
-    """Above the exact model's size (a tree of 200 points: the springs model's
-    lowest modes climb) the landscape
-    finds verified saddles, and two dask workers find the same graph."""
+    """Above the exact model's size (a tree of 100 points, 300 free
+    coordinates, twice EXACT_MAX_DOFS: the springs model's lowest modes
+    climb) the landscape finds verified saddles, and two dask workers find
+    the same graph."""
     distributed = pytest.importorskip('distributed')
-    minimum = _minimum('tree', 200, seed)
+    minimum = _minimum('tree', 100, seed)
     here = landscape(minimum, modes=1, fmax=FMAX, steps=500)
     assert here.saddles and here.failed == 0
     for saddle in here.saddles:

@@ -319,6 +319,11 @@ class Strategy:
         """Learn from a step ``s`` (N, 3) that changed the forces by ``-y``:
         the model's state and, with a memory, the L-BFGS pairs."""
         state.model = self.model.observe(s, y, state.model)
+        self.remember(state, s, y)
+
+    def remember(self, state: MaudState, s: np.ndarray, y: np.ndarray) -> None:
+        """Keep the secant pair ``(s, y)`` in the L-BFGS memory (if the rule
+        has one and :func:`keeps_pair`), the oldest dropped beyond its size."""
         if self.rule.memory and keeps_pair(s, y):
             state.pairs = [*state.pairs, (s, y)][-self.rule.memory:]
 
@@ -394,9 +399,7 @@ class Minimise(Strategy):
         last, rejected = state.last, state.v
         radius = cubic_cut(last.forces, rejected, change, forces) * float(
             np.linalg.norm(rejected, axis=1).max())
-        s, y = x - last.x, last.forces - forces
-        if self.rule.memory and keeps_pair(s, y):
-            state.pairs = [*state.pairs, (s, y)][-self.rule.memory:]
+        self.remember(state, x - last.x, last.forces - forces)
         state.v = None
         state.k = 0
         move = self._move(state)

@@ -49,7 +49,7 @@ TRUST_GOOD, TRUST_BAD = 0.25, 0.75
 #: The damped move is taken once its longest point is within this fraction
 #: of its limit, or the bracket of ``mu`` this narrow (in log), and
 #: :data:`DAMPING_TRIALS` damped solves at most once the bracket is found
-#: (false position in log mu, where 14 bisections pinned ``mu`` to 0.2 %;
+#: (the secant, then false position, in log mu; 14 bisections pinned ``mu`` to 0.2 %;
 #: a coarser ``mu`` took more steps: docs/optimizer.md).
 DAMPING_TOLERANCE = 2e-3
 DAMPING_TRIALS = 14
@@ -204,10 +204,11 @@ def damping(moves: Callable[[float], np.ndarray | None], gamma: float,
     """The move ``moves(mu)`` (None where the damped model is not definite)
     of the smallest damping ``mu`` whose ``gamma`` times keeps every point
     within ``limit``: ``mu`` grows tenfold from ``scale`` until it does, then
-    the bracket from ``1e-12`` of that is narrowed by false position in
-    ``log mu`` on the log of the longest point's ratio to its limit
-    (Illinois; a bisection while the lower end is not definite) to
-    :data:`DAMPING_TOLERANCE`."""
+    the bracket from ``1e-12`` of that is narrowed in ``log mu`` on the log
+    of the longest point's ratio to its limit to :data:`DAMPING_TOLERANCE`:
+    while no lower end has a move, by the secant through the last two moves
+    that fit (at first the slope -1 of a move ``f / mu``; never below the
+    bracket's geometric middle), then by false position (Illinois)."""
     def excess(move: np.ndarray | None) -> float:
         return np.inf if move is None else float(np.log(max(gamma * longest(move, limit),
                                                             np.finfo(float).tiny)))
@@ -217,19 +218,23 @@ def damping(moves: Callable[[float], np.ndarray | None], gamma: float,
     while (f_high := excess(best)) > 0:
         high *= 10.0
         best = moves(high)
-    low, kept = high * 1e-12, None
+    low, kept, slope = high * 1e-12, None, -1.0
     g_high, g_low = f_high, np.inf   # what false position weighs: Illinois halves an end kept twice
     for _ in range(DAMPING_TRIALS):
         if f_high >= -DAMPING_TOLERANCE or np.log(high / low) <= DAMPING_TOLERANCE:
             break
-        weight = 0.5 if np.isinf(g_low) else g_high / (g_high - g_low)
-        mid = high * (low / high) ** weight
+        if np.isinf(g_low):
+            mid = max(high * np.exp(-f_high / slope), np.sqrt(low * high))
+        else:
+            mid = high * (low / high) ** (g_high / (g_high - g_low))
         move = moves(mid)
         if (f := excess(move)) > 0:
             low, g_low = mid, f
             g_high *= 0.5 if kept == 'high' else 1.0
             kept = 'high'
         else:
+            if f > f_high:   # the secant of the moves that fit
+                slope = (f - f_high) / np.log(mid / high)
             high, f_high, g_high, best = mid, f, f, move
             g_low *= 0.5 if kept == 'low' else 1.0
             kept = 'low'

@@ -60,6 +60,7 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 from ase import Atoms
+from scipy.linalg.lapack import dpotrf, dpotrs, dsyevd
 from scipy.sparse.linalg import LinearOperator, cg, splu
 
 from . import physics
@@ -473,7 +474,7 @@ class _CholeskySolver(_DenseSolver, DampedSolver):
     definite = True
 
     def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray,
-                 scale: float, factor: Any):
+                 scale: float, factor: np.ndarray):
         super().__init__(matrix, basis, free)
         self.scale, self.factor = scale, factor
 
@@ -486,26 +487,25 @@ class _CholeskySolver(_DenseSolver, DampedSolver):
         return None if factor is None else cls(matrix, basis, free, scale, factor)
 
     def _solve(self, rhs):
-        return self._out(scipy.linalg.cho_solve(self.factor, self._into(rhs),
-                                                check_finite=False))
+        return self._out(dpotrs(self.factor, self._into(rhs))[0])
 
     def damped(self, forces: np.ndarray) -> Callable[[float], np.ndarray | None]:
         rhs = self._into(self._gather(forces))
 
         def move(mu: float) -> np.ndarray | None:
             factor = _cholesky(self.matrix, mu)
-            return None if factor is None else self._moves(
-                scipy.linalg.cho_solve(factor, rhs, check_finite=False))
+            return None if factor is None else self._moves(dpotrs(factor, rhs)[0])
         return move
 
 
-def _cholesky(matrix: np.ndarray, shift: float) -> Any:
-    """The Cholesky factor of ``matrix + shift I``, or None if not definite."""
-    try:
-        return scipy.linalg.cho_factor(matrix + shift * np.eye(len(matrix)),
-                                       check_finite=False)
-    except np.linalg.LinAlgError:
-        return None
+def _cholesky(matrix: np.ndarray, shift: float) -> np.ndarray | None:
+    """The upper Cholesky factor of ``matrix + shift I`` (LAPACK's potrf, as
+    ``scipy.linalg.cho_factor`` calls it, without its checks and batching
+    wrapper, which cost as much as the factorisation on tens of unknowns), or
+    None if not definite."""
+    shifted = matrix + shift * np.eye(len(matrix))
+    factor, info = dpotrf(shifted, lower=False, clean=False, overwrite_a=True)
+    return factor if info == 0 else None
 
 
 class _EigenSolver(_DenseSolver, DampedSolver, ModeSolver):
@@ -524,9 +524,12 @@ class _EigenSolver(_DenseSolver, DampedSolver, ModeSolver):
 
     def _decomposed(self) -> tuple[np.ndarray, np.ndarray]:
         if self._pairs is None:
-            # LAPACK's syevd, as scipy's driver='evd' (the same digits), with
-            # less Python around each call
-            values, vectors = np.linalg.eigh(self.matrix)
+            # LAPACK's syevd on the lower triangle, as numpy's eigh calls it
+            # (the same digits), without its wrapper
+            values, vectors, info = dsyevd(self.matrix, lower=True)
+            if info:
+                raise np.linalg.LinAlgError(f'the eigen-decomposition did not converge '
+                                            f'(LAPACK syevd info {info})')
             self._pairs = self.absolute(values), vectors
         return self._pairs
 

@@ -614,12 +614,14 @@ def test_damping_of_an_indefinite_model_is_the_smallest_that_fits(seed):
             or longest >= 0.3 * (1 - DAMPING_TOLERANCE))
 
 
-@pytest.mark.parametrize('seed', range(8))
+@pytest.mark.parametrize('seed', range(16))
 def test_damping_finds_its_move_in_a_few_solves(seed):
-    """False position in log mu: a move within 1 % of the longest that fits
-    the limits, in at most 12 damped solves with the bracket's growth (14
-    bisections took 15 or more), on indefinite quadratics whose limits are
-    a tenth to half of Newton's move."""
+    """The secant from above, then false position, in log mu: a move within
+    1 % of the longest that fits the limits, in at most 7 damped solves with
+    the bracket's growth (3-6 on these seeds; false position from the
+    bracket's geometric middle took 7-11, 14 bisections 15 or more), on
+    indefinite quadratics whose limits are a tenth to half of Newton's
+    move."""
     model, forces, _ = _quadratic_model(seed, negative=2)
     rng = np.random.default_rng(seed)
     limit = rng.uniform(0.1, 0.5, len(forces)) * np.linalg.norm(model.solve(forces), axis=1)
@@ -633,7 +635,7 @@ def test_damping_finds_its_move_in_a_few_solves(seed):
     ratio = np.linalg.norm(move, axis=1) / limit
     assert ratio.max() <= 1 + 1e-12
     assert ratio.max() >= 0.99
-    assert len(mus) <= 12
+    assert len(mus) <= 7
 
 
 def test_exact_models_solver_is_cholesky_where_definite_and_eigen_where_not():

@@ -394,6 +394,7 @@ class ExactModel(StiffnessModel):
         super().__init__(target, floor)
         self._basis: tuple[Any, np.ndarray | None] | None = None
         self._held: np.ndarray | None = None
+        self._kept_index = np.empty(0, dtype=np.intp)   # the coordinates not held
 
     def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
         return self.local(atoms.calc.get_property('hessian', atoms), atoms)
@@ -411,8 +412,8 @@ class ExactModel(StiffnessModel):
             return _EigenSolver(internal.T @ hessian @ internal, internal, free,
                                 np.asarray)
         if (held := self._held) is not None:   # whole coordinates: a selection
-            free = ~held
-            matrix, basis = hessian[np.ix_(free.ravel(), free.ravel())], None
+            free, kept = ~held, self._kept_index
+            matrix, basis = hessian.take(kept, axis=0).take(kept, axis=1), None
         else:
             matrix = hessian if basis is None else basis.T @ hessian @ basis
         eigen = _EigenSolver(matrix, basis, free, self._absolute)
@@ -424,8 +425,9 @@ class ExactModel(StiffnessModel):
         """:func:`allowed_basis`, kept while the constraints are the same;
         None if every move is allowed. Where its columns are coordinates (up
         to sign: the constraints hold whole coordinates, as FixAtoms and
-        FixCartesian do), :attr:`_held` marks the held ones (N, dim), for a
-        selection of the Hessian's rows and columns in place of products."""
+        FixCartesian do), :attr:`_held` marks the held ones (N, dim) and
+        :attr:`_kept_index` numbers the others, for a selection of the
+        Hessian's rows and columns in place of products."""
         key = (len(atoms), dim, [(type(c).__name__, repr(c.todict()))
                                  for c in atoms.constraints])
         if self._basis is None or self._basis[0] != key:
@@ -434,6 +436,7 @@ class ExactModel(StiffnessModel):
             if basis is not None and (np.abs(basis).sum(axis=0) == 1).all() and (
                     np.count_nonzero(basis, axis=0) == 1).all():
                 self._held = ~np.abs(basis).sum(axis=1).astype(bool).reshape(-1, dim)
+                self._kept_index = np.flatnonzero(~self._held)
         return self._basis[1]
 
 

@@ -17,8 +17,9 @@ one calculator call gives the energy, forces and Hessian together). CPU seconds 
 process's (``time.process_time``), after every kernel was compiled and run once, the median
 of ``--repeat`` runs from fresh copies (default 3; the calls are the same each time). Every end
 point is checked to be a minimum by the analytic Hessian (``ase_maud.analysis.classify``).
-``--profile`` gives the share of a Maud step spent in the kernel and the factorisations
-(cProfile over repeated runs of one scene). Run with one thread and save the raw numbers::
+``--profile`` gives the share of Maud's run time spent in the kernel and the
+factorisations (timers around those calls over repeated unprofiled runs of one scene).
+Run with one thread and save the raw numbers::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
         python tools/small_scenes.py --out small-scenes.csv --profile
@@ -27,16 +28,15 @@ point is checked to be a minimum by the analytic Hessian (``ase_maud.analysis.cl
 from __future__ import annotations
 
 import argparse
-import cProfile
 import csv
-import pstats
 import time
+from contextlib import contextmanager
 
 import numpy as np
 from ase.optimize import BFGS, FIRE, LBFGS
 from scipy.optimize import minimize
 
-from ase_maud import Maud
+from ase_maud import Maud, stiffness
 from ase_maud.analysis import classify
 from ase_maud.backends import direct
 from ase_maud.bench.optimizers import ScipyLBFGSB
@@ -162,28 +162,51 @@ def measure(name, size, seed, fmax, steps, repeat=3):
     return row
 
 
+@contextmanager
+def timed(module, names, totals, key):
+    """Within: each function ``names`` of ``module`` adds its process CPU
+    seconds to ``totals[key]`` (restored after)."""
+    kept = {name: getattr(module, name) for name in names}
+
+    def timer(function):
+        def wrapper(*args, **kwargs):
+            start = time.process_time()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                totals[key] += time.process_time() - start
+        return wrapper
+
+    for name, function in kept.items():
+        setattr(module, name, timer(function))
+    try:
+        yield
+    finally:
+        for name, function in kept.items():
+            setattr(module, name, function)
+
+
 def profile(name, size, seed, fmax, repeats=20):
-    """Shares of Maud's run time in the kernel (the one pass over the pairs)
-    and the factorisations (Cholesky, eigh), by cProfile."""
+    """Shares of Maud's run time (process CPU, the optimiser's construction
+    and run) in the kernel (the one pass over the pairs that gives the
+    energy, forces and Hessian) and the factorisations (LAPACK's Cholesky
+    and eigen-decomposition, as the exact model calls them), by timers
+    around those calls in ``repeats`` unprofiled runs (cProfile's cost per
+    Python call would inflate the rest)."""
     atoms = build(name, size, seed=seed)
-    profiler = cProfile.Profile()
-    profiler.enable()
-    for _ in range(repeats):
-        with Maud(fresh(atoms), logfile=None) as opt:
-            opt.run(fmax=fmax)
-    profiler.disable()
-    stats = pstats.Stats(profiler).stats
-    total = sum(ct for (path, _, fn), (_, _, _, ct, _) in stats.items()
-                if fn == 'run' and path.endswith('optimizer.py') and 'ase_maud' in path)
-
-    def cumulative(*names):
-        return sum(ct for (_, _, fn), (_, _, _, ct, _) in stats.items() if fn in names)
-
-    kernel = cumulative('repulsion_hessian')
-    algebra = cumulative('cho_factor', 'cho_solve', 'eigh')
-    return {'scene': f'{name}:{size}', 'seed': seed, 'kernel': kernel / total,
-            'factorisations': algebra / total,
-            'rest': 1 - (kernel + algebra) / total}
+    run_maud(fresh(atoms), fmax, 5000)   # every kernel compiled and loaded
+    copies = [fresh(atoms) for _ in range(repeats)]
+    totals = {'kernel': 0.0, 'factorisations': 0.0}
+    with timed(direct, ['repulsion_hessian'], totals, 'kernel'), \
+            timed(stiffness, ['dpotrf', 'dpotrs', 'dsyevd'], totals, 'factorisations'):
+        start = time.process_time()
+        for copy in copies:
+            with Maud(copy, logfile=None) as opt:
+                opt.run(fmax=fmax)
+        total = time.process_time() - start
+    shares = {key: value / total for key, value in totals.items()}
+    return {'scene': f'{name}:{size}', 'seed': seed, **shares,
+            'rest': 1 - sum(shares.values())}
 
 
 def main() -> None:

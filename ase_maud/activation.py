@@ -183,7 +183,7 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     steps). Arguments are checked first (a ValueError names a bad one)."""
     checked = check_all(local=local, budget=budget, fmax=fmax, steps=steps, seed=seed,
                         energy_rtol=energy_rtol, distance_atol=distance_atol)
-    modes = check('modes', modes, 'search_modes')
+    modes = check('modes', modes)
     local, budget, fmax, steps = (checked[k] for k in ('local', 'budget', 'fmax', 'steps'))
     if wanted is not None:
         wanted = check('wanted', wanted, 'count')

@@ -120,12 +120,10 @@ RULES: dict[str, Rule] = {
     'fmm_eps': Rule('a number in (0, 1), the requested relative precision',
                     lambda v: 0 < v < 1),
     # the landscape (ase_maud.landscape)
-    'modes': Rule('a whole number >= 1 (the lowest modes climbed, each both ways)',
-                  lambda v: v >= 1, whole=True),
+    'modes': Rule('a whole number >= 0 (the lowest modes climbed, each both ways, '
+                  'before the local activations)', lambda v: v >= 0, whole=True),
     'distance_atol': Rule('a finite number >= 0 (length units)', lambda v: v >= 0),
     # the saddle search (ase_maud.activation)
-    'search_modes': Rule('a whole number >= 0 (the lowest modes climbed, each both ways, '
-                         'before the local activations)', lambda v: v >= 0, whole=True),
     'local': Rule('a whole number >= 0 (local activations after the mode climbs)',
                   lambda v: v >= 0, whole=True),
     'budget': Rule('a whole number >= 1 (force-call equivalents of one attempt), '

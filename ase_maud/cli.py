@@ -41,7 +41,10 @@ import sys
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from ase import Atoms
 
 #: The commands and what each does, in one line (``ase-maud --help``).
 COMMANDS = {'relax': 'relax a net from a file, or a built-in scene, with Maud',
@@ -257,10 +260,11 @@ def saddles(args: argparse.Namespace) -> int:
 
     atoms = read_net(args.file, index=args.frame, **_net_options(args))
     Maud(atoms, logfile=None).run(fmax=args.fmax, steps=args.steps)
+    partner = _partner(args, atoms)
     with _dask_client(args.workers, args.scheduler) as client:
         found = landscape(atoms, modes=args.modes, fmax=args.fmax, steps=args.steps,
                           client=client, local=args.local, budget=args.budget,
-                          seed=args.seed)
+                          seed=args.seed, partner=partner)
     print(found.search.report())
     energies = [m.get_potential_energy() for m in found.minima]
     barriers = [s.get_potential_energy() for s in found.saddles]
@@ -275,6 +279,35 @@ def saddles(args: argparse.Namespace) -> int:
         energies, barriers, found.joins, temporary))
     replace_text(_graph_json(args), json.dumps(found.todict()))
     return 1 if found.failed else 0
+
+
+def _partner(args: argparse.Namespace, minimum: Atoms) -> Atoms | None:
+    """The second minimum of ``ase-maud saddles`` (None without --partner or
+    --mirror): the points of the --partner file (its last frame, read as the
+    net is) on the net of ``minimum``, relaxed by Maud to --fmax, or the
+    mirror image of ``minimum`` through the plane of its fixed points
+    (:func:`ase_maud.transition.mirrored`). A ValueError names a --partner
+    file whose points are not the net's, or one that does not relax."""
+    from .bench.runner import fresh_copy
+    from .io import read_net
+    from .optimizer import Maud
+    from .transition import mirrored
+
+    if args.mirror:
+        return mirrored(minimum, fmax=args.fmax, steps=args.steps)
+    if args.partner is None:
+        return None
+    read = read_net(args.partner, **_net_options(args))
+    if len(read) != len(minimum):
+        raise ValueError(f'--partner {args.partner!r} has {len(read)} points, the net '
+                         f'{args.file!r} has {len(minimum)}: a second minimum of the net '
+                         'has its points, in its order')
+    partner = fresh_copy(minimum)
+    partner.positions = read.positions
+    if not Maud(partner, logfile=None).run(fmax=args.fmax, steps=args.steps):
+        raise ValueError(f'--partner {args.partner!r}: its points did not relax to fmax '
+                         f'{args.fmax:g} in {args.steps} steps')
+    return partner
 
 
 @contextlib.contextmanager
@@ -364,6 +397,8 @@ def check_outputs(args: argparse.Namespace) -> None:
                 'an animation (--gif) is written as .gif' if args.gif else
                 f'a picture is written as one of .{", .".join(known)}'))
     elif args.command == 'saddles':
+        if args.partner is not None and not Path(args.partner).is_file():
+            raise ValueError(f'--partner {args.partner!r}: no such file')
         check_writable('--out', args.out)
         check_writable('--out', _graph_json(args))
         from .landscape import GRAPH_KEYS
@@ -397,6 +432,7 @@ def _files(args: argparse.Namespace) -> tuple[list, list]:
     elif args.command == 'show':
         outputs = [('--output', _picture_path(args))]
     elif args.command == 'saddles':
+        inputs.append(('--partner', args.partner))
         outputs = [('--out', args.out), ("--out's graph JSON", _graph_json(args))]
     return inputs, outputs
 
@@ -635,10 +671,13 @@ def build_parser() -> argparse.ArgumentParser:
         'with .json). Exit status 0, or 1 if an attempt or descent failed.',
         ['ase-maud saddles cluster.traj --modes 3 --out graph.png',
          'ase-maud saddles net.obj --fix boundary --modes 1 --local 8 --budget 1000',
+         'ase-maud saddles dome.traj --modes 0 --mirror   # the snap-through saddle',
          'ase-maud saddles points.xyz --edges edges.txt --dim 2'])
     _add_file(p)
-    p.add_argument('--modes', type=_ruled('count', int), default=2,
-                   help='lowest modes climbed, each both ways (default: %(default)s)')
+    p.add_argument('--modes', type=_ruled('modes', int), default=2,
+                   help='lowest modes climbed, each both ways (default: %(default)s; 0: '
+                   'none, the local activations and the path to --partner or --mirror '
+                   'alone)')
     p.add_argument('--local', type=_ruled('local', int), default=0,
                    help='local activations after the mode climbs, at points drawn with '
                    '--seed (default: %(default)s)')
@@ -654,6 +693,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--out', default='graph.png',
                    help='the disconnectivity graph (default: %(default)s); its JSON '
                    'beside it, .json')
+    second = p.add_mutually_exclusive_group()
+    second.add_argument('--partner', metavar='FILE',
+                        help="a second minimum of the net: the points of FILE's last "
+                        'frame (read as the net is, the same points in the same order), '
+                        'relaxed to --fmax; where the climbs and local activations find '
+                        'no saddle, a band of images between the two minima finds the '
+                        'one between them (ase_maud.transition.saddle_between)')
+    second.add_argument('--mirror', action='store_true',
+                        help='the second minimum is the mirror image of the net through '
+                        'the plane of its fixed points, relaxed (a dome and its '
+                        'snap-through; ase_maud.transition.mirrored)')
     spread = p.add_mutually_exclusive_group()
     spread.add_argument('--workers', type=_ruled('count', int), metavar='N',
                         help='run the climbs and descents on a dask LocalCluster of N '

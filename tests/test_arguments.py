@@ -82,9 +82,8 @@ def test_frame_of_a_one_frame_format(capsys, tmp_path):
     ('energy_rtol', np.nan, 'a positive finite number'),
     ('distance_atol', np.nan, 'a finite number >= 0'),
     ('distance_atol', -1e-3, 'a finite number >= 0'),
-    ('modes', -1, 'a whole number >= 1'),
-    ('modes', 0, 'a whole number >= 1'),
-    ('modes', 1.5, 'a whole number >= 1'),
+    ('modes', -1, 'a whole number >= 0'),
+    ('modes', 1.5, 'a whole number >= 0'),
     ('fmax', 0, 'a positive finite number')])
 def test_landscape_checks_its_arguments(keyword, value, accepted):
     with pytest.raises(ValueError, match=f'^{keyword} must be {re.escape(accepted)}'):

@@ -413,6 +413,61 @@ def test_saddles_on_two_local_workers_writes_the_same_graph(tmp_path, capsys):
         [s['energy'] for s in graphs[1]['saddles']], rel=1e-12)
 
 
+@pytest.mark.integration
+def test_saddles_takes_the_path_to_a_second_minimum_given_or_mirrored(tmp_path, capsys):
+    """With no climbs (--modes 0), ``ase-maud saddles`` on a dome finds the
+    saddle between it and a second minimum: its mirror image (--mirror) or
+    the points of a file (--partner, the mirror image written by the
+    library); both the saddle ``saddle_between`` finds from the same two
+    minima (seeds 1-2 of 6 x 6 domes), verified index 1, joining two minima
+    (not always the two given: the band's highest saddle may lie between two
+    minima of the path)."""
+    from test_transition import DOMES
+
+    from ase_maud import Maud
+    from ase_maud.analysis import classify
+    from ase_maud.bench.runner import fresh_copy
+    from ase_maud.transition import mirrored, saddle_between
+
+    for seed in (1, 2):
+        first = DOMES(6, seed)
+        write_net(tmp_path / f'dome{seed}.traj', first)
+        assert Maud(first, logfile=None).run(fmax=1e-6, steps=5000)
+        second = mirrored(first)
+        write_net(tmp_path / f'mirror{seed}.traj', second)
+        expected = saddle_between(first, second).saddle
+        assert classify(fresh_copy(expected)).index == 1
+        for how in (['--mirror'], ['--partner', str(tmp_path / f'mirror{seed}.traj')]):
+            out = tmp_path / f'graph{seed}{len(how)}.png'
+            assert main(['saddles', str(tmp_path / f'dome{seed}.traj'), '--modes', '0',
+                         '--out', str(out), *how]) == 0
+            lines = capsys.readouterr().out.splitlines()
+            assert any(line.startswith('  path ') for line in lines)
+            graph = json.loads(out.with_suffix('.json').read_text())
+            assert len(graph['saddles']) == 1 and len(set(graph['joins'][0])) == 2
+            assert graph['saddles'][0]['energy'] == pytest.approx(
+                expected.get_potential_energy(), rel=1e-8)
+
+
+def test_saddles_names_a_partner_that_is_not_the_nets(tmp_path):
+    """A --partner file with other points than the net's, or none, is named
+    (no search runs with it)."""
+    from test_transition import DOMES
+
+    write_net(tmp_path / 'dome.traj', DOMES(5, 0))
+    write_net(tmp_path / 'other.traj', DOMES(6, 0))
+    base = ['saddles', str(tmp_path / 'dome.traj'), '--modes', '0', '--out',
+            str(tmp_path / 'g.png')]
+    with pytest.raises(ValueError, match="--partner .*other.traj' has 36 points, the net "
+                       ".*has 25"):
+        cli.saddles(cli.build_parser().parse_args(
+            [*base, '--partner', str(tmp_path / 'other.traj')]))
+    with pytest.raises(ValueError, match="--partner .*none.traj': no such file"):
+        cli.check_outputs(cli.build_parser().parse_args(
+            [*base, '--partner', str(tmp_path / 'none.traj')]))
+    assert not (tmp_path / 'g.png').exists()
+
+
 def test_saddles_checks_its_output_first(tmp_path):
     with pytest.raises(ValueError, match='--out .*does not exist'):
         cli.check_outputs(cli.build_parser().parse_args(

@@ -419,7 +419,7 @@ def test_saddles_takes_the_path_to_a_second_minimum_given_or_mirrored(tmp_path, 
     saddle between it and a second minimum: its mirror image (--mirror) or
     the points of a file (--partner, the mirror image written by the
     library); both the saddle ``saddle_between`` finds from the same two
-    minima (seeds 1-2 of 6 x 6 domes), verified index 1, joining two minima
+    minima (seeds 1-2 of 5 x 5 domes), verified index 1, joining two minima
     (not always the two given: the band's highest saddle may lie between two
     minima of the path)."""
     from test_transition import DOMES
@@ -430,7 +430,7 @@ def test_saddles_takes_the_path_to_a_second_minimum_given_or_mirrored(tmp_path, 
     from ase_maud.transition import mirrored, saddle_between
 
     for seed in (1, 2):
-        first = DOMES(6, seed)
+        first = DOMES(5, seed)
         write_net(tmp_path / f'dome{seed}.traj', first)
         assert Maud(first, logfile=None).run(fmax=1e-6, steps=5000)
         second = mirrored(first)

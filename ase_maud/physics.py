@@ -183,9 +183,20 @@ def spring_hessian(springs: np.ndarray, natoms: int, Q: float | np.ndarray,
 
 def _weighted_laplacian(springs: np.ndarray, natoms: int, Q: float | np.ndarray,
                         dim: int) -> sp.csr_matrix:
-    """``L_Q (x) I_dim`` (``dim`` 1: ``L_Q``): each spring's ``Q_s`` on
-    both diagonal places of each coordinate and ``-Q_s`` on both
-    off-diagonal ones, in one sparse construction (duplicates summed)."""
+    """``L_Q (x) I_dim`` (``dim`` 1: ``L_Q``) from
+    :func:`spring_hessian_entries`, in one sparse construction (duplicates
+    summed)."""
+    rows, cols, data = spring_hessian_entries(springs, natoms, Q, dim)
+    return sp.csr_matrix((data, (rows, cols)), shape=(dim * natoms,) * 2)
+
+
+def spring_hessian_entries(springs: np.ndarray, natoms: int, Q: float | np.ndarray,
+                           dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The entries of ``L_Q (x) I_dim`` as (rows, columns, values), a pair
+    listed once per spring that meets it (their sum is the entry): each
+    spring's ``Q_s`` on both diagonal places of each coordinate and ``-Q_s``
+    on both off-diagonal ones; coordinates point by point. ``natoms`` sizes
+    nothing here; it is the matrix's (checked by the callers)."""
     pairs = np.asarray(springs, dtype=int).reshape(-1, 2)
     i, j = pairs.T
     weights = np.broadcast_to(np.asarray(Q, dtype=float), len(pairs))
@@ -194,8 +205,7 @@ def _weighted_laplacian(springs: np.ndarray, natoms: int, Q: float | np.ndarray,
     cols = dim * np.stack([j, i, i, j])[:, :, None] + axis
     data = np.broadcast_to(np.stack([-weights, -weights, weights, weights])[:, :, None],
                            rows.shape)
-    return sp.csr_matrix((data.ravel(), (rows.ravel(), cols.ravel())),
-                         shape=(dim * natoms,) * 2)
+    return rows.ravel(), cols.ravel(), data.ravel()
 
 
 def pair_chunks(natoms: int,

@@ -209,7 +209,9 @@ class MaudPotential:
         once per N, not converted at every call); ``repulsion`` is overwritten."""
         n = len(repulsion) // self.dim
         flat, data = self._kept(('hessian entries', n), lambda: _flat_entries(
-            self.spring_hessian(n), len(repulsion)))
+            *physics.spring_hessian_entries(self._springs_within(n), n,
+                                            self.Q * self.stiffnesses, self.dim),
+            len(repulsion)))
         repulsion *= self.Q
         repulsion.ravel()[flat] += data
         return repulsion
@@ -251,9 +253,10 @@ def _with_transpose(matrix: sp.csr_matrix) -> tuple[sp.csr_matrix | np.ndarray,
     return matrix, sp.csr_matrix(matrix.T)
 
 
-def _flat_entries(matrix: sp.csr_matrix, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """The flat indices into a dense (size, size) array of ``matrix``'s
-    stored entries (each (row, column) once), and their values."""
-    coo = matrix.tocoo()
-    coo.sum_duplicates()
-    return coo.row.astype(np.int64) * size + coo.col, coo.data
+def _flat_entries(rows: np.ndarray, cols: np.ndarray, data: np.ndarray,
+                  size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The flat indices into a dense (size, size) array of the entries
+    ``(rows, cols, data)``, each once, and their values (a repeated entry's
+    summed): no sparse matrix is built on the way."""
+    flat, which = np.unique(rows.astype(np.int64) * size + cols, return_inverse=True)
+    return flat, np.bincount(which, weights=data, minlength=len(flat))

@@ -155,6 +155,30 @@ def test_spring_hessian_is_the_spring_part_of_the_hessian(random_points, dim,
         physics.spring_nodal_blocks(springs, n, 0.7, dim), diagonal)
 
 
+@pytest.mark.parametrize('seed', [3, 4, 5])
+@pytest.mark.parametrize('dim', [2, 3])
+def test_dense_hessian_sums_the_springs_at_each_point(random_points, dim, seed):
+    """The dense Hessian's spring part (its entries summed without a sparse
+    matrix: several springs meet at each point's diagonal block) is the
+    sparse springs' Hessian, each spring with its own force density, listed
+    in either order."""
+    n = 9
+    rng = np.random.default_rng(seed)
+    springs = random_springs(n, 16, seed)
+    springs[::3] = springs[::3, ::-1]
+    q = rng.uniform(0.2, 3.0, len(springs))
+    positions = random_points(n, dim, seed)
+    full = MaudPotential(springs, 1.3, 0.7, dim, q=q).hessian(positions)
+    repulsion = MaudPotential(np.zeros((0, 2), int), 1.3, 0.7, dim).hessian(positions)
+    sparse = physics.spring_hessian(springs, n, 0.7 * q, dim).toarray()
+    np.testing.assert_allclose(full - repulsion, sparse, rtol=0,
+                               atol=1e-13 * np.abs(full).max())
+    dense = np.zeros((dim * n, dim * n))
+    rows, cols, data = physics.spring_hessian_entries(springs, n, 0.7 * q, dim)
+    np.add.at(dense, (rows, cols), data)
+    np.testing.assert_allclose(dense, sparse, rtol=1e-15, atol=1e-15)
+
+
 @pytest.mark.parametrize('n, chunk', [(0, 5), (1, 5), (2, 1), (7, 1), (7, 4),
                                       (7, 100), (30, 50), (31, 7)])
 def test_pair_chunks_give_every_pair_once(n, chunk):

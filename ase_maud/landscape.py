@@ -15,7 +15,10 @@ to ``distance_atol`` (length units): that is blind to rigid motion and to
 relabelling of the points (and takes mirror images as one). An attempt or
 descent that fails (a :class:`~ase_maud.monitor.MaudError`, no convergence
 in ``steps``, its budget spent) is counted in :attr:`Landscape.failed`, never
-silently dropped; :attr:`Landscape.search` tells what each attempt did.
+silently dropped; :attr:`Landscape.search` tells what each attempt did, and
+:attr:`Landscape.cost` what the whole map computed (the search's attempts,
+the start's and the saddles' Hessians, the descents) in force-call
+equivalents.
 
 The attempts are independent tasks, and so are the descents from the saddles
 they find: with a ``dask.distributed`` ``Client`` (a ``LocalCluster`` on this
@@ -33,8 +36,8 @@ import numpy as np
 from ase import Atoms
 
 from .activation import SaddleSearch, run_tasks, search_saddles
-from .analysis import DISTANCE_ATOL, ENERGY_RTOL, classify, displace_along_mode, same_point
-from .bench.runner import fresh_copy
+from .analysis import DISTANCE_ATOL, ENERGY_RTOL, Work, classify, displace_along_mode, same_point
+from .bench.runner import CallRecorder, fresh_copy
 from .checks import check_all
 from .monitor import MaudError
 from .optimizer import Maud
@@ -50,14 +53,27 @@ class Landscape:
     calculators, the first minimum the start), ``joins``: for each saddle
     the indices of the two minima it joins (the same one twice if both sides
     fall back into it), ``failed``: attempts and descents that ended
-    elsewhere, ran out of budget or raised, and ``search``: what the saddle
-    search tried (:class:`~ase_maud.activation.SaddleSearch`)."""
+    elsewhere, ran out of budget or raised, ``search``: what the saddle
+    search tried (:class:`~ase_maud.activation.SaddleSearch`), and beside
+    it, ``calls`` and ``work``: the descents' calculator calls and the
+    Hessian-vector product vectors and Hessians of the descents and of the
+    start's and each saddle's classification."""
 
     minima: list[Atoms] = field(default_factory=list)
     saddles: list[Atoms] = field(default_factory=list)
     joins: list[tuple[int, int]] = field(default_factory=list)
     failed: int = 0
     search: SaddleSearch | None = None
+    calls: int = 0
+    work: Work = field(default_factory=Work)
+
+    @property
+    def cost(self) -> int:
+        """Force-call equivalents of the whole map: the search's
+        (:attr:`~ase_maud.activation.SaddleSearch.cost`), the descents'
+        calls and the Hessian-vector product vectors and Hessians beside
+        them."""
+        return (0 if self.search is None else self.search.cost) + self.calls + self.work.total
 
     def todict(self) -> dict:
         """The graph as plain data (JSON): energies and positions of the
@@ -103,12 +119,12 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
     modes, fmax, steps = checked['modes'], checked['fmax'], checked['steps']
     energy_rtol, distance_atol = checked['energy_rtol'], checked['distance_atol']
     start = fresh_copy(atoms)
-    point = classify(start, ftol=np.inf)   # its fmax is tested here
+    found = Landscape(minima=[start])
+    point = classify(start, ftol=np.inf, work=found.work)   # its fmax is tested here
     if point.verdict != 'minimum' or point.fmax > fmax:
         raise ValueError(f'landscape needs a minimum to start from; this is a '
                          f'{point.verdict} with fmax {point.fmax:.3g} (> {fmax:g}?): '
                          'relax it first')
-    found = Landscape(minima=[start])
 
     def index_of(points: list[Atoms], candidate: Atoms) -> int:
         for i, known in enumerate(points):
@@ -124,7 +140,10 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
     distinct = found.search.saddles   # the saddles found, each once
     found.failed += sum(a.outcome not in _NOT_FAILED for a in found.search.attempts)
     descents = run_tasks(client, _descend, [(s, fmax, steps) for s in distinct])
-    for saddle, ends in zip(distinct, descents, strict=True):
+    for saddle, (ends, calls, work) in zip(distinct, descents, strict=True):
+        found.calls += calls
+        found.work.hvp_vectors += work.hvp_vectors
+        found.work.hessians += work.hessians
         if None in ends:   # a saddle joins what its two sides reached
             found.failed += ends.count(None)
             continue
@@ -138,15 +157,23 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
 _NOT_FAILED = ('saddle', 'known saddle', 'known direction')
 
 
-def _descend(saddle: Atoms, fmax: float, steps: int) -> list[Atoms | None]:
+def _descend(saddle: Atoms, fmax: float, steps: int
+             ) -> tuple[list[Atoms | None], int, Work]:
     """The minima relaxed to from either side of ``saddle``'s unstable mode
-    (None for a side that fails or ends elsewhere than at a minimum)."""
-    ends = []
-    for side in displace_along_mode(saddle, classify(saddle, ftol=fmax)):
-        converged = _run(Maud(side, logfile=None), fmax, steps)
-        ends.append(side if converged and classify(side, ftol=fmax).verdict == 'minimum'
-                    else None)
-    return ends
+    (None for a side that fails or ends elsewhere than at a minimum), the
+    calculator calls of the two relaxations and the Hessian-vector product
+    vectors and Hessians of them and of the classifications."""
+    ends, calls, work = [], 0, Work()
+    for side in displace_along_mode(saddle, classify(saddle, ftol=fmax, work=work)):
+        opt = Maud(side, logfile=None)
+        with CallRecorder(side.calc) as recorder:
+            converged = _run(opt, fmax, steps)
+            minimum = converged and classify(side, ftol=fmax, work=work).verdict == 'minimum'
+        calls += len(recorder.samples)
+        work.hvp_vectors += opt.work.hvp_vectors
+        work.hessians += opt.work.hessians
+        ends.append(side if minimum else None)
+    return ends, calls, work
 
 
 def _run(opt: Maud, fmax: float, steps: int) -> bool:

@@ -160,7 +160,11 @@ _NOT_FAILED = ('saddle', 'known saddle', 'known direction')
 def _descend(saddle: Atoms, fmax: float, steps: int
              ) -> tuple[list[Atoms | None], int, Work]:
     """The minima relaxed to from either side of ``saddle``'s unstable mode
-    (None for a side that fails or ends elsewhere than at a minimum), the
+    (None for a side that fails or ends at a point with a negative
+    curvature; an end with no negative one is a minimum even where a
+    curvature is flatter than :func:`classify`'s zero tolerance, its verdict
+    'degenerate': a 2D trap cluster whose shells turn one against the other
+    at almost no cost), the
     calculator calls of the two relaxations and the Hessian-vector product
     vectors and Hessians of them and of the classifications."""
     ends, calls, work = [], 0, Work()
@@ -168,7 +172,7 @@ def _descend(saddle: Atoms, fmax: float, steps: int
         opt = Maud(side, logfile=None)
         with CallRecorder(side.calc) as recorder:
             converged = _run(opt, fmax, steps)
-            minimum = converged and classify(side, ftol=fmax, work=work).verdict == 'minimum'
+            minimum = converged and classify(side, ftol=fmax, work=work).n_negative == 0
         calls += len(recorder.samples)
         work.hvp_vectors += opt.work.hvp_vectors
         work.hessians += opt.work.hessians

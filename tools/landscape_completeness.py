@@ -10,14 +10,18 @@ must be a verified minimum.
 From it:
 
 - **default**: :func:`ase_maud.landscape.landscape` with its default arguments (its modes,
-  local activations and seed) to ``--fmax``;
+  local activations and seed) to ``--fmax``, told the window (``window=``: it goes on in
+  rounds, the next modes each, while a round finds a new saddle below it); with
+  ``--one-round``, not told it (one round: what the landscape did before it took a window);
 - **reference**: the same function with ``--factor`` (default 10) times as many attempts
   (:class:`ase_maud.activation.Attempt`: each climb along a mode, one way, or each local
   activation), a ``seed`` of its own (``--ref-seed``) for its local activations: half of
   the attempts local activations, at most one at each free point (an activation from a
   point is deterministic, so a second seed would repeat it), the rest climbs along the
   lowest modes both ways (at most every mode); what a scene cannot take (too few modes or
-  points) is made up by the other kind. ``--net-factor`` gives the net its own factor.
+  points) is made up by the other kind, and where both are used up (every mode both ways,
+  every free point: a small cluster) the reference has fewer than ``--factor`` times the
+  attempts (the rows say how many). ``--net-factor`` gives the net its own factor.
 
 A saddle **counts** when it joins the start minimum (on either side: the landscape relaxed
 one side of its unstable mode back into the start, up to relabelling) and its barrier above
@@ -60,8 +64,8 @@ SCENES = {'cluster': 'all_pairs2d', 'net': 'net2d'}
 RELAX_FMAX = 1e-8
 
 COLUMNS = ('scene', 'natoms', 'seed', 'window', 'threads', 'run', 'modes', 'local',
-           'attempts', 'saddles', 'counted', 'reference', 'found', 'fraction', 'default_only',
-           'minima', 'failed', 'cost', 'cost_per_saddle', 'cpu_s', 'cpu_per_saddle')
+           'attempts', 'ratio', 'saddles', 'counted', 'reference', 'found', 'fraction',
+           'default_only', 'minima', 'failed', 'cost', 'cost_per_saddle', 'cpu_s', 'cpu_per_saddle')
 
 
 def minimum(scene: str, size: int, seed: int) -> Atoms:
@@ -106,10 +110,10 @@ def timed(start: Atoms, fmax: float, **kwargs) -> tuple[Landscape, float]:
 
 
 def compare(scene: str, size: int, seed: int, window: float, factor: int, ref_seed: int,
-            fmax: float) -> list[dict]:
+            fmax: float, one_round: bool) -> list[dict]:
     """The default and reference rows of ``scene``, its missed saddles printed."""
     start = minimum(scene, size, seed)
-    default, default_cpu = timed(start, fmax)
+    default, default_cpu = timed(start, fmax, window=None if one_round else window)
     modes, local = allocation(start, factor * len(default.search.attempts))
     reference, reference_cpu = timed(start, fmax, modes=modes, local=local, seed=ref_seed)
     mine, theirs = counted(default, window), counted(reference, window)
@@ -124,7 +128,9 @@ def compare(scene: str, size: int, seed: int, window: float, factor: int, ref_se
         rows.append({**common, 'run': run,
                      'modes': sum(a.kind == 'mode' for a in arguments) // 2,
                      'local': sum(a.kind == 'local' for a in arguments),
-                     'attempts': len(arguments), 'saddles': len(result.saddles),
+                     'attempts': len(arguments),
+                     'ratio': round(len(arguments) / len(default.search.attempts), 1),
+                     'saddles': len(result.saddles),
                      'counted': len(kept), 'reference': len(theirs),
                      'found': sum(found) if run == 'default' else len(theirs),
                      'fraction': (round(sum(found) / len(theirs), 3)
@@ -154,6 +160,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--net-factor', type=int, default=None,
                         help="the net's reference factor (default: --factor)")
     parser.add_argument('--ref-seed', type=int, default=1)
+    parser.add_argument('--one-round', action='store_true',
+                        help='the default landscape not told the window (one round)')
     parser.add_argument('--fmax', type=float, default=1e-6)
     parser.add_argument('--out', type=Path, default=Path('landscape_completeness'))
     args = parser.parse_args(argv)
@@ -164,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
         for size in sizes:
             for seed in args.seeds:
                 for row in compare(scene, size, seed, args.window, factor, args.ref_seed,
-                                   args.fmax):
+                                   args.fmax, args.one_round):
                     rows.append(row)
                     print(' '.join(f'{k}={row[k]}' for k in COLUMNS), flush=True)
     args.out.mkdir(parents=True, exist_ok=True)

@@ -29,6 +29,12 @@ minimum it makes, in order:
    from the region's negative mode) and converged on a verified index-1
    saddle.
 
+With an energy ``window`` these two make a round, and the search goes on
+in rounds (the next ``modes`` modes, ``local`` more points) while a round
+finds a new saddle whose barrier above the minimum is below the window (and
+that passes a test given, ``connected``: the landscape's asks whether it
+joins the minimum): until new searches stop finding new saddles.
+
 3. **A path**, if none of these found a saddle and a second minimum of the
    scene is given (``partner``): a band of images between the two, its
    highest image refined to a verified index-1 saddle
@@ -50,6 +56,7 @@ same batch is then not known to an attempt: the point it reaches still is).
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -164,7 +171,8 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
                    budget: int | None = BUDGET, fmax: float = 1e-6, steps: int = 1000,
                    seed: int = 0, energy_rtol: float = 1e-8, distance_atol: float = 1e-4,
                    client: Any = None, point: StationaryPoint | None = None,
-                   partner: Atoms | None = None) -> SaddleSearch:
+                   partner: Atoms | None = None, window: float | None = None,
+                   connected: Callable[[Atoms], bool] | None = None) -> SaddleSearch:
     """The :class:`SaddleSearch` from the minimum ``minimum`` (a MaudCalculator
     scene relaxed to ``fmax``; see the module docstring): climbs along its
     ``modes`` lowest modes both ways, then ``local`` activations at points
@@ -180,11 +188,19 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     image, :func:`~ase_maud.transition.mirrored`, say); if the attempts
     found no saddle, a last one joins the two by a band of images
     (:func:`~ase_maud.transition.saddle_between`; no budget but its own
-    steps). Arguments are checked first (a ValueError names a bad one)."""
+    steps). ``window``: a barrier (energy units, above the minimum): the
+    search goes on in rounds like the first (the next ``modes`` modes both
+    ways, ``local`` more points) while a round finds a new saddle whose
+    barrier is below it, until the modes (those of ``point``) and the free
+    points are used up (None: the first round only); ``connected``: a test
+    a new saddle must pass too, asked once a saddle (the landscape's: one
+    side of it relaxes into ``minimum``; None: every saddle passes).
+    Arguments are checked first (a ValueError names a bad one)."""
     checked = check_all(local=local, budget=budget, fmax=fmax, steps=steps, seed=seed,
-                        energy_rtol=energy_rtol, distance_atol=distance_atol)
+                        energy_rtol=energy_rtol, distance_atol=distance_atol, window=window)
     modes = check('modes', modes)
-    local, budget, fmax, steps = (checked[k] for k in ('local', 'budget', 'fmax', 'steps'))
+    local, budget, fmax, steps, window = (checked[k] for k in ('local', 'budget', 'fmax', 'steps',
+                                                              'window'))
     if wanted is not None:
         wanted = check('wanted', wanted, 'count')
     found = SaddleSearch()
@@ -204,16 +220,33 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
                     found.saddles.append(saddle)
             found.attempts.append(attempt)
 
-    climbs = [(minimum, sign * point.modes[k], Attempt('mode', k, sign), fmax, steps, budget)
-              for k in range(min(modes, len(point.modes))) for sign in (1.0, -1.0)]
-    for batch in _batches(climbs, client, enough):
-        merge(run_tasks(client, _climb, batch))
     free = np.flatnonzero(free_dofs(minimum, minimum.calc.potential.dim).any(axis=1))
-    centres = np.random.default_rng(seed).permutation(free)[:local]
-    for batch in _batches(list(centres), client, enough):
-        known = [s.positions - minimum.positions for s in found.saddles]
-        merge(run_tasks(client, _activate, [(minimum, int(c), known, fmax, steps, budget)
-                                       for c in batch]))
+    order = np.random.default_rng(seed).permutation(free)
+    energy = minimum.get_potential_energy()
+
+    judged: list[bool] = []   # for each saddle found, whether it counts
+
+    def below() -> int:   # the saddles found that count: below the window, connected
+        for saddle in found.saddles[len(judged):]:
+            judged.append(bool(saddle.get_potential_energy() - energy < window
+                               and (connected is None or connected(saddle))))
+        return sum(judged)
+
+    for turn in itertools.count():   # rounds: modes [turn modes, (turn + 1) modes), ...
+        before = 0 if window is None else below()
+        climbs = [(minimum, sign * point.modes[k], Attempt('mode', k, sign), fmax, steps,
+                   budget)
+                  for k in range(turn * modes, min((turn + 1) * modes, len(point.modes)))
+                  for sign in (1.0, -1.0)]
+        for batch in _batches(climbs, client, enough):
+            merge(run_tasks(client, _climb, batch))
+        for batch in _batches(list(order[turn * local:(turn + 1) * local]), client, enough):
+            known = [s.positions - minimum.positions for s in found.saddles]
+            merge(run_tasks(client, _activate, [(minimum, int(c), known, fmax, steps, budget)
+                                                for c in batch]))
+        used_up = (turn + 1) * modes >= len(point.modes) and (turn + 1) * local >= len(free)
+        if window is None or enough() or used_up or below() == before:
+            break
     if partner is not None and not found.saddles:
         merge([_path(minimum, partner, fmax)])
     return found

@@ -129,6 +129,9 @@ RULES: dict[str, Rule] = {
     'budget': Rule('a whole number >= 1 (force-call equivalents of one attempt), '
                    'or None (no bound but the steps)', lambda v: v >= 1, whole=True,
                    none=True),
+    'window': Rule('a positive number (a barrier above the minimum, energy units), inf '
+                   '(every saddle), or None (no window: one round of attempts)',
+                   lambda v: v > 0, none=True, infinite=True),
     # the command line's own
     'count': Rule('a whole number >= 1', lambda v: v >= 1, whole=True),
     'seed': Rule('a whole number >= 0', lambda v: v >= 0, whole=True),

@@ -15,7 +15,10 @@ to ``distance_atol`` (length units): that is blind to rigid motion and to
 relabelling of the points (and takes mirror images as one). An attempt or
 descent that fails (a :class:`~ase_maud.monitor.MaudError`, no convergence
 in ``steps``, its budget spent) is counted in :attr:`Landscape.failed`, never
-silently dropped; :attr:`Landscape.search` tells what each attempt did.
+silently dropped; :attr:`Landscape.search` tells what each attempt did, and
+:attr:`Landscape.cost` what the whole map computed (the search's attempts,
+the start's and the saddles' Hessians, the descents) in force-call
+equivalents.
 
 The attempts are independent tasks, and so are the descents from the saddles
 they find: with a ``dask.distributed`` ``Client`` (a ``LocalCluster`` on this
@@ -33,8 +36,8 @@ import numpy as np
 from ase import Atoms
 
 from .activation import SaddleSearch, run_tasks, search_saddles
-from .analysis import DISTANCE_ATOL, ENERGY_RTOL, classify, displace_along_mode, same_point
-from .bench.runner import fresh_copy
+from .analysis import DISTANCE_ATOL, ENERGY_RTOL, Work, classify, displace_along_mode, same_point
+from .bench.runner import CallRecorder, fresh_copy
 from .checks import check_all
 from .monitor import MaudError
 from .optimizer import Maud
@@ -50,14 +53,27 @@ class Landscape:
     calculators, the first minimum the start), ``joins``: for each saddle
     the indices of the two minima it joins (the same one twice if both sides
     fall back into it), ``failed``: attempts and descents that ended
-    elsewhere, ran out of budget or raised, and ``search``: what the saddle
-    search tried (:class:`~ase_maud.activation.SaddleSearch`)."""
+    elsewhere, ran out of budget or raised, ``search``: what the saddle
+    search tried (:class:`~ase_maud.activation.SaddleSearch`), and beside
+    it, ``calls`` and ``work``: the descents' calculator calls and the
+    Hessian-vector product vectors and Hessians of the descents and of the
+    start's and each saddle's classification."""
 
     minima: list[Atoms] = field(default_factory=list)
     saddles: list[Atoms] = field(default_factory=list)
     joins: list[tuple[int, int]] = field(default_factory=list)
     failed: int = 0
     search: SaddleSearch | None = None
+    calls: int = 0
+    work: Work = field(default_factory=Work)
+
+    @property
+    def cost(self) -> int:
+        """Force-call equivalents of the whole map: the search's
+        (:attr:`~ase_maud.activation.SaddleSearch.cost`), the descents'
+        calls and the Hessian-vector product vectors and Hessians beside
+        them."""
+        return (0 if self.search is None else self.search.cost) + self.calls + self.work.total
 
     def todict(self) -> dict:
         """The graph as plain data (JSON): energies and positions of the
@@ -81,7 +97,8 @@ class Landscape:
 def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 1000,
               energy_rtol: float = ENERGY_RTOL, distance_atol: float = DISTANCE_ATOL,
               client: Any = None, local: int = 0, budget: int | None = None,
-              seed: int = 0, partner: Atoms | None = None) -> Landscape:
+              seed: int = 0, partner: Atoms | None = None,
+              window: float | None = None) -> Landscape:
     """The :class:`Landscape` around the minimum ``atoms`` (a MaudCalculator
     scene relaxed to ``fmax``; a ValueError if it is not a minimum): the
     saddles of :func:`~ase_maud.activation.search_saddles` (climbs along its
@@ -95,7 +112,12 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
     ``partner``: a second minimum of the scene (a dome's mirror image,
     :func:`~ase_maud.transition.mirrored`): if the search found no saddle,
     the one a band of images between the two reaches
-    (:func:`~ase_maud.transition.saddle_between`). Each
+    (:func:`~ase_maud.transition.saddle_between`). ``window``: a barrier
+    above the minimum (energy units): the search goes on in rounds like the
+    first (the next ``modes`` modes, ``local`` more points) while a round
+    finds a new saddle below it that joins the minimum (each new saddle
+    below it is then descended from at once, in this process; None: one
+    round). Each
     argument is checked first (:data:`~ase_maud.checks.RULES`): a ValueError
     names a bad one."""
     checked = check_all(modes=modes, fmax=fmax, steps=steps, energy_rtol=energy_rtol,
@@ -103,12 +125,12 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
     modes, fmax, steps = checked['modes'], checked['fmax'], checked['steps']
     energy_rtol, distance_atol = checked['energy_rtol'], checked['distance_atol']
     start = fresh_copy(atoms)
-    point = classify(start, ftol=np.inf)   # its fmax is tested here
+    found = Landscape(minima=[start])
+    point = classify(start, ftol=np.inf, work=found.work)   # its fmax is tested here
     if point.verdict != 'minimum' or point.fmax > fmax:
         raise ValueError(f'landscape needs a minimum to start from; this is a '
                          f'{point.verdict} with fmax {point.fmax:.3g} (> {fmax:g}?): '
                          'relax it first')
-    found = Landscape(minima=[start])
 
     def index_of(points: list[Atoms], candidate: Atoms) -> int:
         for i, known in enumerate(points):
@@ -117,14 +139,29 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
         points.append(candidate)
         return len(points) - 1
 
+    descended: dict[int, tuple] = {}   # id of a saddle: its _descend
+
+    def joins_start(saddle: Atoms) -> bool:
+        descended[id(saddle)] = _descend(saddle, fmax, steps)
+        return any(end is not None and same_point(end, start, energy_rtol, distance_atol)
+                   for end in descended[id(saddle)][0])
+
     found.search = search_saddles(start, modes=modes, local=local, budget=budget,
                                   fmax=fmax, steps=steps, seed=seed, energy_rtol=energy_rtol,
                                   distance_atol=distance_atol, client=client, point=point,
-                                  partner=partner)
+                                  partner=partner, window=window,
+                                  connected=None if window is None else joins_start)
     distinct = found.search.saddles   # the saddles found, each once
     found.failed += sum(a.outcome not in _NOT_FAILED for a in found.search.attempts)
-    descents = run_tasks(client, _descend, [(s, fmax, steps) for s in distinct])
-    for saddle, ends in zip(distinct, descents, strict=True):
+    rest = [s for s in distinct if id(s) not in descended]
+    descended.update(zip(map(id, rest), run_tasks(client, _descend,
+                                                  [(s, fmax, steps) for s in rest]),
+                         strict=True))
+    for saddle in distinct:
+        ends, calls, work = descended[id(saddle)]
+        found.calls += calls
+        found.work.hvp_vectors += work.hvp_vectors
+        found.work.hessians += work.hessians
         if None in ends:   # a saddle joins what its two sides reached
             found.failed += ends.count(None)
             continue
@@ -136,17 +173,39 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
 #: Outcomes of a saddle search's attempts that are not failures: a saddle,
 #: or one found before (:class:`~ase_maud.activation.Attempt`).
 _NOT_FAILED = ('saddle', 'known saddle', 'known direction')
+#: A descent that converges on a saddle is pushed off it along its unstable
+#: mode and relaxed again at most this many times (:func:`_descend`).
+PUSHES = 2
 
 
-def _descend(saddle: Atoms, fmax: float, steps: int) -> list[Atoms | None]:
+def _descend(saddle: Atoms, fmax: float, steps: int
+             ) -> tuple[list[Atoms | None], int, Work]:
     """The minima relaxed to from either side of ``saddle``'s unstable mode
-    (None for a side that fails or ends elsewhere than at a minimum)."""
-    ends = []
-    for side in displace_along_mode(saddle, classify(saddle, ftol=fmax)):
-        converged = _run(Maud(side, logfile=None), fmax, steps)
-        ends.append(side if converged and classify(side, ftol=fmax).verdict == 'minimum'
-                    else None)
-    return ends
+    (None for a side that fails), the calculator calls of the relaxations
+    and the Hessian-vector product vectors and Hessians of them and of the
+    classifications. A relaxation that converges on a point with a negative
+    curvature (another saddle, met on the way) is pushed off it along that
+    mode and relaxed again, at most :data:`PUSHES` times. An end with no
+    negative curvature is a minimum even where a curvature is flatter than
+    :func:`classify`'s zero tolerance (its verdict 'degenerate'): a 2D trap
+    cluster whose shells turn one against the other at almost no cost."""
+    ends, calls, work = [], 0, Work()
+    for side in displace_along_mode(saddle, classify(saddle, ftol=fmax, work=work)):
+        end = None
+        for _ in range(PUSHES + 1):
+            opt = Maud(side, logfile=None)
+            with CallRecorder(side.calc) as recorder:
+                converged = _run(opt, fmax, steps)
+                point = classify(side, ftol=fmax, work=work) if converged else None
+            calls += len(recorder.samples)
+            work.hvp_vectors += opt.work.hvp_vectors
+            work.hessians += opt.work.hessians
+            if point is None or point.n_negative == 0:
+                end = side if point is not None else None
+                break
+            side = displace_along_mode(side, point)[0]
+        ends.append(end)
+    return ends, calls, work
 
 
 def _run(opt: Maud, fmax: float, steps: int) -> bool:

@@ -74,7 +74,7 @@ from .dofs import free_dofs
 from .monitor import MaudError
 from .optimizer import Maud
 from .stiffness import EXACT_MAX_DOFS
-from .transition import saddle_between
+from .transition import check_same_scene, saddle_between
 
 #: A local region: the free points within this many times the centre
 #: point's nearest-neighbour distance.
@@ -188,7 +188,9 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     image, :func:`~ase_maud.transition.mirrored`, say); if the attempts
     found no saddle, a last one joins the two by a band of images
     (:func:`~ase_maud.transition.saddle_between`; no budget but its own
-    steps). ``window``: a barrier (energy units, above the minimum): the
+    steps; a partner that is not a configuration of the same scene is a
+    ValueError before any attempt, :func:`~ase_maud.transition.check_same_scene`).
+    ``window``: a barrier (energy units, above the minimum): the
     search goes on in rounds like the first (the next ``modes`` modes both
     ways, ``local`` more points) while a round finds a new saddle whose
     barrier is below it, until the modes (those of ``point``) and the free
@@ -203,6 +205,8 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
                                                               'window'))
     if wanted is not None:
         wanted = check('wanted', wanted, 'count')
+    if partner is not None:
+        check_same_scene(minimum, partner)
     found = SaddleSearch()
     if point is None:
         point = classify(minimum, ftol=np.inf, work=found.work)

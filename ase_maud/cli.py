@@ -264,7 +264,7 @@ def saddles(args: argparse.Namespace) -> int:
     with _dask_client(args.workers, args.scheduler) as client:
         found = landscape(atoms, modes=args.modes, fmax=args.fmax, steps=args.steps,
                           client=client, local=args.local, budget=args.budget,
-                          seed=args.seed, partner=partner)
+                          seed=args.seed, partner=partner, window=args.window)
     print(found.search.report())
     energies = [m.get_potential_energy() for m in found.minima]
     barriers = [s.get_potential_energy() for s in found.saddles]
@@ -686,6 +686,11 @@ def build_parser() -> argparse.ArgumentParser:
                    'Hessians) of each attempt (default: no bound but --steps)')
     p.add_argument('--seed', type=_ruled('seed', int), default=0,
                    help='seed of the points activated (default: %(default)s)')
+    p.add_argument('--window', type=_ruled('window'), default=None, metavar='BARRIER',
+                   help='go on in rounds like the first (the next --modes modes, --local '
+                   'more points) while a round finds a new saddle whose barrier from the '
+                   'minimum is below BARRIER (energy units; inf: any) and that joins it '
+                   '(default: one round)')
     p.add_argument('--fmax', type=_ruled('fmax'), default=1e-6,
                    help='fmax of every relaxation and climb (default: %(default)s)')
     p.add_argument('--steps', type=_ruled('steps', int), default=1000,

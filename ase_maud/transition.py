@@ -127,7 +127,7 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
     fmax, steps = checked['fmax'], checked['steps']
     if not (isinstance(images, int) and images >= 1):
         raise ValueError(f'images must be a whole number >= 1, got {images!r}')
-    _check_ends(first, second)
+    check_same_scene(first, second)
     potential = first.calc.potential
     band_fmax = BAND_FMAX * potential.force_unit if band_fmax is None else band_fmax
     spring = potential.Q if spring is None else spring
@@ -207,28 +207,30 @@ def _jitter(images: list[Atoms], amplitude: float, seed: int) -> None:
         image.positions = image.positions + move
 
 
-def _check_ends(first: Atoms, second: Atoms) -> None:
-    """A ValueError unless both are MaudCalculator scenes of the same
-    points, springs and fixed coordinates."""
+def check_same_scene(first: Atoms, second: Atoms) -> None:
+    """A ValueError unless the two minima a band would join are
+    MaudCalculator scenes of the same points, springs and fixed coordinates
+    (:func:`saddle_between` asks it first, and a saddle search given a
+    partner before its climbs)."""
     for name, atoms in (('first', first), ('second', second)):
         if not isinstance(atoms.calc, MaudCalculator):
-            raise ValueError(f'saddle_between: the {name} minimum has no MaudCalculator '
+            raise ValueError(f'the {name} minimum has no MaudCalculator '
                              f'(it has {type(atoms.calc).__name__})')
     if len(first) != len(second):
-        raise ValueError(f'saddle_between: the minima have {len(first)} and {len(second)} '
+        raise ValueError(f'the minima have {len(first)} and {len(second)} '
                          'points: a band joins two configurations of one scene')
     springs = [np.asarray(a.calc.parameters.get('springs', ())) for a in (first, second)]
     if springs[0].shape != springs[1].shape or not np.array_equal(*springs):
-        raise ValueError('saddle_between: the minima have different springs: a band '
+        raise ValueError('the minima have different springs: a band '
                          'joins two configurations of one scene')
     held = [~free_dofs(a, a.calc.dim) for a in (first, second)]
     if not np.array_equal(*held):
-        raise ValueError('saddle_between: the minima hold different coordinates fixed')
+        raise ValueError('the minima hold different coordinates fixed')
     dim = held[0].shape[1]
     differ = first.positions[:, :dim][held[0]] != second.positions[:, :dim][held[0]]
     if differ.any():
         point = np.argwhere(held[0])[np.flatnonzero(differ)[0]][0]
-        raise ValueError(f'saddle_between: a fixed coordinate differs between the minima '
+        raise ValueError(f'a fixed coordinate differs between the minima '
                          f'(near point {point})')
 
 

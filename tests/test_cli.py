@@ -369,10 +369,11 @@ def test_argument_errors_are_one_line_with_status_2(capsys, argv, message):
     assert error.rstrip().endswith('--help')
 
 
-@pytest.mark.parametrize('seed', [0, 1])
-def test_saddles_prints_draws_and_writes_the_landscape(tmp_path, capsys, seed):
+@pytest.mark.parametrize('seed, window', [(0, None), (1, None), (2, 1.0)])
+def test_saddles_prints_draws_and_writes_the_landscape(tmp_path, capsys, seed, window):
     """``ase-maud saddles`` relaxes the net, finds the landscape the library
-    finds from the same minimum, and writes the picture and its JSON."""
+    finds from the same minimum (with ``--window``, its rounds too), and
+    writes the picture and its JSON."""
     import json
 
     from ase_maud import Maud
@@ -381,18 +382,21 @@ def test_saddles_prints_draws_and_writes_the_landscape(tmp_path, capsys, seed):
     atoms = build('all_pairs2d', 9, seed=seed)
     write_net(tmp_path / 'c.traj', atoms)
     out = tmp_path / 'graph.png'
+    rounds = [] if window is None else ['--window', str(window)]
     assert main(['saddles', str(tmp_path / 'c.traj'), '--modes', '2', '--out',
-                 str(out)]) == 0
+                 str(out), *rounds]) == 0
     lines = capsys.readouterr().out.splitlines()
     graph = json.loads(out.with_suffix('.json').read_text())
     assert out.stat().st_size > 0
     Maud(atoms, logfile=None).run(fmax=1e-6, steps=1000)
-    found = landscape(atoms, modes=2)
+    found = landscape(atoms, modes=2, window=window)
     assert len(graph['minima']) == len(found.minima)
     saddle_lines = [line for line in lines if line.startswith('saddle ')]
     assert len(graph['saddles']) == len(found.saddles) == len(saddle_lines)
     assert lines[0].endswith('CPU s:')   # the search's report: one line an attempt
-    assert sum(line.startswith('  mode ') for line in lines) == 4
+    assert sum(line.startswith('  mode ') for line in lines) == len(
+        [a for a in found.search.attempts if a.kind == 'mode'])
+    assert window is not None or len(found.search.attempts) == 4
     assert sorted(s['energy'] for s in graph['saddles']) == pytest.approx(
         sorted(s.get_potential_energy() for s in found.saddles), rel=1e-9)
     assert graph['failed'] == 0 and lines[-1].startswith(f"{len(found.minima)} minima")

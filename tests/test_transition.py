@@ -125,6 +125,23 @@ def test_minima_of_different_scenes_are_refused():
         saddle_between(first, moved)
 
 
+def test_a_partner_of_another_scene_is_refused_before_any_climb():
+    """A saddle search or landscape given a partner of another scene says so
+    before it climbs (no calculator call), naming what differs."""
+    from ase_maud.bench.runner import CallRecorder
+
+    first = DOMES(4, 1)
+    assert Maud(first, logfile=None).run(fmax=1e-6, steps=2000)
+    moved = fresh_copy(first)
+    moved.positions[0] += 0.1   # point 0 is on the fixed rim
+    with CallRecorder(first.calc) as recorder:
+        with pytest.raises(ValueError, match='fixed coordinate differs.*point 0'):
+            search_saddles(first, modes=1, local=0, partner=moved)
+        with pytest.raises(ValueError, match='16 and 25 points'):
+            landscape(first, modes=1, partner=DOMES(5, 1))
+    assert not recorder.samples
+
+
 def test_a_saddle_search_that_found_nothing_takes_the_path_to_the_partner():
     """No climbs and no local activations: the search's one attempt is the
     band to the mirror image, and its saddle is verified index 1."""

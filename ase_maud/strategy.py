@@ -35,7 +35,8 @@ specification's step with the whole scene's stiffness ``K``::
   along it is the one thing the rise measured) and the next move is the
   model's new move from where the step began, no longer than the cubic
   cut of the step taken back (a trust radius, so the curvature learnt and
-  the cut do not shorten the move twice).
+  the cut do not shorten the move twice), each point's jump from where it
+  is (the rejected end) cut to its limit on its own.
   Gamma grows by ``gamma_growth`` after each accepted step, up to
   ``gamma_max``.
 - No point moves further than its limit (:class:`~ase_maud.search.Limits`);
@@ -87,7 +88,6 @@ from .search import (
     cubic_cut,
     merit_change,
     merit_tolerance,
-    reach,
     trust_fraction,
     trust_region,
     work_change,
@@ -395,7 +395,11 @@ class Minimise(Strategy):
         the model's own state, e.g. the bfgs model's ``kappa``, is not
         changed by a step taken back), no point moving further than the
         longest point move of that step times its :func:`cubic_cut`, nor
-        further from ``x`` (where the points are) than its limit."""
+        further from ``x`` (where the points are) than its limit: each
+        point's jump from ``x`` is cut to its limit on its own (a point
+        whose rejected move reached its limit cannot pass where the step
+        began; scaling the whole move for it, as before, shrank the move to
+        nothing and spent a calculator call on the point already known)."""
         last, rejected = state.last, state.v
         radius = cubic_cut(last.forces, rejected, change, forces) * float(
             np.linalg.norm(rejected, axis=1).max())
@@ -407,7 +411,7 @@ class Minimise(Strategy):
         if length > radius:
             move = move * (radius / length)
         # from x, the points jump by move - rejected: within their limits too
-        return move * min(1.0, reach(-rejected, move, self.limits(last.x)))
+        return rejected + bound(move - rejected, self.limits(last.x))
 
     def _accept(self, state: MaudState, x: np.ndarray, forces: np.ndarray) -> None:
         """Learn from the accepted step that ended at ``x``."""

@@ -199,6 +199,35 @@ def test_a_rise_is_learnt_from_and_retaken_within_the_cut(seed):
 
 
 @pytest.mark.parametrize('seed', range(3))
+def test_a_retake_past_where_the_step_began_keeps_each_jump_within_its_limit(seed):
+    """A point whose rejected move reached its 0.2 limit and that the
+    retake sends back past where the step began jumps at most its limit
+    from where it is (so it lands where the step began), while the other
+    points take the model's retake: the move is not scaled to nothing for
+    that one point (which had spent a call on the point already known)."""
+    rng = np.random.default_rng(seed)
+    stiffness = MODELS['bfgs']()
+    rule = compose(stiffness, replace(step_rule(stiffness), maxstep_nn=None),
+                   NearestDistances())
+    x0 = rng.normal(size=(3, 3))
+    f0 = rng.normal(size=(3, 3))
+    f0[0] = [-1.0, 0.0, 0.0]                       # point 0 pulled along -x
+    rejected = 0.05 * rng.normal(size=(3, 3))
+    rejected[0] = [0.2, 0.0, 0.0]                  # ... it went +x, to its limit
+    f1 = f0 - 10.0 * rejected                      # a stiff wall along the step
+    state = MaudState(gamma=1.0, last=Point(x0, 0.0, f0), v=rejected,
+                      solver=stiffness.at(None))
+    again = rule.step(state, x0 + rejected, 1.0, f1, 0.0,
+                      lambda at: pytest.fail('the solver of the start is kept'))
+    assert np.array_equal(state.last.x, x0)        # taken back
+    jump = np.linalg.norm(again - rejected, axis=1)
+    assert np.all(jump <= 0.2 * (1 + 1e-12))
+    np.testing.assert_allclose(again[0], 0.0, atol=1e-12)   # back where it began
+    assert np.linalg.norm(again[1:], axis=1).min() > 1e-3   # the others move on
+    assert np.vdot(f0, again) > 0                            # downhill
+
+
+@pytest.mark.parametrize('seed', range(3))
 @pytest.mark.parametrize('kappa', [0.3, 3.0])
 def test_learning_from_rises_saves_evaluations_of_a_poor_model(seed, kappa):
     """On a quadratic (curvatures 1 to 100) from the model ``kappa I``

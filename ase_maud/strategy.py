@@ -35,8 +35,9 @@ specification's step with the whole scene's stiffness ``K``::
   along it is the one thing the rise measured) and the next move is the
   model's new move from where the step began, no longer than the cubic
   cut of the step taken back (a trust radius, so the curvature learnt and
-  the cut do not shorten the move twice), each point's jump from where it
-  is (the rejected end) cut to its limit on its own.
+  the cut do not shorten the move twice), each point's move cut on its own
+  so that its jump from where it is (the rejected end) stays within its
+  limit.
   Gamma grows by ``gamma_growth`` after each accepted step, up to
   ``gamma_max``.
 - No point moves further than its limit (:class:`~ase_maud.search.Limits`);
@@ -88,6 +89,7 @@ from .search import (
     cubic_cut,
     merit_change,
     merit_tolerance,
+    reaches,
     trust_fraction,
     trust_region,
     work_change,
@@ -396,10 +398,12 @@ class Minimise(Strategy):
         changed by a step taken back), no point moving further than the
         longest point move of that step times its :func:`cubic_cut`, nor
         further from ``x`` (where the points are) than its limit: each
-        point's jump from ``x`` is cut to its limit on its own (a point
-        whose rejected move reached its limit cannot pass where the step
-        began; scaling the whole move for it, as before, shrank the move to
-        nothing and spent a calculator call on the point already known)."""
+        point's move is cut on its own (:func:`reaches`) so that its jump
+        from ``x`` stays within its limit (a point whose rejected move
+        reached its limit and that the move sends back past where the step
+        began stays there; scaling the whole move for it, as before, shrank
+        the move to nothing and spent a calculator call on the point already
+        known)."""
         last, rejected = state.last, state.v
         radius = cubic_cut(last.forces, rejected, change, forces) * float(
             np.linalg.norm(rejected, axis=1).max())
@@ -411,7 +415,7 @@ class Minimise(Strategy):
         if length > radius:
             move = move * (radius / length)
         # from x, the points jump by move - rejected: within their limits too
-        return rejected + bound(move - rejected, self.limits(last.x))
+        return move * np.minimum(reaches(-rejected, move, self.limits(last.x)), 1.0)[:, None]
 
     def _accept(self, state: MaudState, x: np.ndarray, forces: np.ndarray) -> None:
         """Learn from the accepted step that ended at ``x``."""

@@ -20,7 +20,14 @@ from ase_maud.descent import (
 )
 from ase_maud.monitor import ENERGY_PROGRESS, DivergenceError, RunMonitor, StagnationError
 from ase_maud.neighbours import NearestDistances
-from ase_maud.search import DAMPING_TOLERANCE, damping, merit_change, trust_region
+from ase_maud.search import (
+    DAMPING_TOLERANCE,
+    damping,
+    merit_change,
+    reach,
+    reaches,
+    trust_region,
+)
 from ase_maud.stiffness import MODELS, DampedSolver, StiffnessModel
 from ase_maud.strategy import STEP_DEFAULTS, MaudState, Point, compose, step_rule
 
@@ -196,6 +203,26 @@ def test_a_rise_is_learnt_from_and_retaken_within_the_cut(seed):
     longest = np.linalg.norm(again, axis=1).max()
     assert longest <= np.linalg.norm(move, axis=1).max() / 3 * (1 + 1e-9)
     assert quadratic.energy(x0 + again) < quadratic.energy(x0)
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_reaches_each_point_and_never_below_zero(seed):
+    """Each point's reach puts it on its limit (its smallest is ``reach``);
+    a point that does not move reaches without end, and one on its limit
+    (by rounding just beyond it) moving outward reaches 0, not a negative
+    root that would turn a move around."""
+    rng = np.random.default_rng(seed)
+    start, step = 0.1 * rng.normal(size=(5, 3)), rng.normal(size=(5, 3))
+    limit = np.full(5, 0.5)
+    start[3] = [0.5 * (1 + 1e-15), 0.0, 0.0]
+    step[3] = [1.0, 0.0, 0.0]                      # on its limit, outward
+    step[4] = 0.0                                  # not moving
+    t = reaches(start, step, limit)
+    moving = [0, 1, 2]
+    np.testing.assert_allclose(np.linalg.norm(start[moving] + t[moving, None] * step[moving],
+                                              axis=1), 0.5)
+    assert t[3] == 0.0 and t[4] == np.inf
+    assert reach(start, step, limit) == 0.0
 
 
 @pytest.mark.parametrize('seed', range(3))

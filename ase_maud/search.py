@@ -23,7 +23,8 @@ a merit is the energy (``target='minimum'``) or ``|f|**2``.
   distance to its nearest other point, in length units, or as a fraction
   of the scene's size; :func:`bound` scales a move within them (each point
   on its own, or the whole move by one factor) and :func:`reach` says how
-  far along a move the first point meets its limit.
+  far along a move the first point meets its limit (:func:`reaches`: each
+  point).
 - :func:`trust_region`: a Newton move cut to the limits by the dogleg path
   (a definite model) or damped to ``(K + mu I)^-1 f`` with the smallest
   ``mu`` that keeps every point within its limit (Levenberg-Marquardt,
@@ -142,15 +143,24 @@ class Limits:
 
 def reach(start: np.ndarray, step: np.ndarray, limit: np.ndarray) -> float:
     """The largest ``t`` in [0, inf] with every point's ``|start_i + t
-    step_i| <= limit_i`` (``start`` within its limits): the smallest positive
-    root over points of ``|start_i + t step_i|**2 = limit_i**2``."""
+    step_i| <= limit_i`` (``start`` within its limits): the smallest of
+    :func:`reaches`."""
+    return float(reaches(start, step, limit).min(initial=np.inf))
+
+
+def reaches(start: np.ndarray, step: np.ndarray, limit: np.ndarray) -> np.ndarray:
+    """Each point's largest ``t`` in [0, inf] with ``|start_i + t step_i| <=
+    limit_i`` (``start`` within its limits; (N,)): the positive root of
+    ``|start_i + t step_i|**2 = limit_i**2``, inf for a point that does not
+    move, and 0 (not a negative rounding) for one on its limit moving out."""
     a = np.einsum('ij,ij->i', step, step)
     b = np.einsum('ij,ij->i', start, step)
     c = np.einsum('ij,ij->i', start, start) - limit**2
+    roots = np.full(len(a), np.inf)
     moving = a > 0
-    roots = (-b[moving] + np.sqrt(np.maximum(b[moving]**2 - a[moving] * c[moving], 0.0))
-             ) / a[moving]
-    return float(roots.min(initial=np.inf))
+    roots[moving] = (-b[moving] + np.sqrt(np.maximum(b[moving]**2 - a[moving] * c[moving],
+                                                     0.0))) / a[moving]
+    return np.maximum(roots, 0.0)
 
 
 def bound(step: np.ndarray, limit: np.ndarray, whole: bool = False) -> np.ndarray:

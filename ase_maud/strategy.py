@@ -35,7 +35,9 @@ specification's step with the whole scene's stiffness ``K``::
   along it is the one thing the rise measured) and the next move is the
   model's new move from where the step began, no longer than the cubic
   cut of the step taken back (a trust radius, so the curvature learnt and
-  the cut do not shorten the move twice).
+  the cut do not shorten the move twice), each point's move cut on its own
+  so that its jump from where it is (the rejected end) stays within its
+  limit.
   Gamma grows by ``gamma_growth`` after each accepted step, up to
   ``gamma_max``.
 - No point moves further than its limit (:class:`~ase_maud.search.Limits`);
@@ -87,7 +89,7 @@ from .search import (
     cubic_cut,
     merit_change,
     merit_tolerance,
-    reach,
+    reaches,
     trust_fraction,
     trust_region,
     work_change,
@@ -395,7 +397,13 @@ class Minimise(Strategy):
         the model's own state, e.g. the bfgs model's ``kappa``, is not
         changed by a step taken back), no point moving further than the
         longest point move of that step times its :func:`cubic_cut`, nor
-        further from ``x`` (where the points are) than its limit."""
+        further from ``x`` (where the points are) than its limit: each
+        point's move is cut on its own (:func:`reaches`) so that its jump
+        from ``x`` stays within its limit (a point whose rejected move
+        reached its limit and that the move sends back past where the step
+        began stays there; scaling the whole move for it, as before, shrank
+        the move to nothing and spent a calculator call on the point already
+        known)."""
         last, rejected = state.last, state.v
         radius = cubic_cut(last.forces, rejected, change, forces) * float(
             np.linalg.norm(rejected, axis=1).max())
@@ -407,7 +415,7 @@ class Minimise(Strategy):
         if length > radius:
             move = move * (radius / length)
         # from x, the points jump by move - rejected: within their limits too
-        return move * min(1.0, reach(-rejected, move, self.limits(last.x)))
+        return move * np.minimum(reaches(-rejected, move, self.limits(last.x)), 1.0)[:, None]
 
     def _accept(self, state: MaudState, x: np.ndarray, forces: np.ndarray) -> None:
         """Learn from the accepted step that ended at ``x``."""

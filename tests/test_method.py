@@ -20,7 +20,14 @@ from ase_maud.descent import (
 )
 from ase_maud.monitor import ENERGY_PROGRESS, DivergenceError, RunMonitor, StagnationError
 from ase_maud.neighbours import NearestDistances
-from ase_maud.search import DAMPING_TOLERANCE, damping, merit_change, trust_region
+from ase_maud.search import (
+    DAMPING_TOLERANCE,
+    damping,
+    merit_change,
+    reach,
+    reaches,
+    trust_region,
+)
 from ase_maud.stiffness import MODELS, DampedSolver, StiffnessModel
 from ase_maud.strategy import STEP_DEFAULTS, MaudState, Point, compose, step_rule
 
@@ -196,6 +203,55 @@ def test_a_rise_is_learnt_from_and_retaken_within_the_cut(seed):
     longest = np.linalg.norm(again, axis=1).max()
     assert longest <= np.linalg.norm(move, axis=1).max() / 3 * (1 + 1e-9)
     assert quadratic.energy(x0 + again) < quadratic.energy(x0)
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_reaches_each_point_and_never_below_zero(seed):
+    """Each point's reach puts it on its limit (its smallest is ``reach``);
+    a point that does not move reaches without end, and one on its limit
+    (by rounding just beyond it) moving outward reaches 0, not a negative
+    root that would turn a move around."""
+    rng = np.random.default_rng(seed)
+    start, step = 0.1 * rng.normal(size=(5, 3)), rng.normal(size=(5, 3))
+    limit = np.full(5, 0.5)
+    start[3] = [0.5 * (1 + 1e-15), 0.0, 0.0]
+    step[3] = [1.0, 0.0, 0.0]                      # on its limit, outward
+    step[4] = 0.0                                  # not moving
+    t = reaches(start, step, limit)
+    moving = [0, 1, 2]
+    np.testing.assert_allclose(np.linalg.norm(start[moving] + t[moving, None] * step[moving],
+                                              axis=1), 0.5)
+    assert t[3] == 0.0 and t[4] == np.inf
+    assert reach(start, step, limit) == 0.0
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_a_retake_past_where_the_step_began_keeps_each_jump_within_its_limit(seed):
+    """A point whose rejected move reached its 0.2 limit and that the
+    retake sends back past where the step began jumps at most its limit
+    from where it is (so it lands where the step began), while the other
+    points take the model's retake: the move is not scaled to nothing for
+    that one point (which had spent a call on the point already known)."""
+    rng = np.random.default_rng(seed)
+    stiffness = MODELS['bfgs']()
+    rule = compose(stiffness, replace(step_rule(stiffness), maxstep_nn=None),
+                   NearestDistances())
+    x0 = rng.normal(size=(3, 3))
+    f0 = rng.normal(size=(3, 3))
+    f0[0] = [-1.0, 0.0, 0.0]                       # point 0 pulled along -x
+    rejected = 0.05 * rng.normal(size=(3, 3))
+    rejected[0] = [0.2, 0.0, 0.0]                  # ... it went +x, to its limit
+    f1 = f0 - 10.0 * rejected                      # a stiff wall along the step
+    state = MaudState(gamma=1.0, last=Point(x0, 0.0, f0), v=rejected,
+                      solver=stiffness.at(None))
+    again = rule.step(state, x0 + rejected, 1.0, f1, 0.0,
+                      lambda at: pytest.fail('the solver of the start is kept'))
+    assert np.array_equal(state.last.x, x0)        # taken back
+    jump = np.linalg.norm(again - rejected, axis=1)
+    assert np.all(jump <= 0.2 * (1 + 1e-12))
+    np.testing.assert_allclose(again[0], 0.0, atol=1e-12)   # back where it began
+    assert np.linalg.norm(again[1:], axis=1).min() > 1e-3   # the others move on
+    assert np.vdot(f0, again) > 0                            # downhill
 
 
 @pytest.mark.parametrize('seed', range(3))

@@ -11,7 +11,7 @@ from ase.optimize import BFGS, FIRE
 from ase.optimize.basin import BasinHopping
 
 from ase_maud import Maud, MaudCalculator
-from ase_maud.bench.ase_systems import au13, lj7, lj_cluster, pt13
+from ase_maud.bench.ase_systems import au13, lj7, lj_cluster, lj_molecule, pt13
 from ase_maud.scenes import SUITE, build
 
 FMAX = 1e-6
@@ -337,6 +337,31 @@ def test_bfgs_model_steps_within_ase_maxstep_and_reaches_bfgs_minimum(make, seed
     fresh.calc = type(reference.calc)()
     assert np.linalg.norm(fresh.get_forces(), axis=1).max() <= 1e-3
     assert calls['n'] <= bfgs.nsteps + 1
+
+
+@pytest.mark.parametrize('make, seed', [(lj7, 15), (lj7, 20), (lj_molecule, 38)])
+def test_bfgs_model_never_evaluates_a_point_twice(make, seed):
+    """A step taken back is retaken somewhere new: no calculator call of a
+    Maud run repeats the positions of an earlier one, and no point moves
+    more than 0.2 between two calls (a retake whose rejected move had
+    reached the 0.2 limit used to be scaled to nothing, and the call went
+    on the point the step had begun from; these seeded starts of ASE's
+    LJ7 and LJ O4 met it), and the run converges."""
+    atoms = make(seed)
+    seen = []
+    inner = atoms.calc.calculate
+
+    def recorded(atoms_asked=None, *args, **kwargs):
+        seen.append(atoms_asked.positions.copy())
+        return inner(atoms_asked, *args, **kwargs)
+    atoms.calc.calculate = recorded
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-3, steps=2000)
+    assert opt.model.name == 'bfgs'
+    for i, here in enumerate(seen[1:], 1):
+        assert np.linalg.norm(here - seen[i - 1], axis=1).max() <= 0.2 + 1e-12
+        nearest = min(np.abs(here - earlier).max() for earlier in seen[:i])
+        assert nearest > 1e-9, f'call {i} repeats an earlier point'
 
 
 @pytest.mark.integration

@@ -146,7 +146,8 @@ def main() -> None:
     parser.add_argument('--systems', nargs='+', default=list(SYSTEMS))
     parser.add_argument('--basin', type=int, default=0,
                         help='instead: BasinHopping of this many hops, Maud against BFGS '
-                        '(each local relaxation at most --steps steps)')
+                        'or the --optimizers given (each local relaxation at most --steps '
+                        'steps)')
     parser.add_argument('--hops', type=int, default=0,
                         help='instead: this many BasinHopping moves from the minimum BFGS '
                         'reaches from each start, each relaxed by every optimizer (--csv)')
@@ -175,13 +176,18 @@ def main() -> None:
                 for row in hops(system, seed, args.hops, optimizers, args.fmax, args.steps)]
         _write(args.csv, rows)
         return
-    if args.basin:
-        print('| system | seed | Maud: calls, CPU, lowest | BFGS: calls, CPU, lowest |')
-        print('|---|---|---|---|')
+    if args.basin:   # Maud and BFGS unless --optimizers names others (ASE's classes)
+        hopping = optimizers if args.optimizers else {
+            name: optimizers[name] for name in ('Maud', 'BFGS')}
+        if any(kwargs or not isinstance(opt, type) for opt, kwargs in hopping.values()):
+            parser.error('--basin: ASE optimizer classes only (no --maud variants, no L-BFGS-B)')
+        print('| system | seed | ' + ' | '.join(f'{name}: calls, CPU, lowest'
+                                                for name in hopping) + ' |')
+        print('|---|---|' + '---|' * len(hopping))
         for system in args.systems:
             for seed in args.seeds:
                 cells = [basin(system, seed, opt, args.basin, args.fmax, args.steps)
-                         for opt in (Maud, BFGS)]
+                         for opt, _ in hopping.values()]
                 print(f'| {system} | {seed} | ' + ' | '.join(
                     f'{c}, {t:.1f} s, {e}' for c, t, e in cells) + ' |', flush=True)
         return

@@ -186,17 +186,17 @@ def _weighted_laplacian(springs: np.ndarray, natoms: int, Q: float | np.ndarray,
     """``L_Q (x) I_dim`` (``dim`` 1: ``L_Q``) from
     :func:`spring_hessian_entries`, in one sparse construction (duplicates
     summed)."""
-    rows, cols, data = spring_hessian_entries(springs, natoms, Q, dim)
+    rows, cols, data = spring_hessian_entries(springs, Q, dim)
     return sp.csr_matrix((data, (rows, cols)), shape=(dim * natoms,) * 2)
 
 
-def spring_hessian_entries(springs: np.ndarray, natoms: int, Q: float | np.ndarray,
+def spring_hessian_entries(springs: np.ndarray, Q: float | np.ndarray,
                            dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The entries of ``L_Q (x) I_dim`` as (rows, columns, values), a pair
     listed once per spring that meets it (their sum is the entry): each
     spring's ``Q_s`` on both diagonal places of each coordinate and ``-Q_s``
-    on both off-diagonal ones; coordinates point by point. ``natoms`` sizes
-    nothing here; it is the matrix's (checked by the callers)."""
+    on both off-diagonal ones; coordinates point by point (the matrix's
+    size, and the springs' indices within it, are the callers')."""
     pairs = np.asarray(springs, dtype=int).reshape(-1, 2)
     i, j = pairs.T
     weights = np.broadcast_to(np.asarray(Q, dtype=float), len(pairs))

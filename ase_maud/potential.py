@@ -209,7 +209,7 @@ class MaudPotential:
         once per N, not converted at every call); ``repulsion`` is overwritten."""
         n = len(repulsion) // self.dim
         flat, data = self._kept(('hessian entries', n), lambda: _flat_entries(
-            *physics.spring_hessian_entries(self._springs_within(n), n,
+            *physics.spring_hessian_entries(self._springs_within(n),
                                             self.Q * self.stiffnesses, self.dim),
             len(repulsion)))
         repulsion *= self.Q

@@ -399,11 +399,8 @@ class Minimise(Strategy):
         longest point move of that step times its :func:`cubic_cut`, nor
         further from ``x`` (where the points are) than its limit: each
         point's move is cut on its own (:func:`reaches`) so that its jump
-        from ``x`` stays within its limit (a point whose rejected move
-        reached its limit and that the move sends back past where the step
-        began stays there; scaling the whole move for it, as before, shrank
-        the move to nothing and spent a calculator call on the point already
-        known)."""
+        from ``x`` stays within its limit (one point at its limit does not
+        hold the others back)."""
         last, rejected = state.last, state.v
         radius = cubic_cut(last.forces, rejected, change, forces) * float(
             np.linalg.norm(rejected, axis=1).max())

@@ -174,7 +174,7 @@ def test_dense_hessian_sums_the_springs_at_each_point(random_points, dim, seed):
     np.testing.assert_allclose(full - repulsion, sparse, rtol=0,
                                atol=1e-13 * np.abs(full).max())
     dense = np.zeros((dim * n, dim * n))
-    rows, cols, data = physics.spring_hessian_entries(springs, n, 0.7 * q, dim)
+    rows, cols, data = physics.spring_hessian_entries(springs, 0.7 * q, dim)
     np.add.at(dense, (rows, cols), data)
     np.testing.assert_allclose(dense, sparse, rtol=1e-15, atol=1e-15)
 

@@ -769,8 +769,9 @@ class SpringsModel(StiffnessModel):
             keep = np.flatnonzero(mask)
             shift = self.floor * largest * _floating(potential.springs, ~mask)[keep]
             inverses[mask.tobytes()] = keep, spd_inverse(
-                matrix[keep][:, keep] + sp.diags(shift), SPRINGS_RTOL)
-        return _CoordinateSolver([inverses[column.tobytes()] for column in free.T], free)
+                matrix[keep][:, keep] + sp.diags(shift), SPRINGS_RTOL), shift
+        return _CoordinateSolver([inverses[column.tobytes()] for column in free.T],
+                                 free, matrix)
 
 
 def _floating(springs: np.ndarray, held: np.ndarray) -> np.ndarray:
@@ -861,20 +862,35 @@ class _LowestModes(ModeSolver):
 
 class _CoordinateSolver(Solver):
     """``P^-1 f`` coordinate by coordinate: column ``c`` of the move is the
-    inverse (``keep``, ``inverse``) of coordinate ``c`` applied to its free
-    points; coordinates with the same free points share one inverse."""
+    inverse (``keep``, ``inverse``, ``shift``) of coordinate ``c`` applied to
+    its free points; coordinates with the same free points share one
+    inverse. ``P`` of a coordinate is ``matrix`` (N, N; ``Q L + diag(s)``)
+    on its free points plus ``diag(shift)`` (the floor on floating points);
+    :meth:`dot` multiplies by it."""
 
-    def __init__(self, columns: list[tuple[np.ndarray, Any]], free: np.ndarray):
-        self.columns, self.free = columns, free
+    def __init__(self, columns: list[tuple[np.ndarray, Any, np.ndarray]], free: np.ndarray,
+                 matrix: sp.csr_matrix):
+        self.columns, self.free, self.matrix = columns, free, matrix
+
+    def dot(self, move: np.ndarray) -> np.ndarray:
+        """``P move`` (N, 3), force per length: each coordinate's ``P`` on
+        its free points, zero on the held ones and on ``z`` in 2D."""
+        v = np.asarray(move, dtype=float).reshape(-1, 3)
+        out = np.zeros_like(v)
+        for c, (keep, _, shift) in enumerate(self.columns):
+            column = np.zeros(len(v))
+            column[keep] = v[keep, c]
+            out[keep, c] = (self.matrix @ column)[keep] + shift * v[keep, c]
+        return out
 
     def solve(self, forces):
         f = np.asarray(forces, dtype=float).reshape(-1, 3)
         move = np.zeros_like(f)
         groups: dict[int, list[int]] = {}
-        for c, (keep, _) in enumerate(self.columns):
+        for c, (keep, _, _) in enumerate(self.columns):
             groups.setdefault(id(keep), []).append(c)
         for coordinates in groups.values():
-            keep, inverse = self.columns[coordinates[0]]
+            keep, inverse, _ = self.columns[coordinates[0]]
             if keep.size:
                 move[np.ix_(keep, coordinates)] = inverse(f[np.ix_(keep, coordinates)])
         return move

@@ -68,10 +68,14 @@ class Work:
     """What a search computed beyond its calculator calls, in force-call
     equivalents: ``hvp_vectors``, the vectors multiplied by the Hessian
     (:func:`hessian_operator`; a block of k vectors is k, each costing about
-    one force call), and ``hessians``, the dense Hessians computed."""
+    one force call), and ``hessians``, the dense Hessians computed. Apart,
+    not in :attr:`total`: ``near_products``, the products with the
+    near-field model's sparse ``P`` (:mod:`ase_maud.nearfield`), each
+    O(near pairs), far below a force call."""
 
     hvp_vectors: int = 0
     hessians: int = 0
+    near_products: int = 0
 
     @property
     def total(self) -> int:

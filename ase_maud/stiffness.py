@@ -28,6 +28,10 @@ it for a step it may take back. Four models, from the cheapest:
   ``Q L`` per coordinate (one N x N matrix for every coordinate), factorised
   once per run; the repulsion is left to the L-BFGS memory of the step rule.
   Energy and forces only, no stiffness property: for large scenes.
+- :class:`~ase_maud.nearfield.NearModel` (``'near'``, opt-in, never
+  ``'auto'``'s): the springs model's ``P`` plus the repulsion's signed pair
+  blocks of near pairs, solved by truncated CG preconditioned by the springs
+  factor, for scenes where the repulsion sets the shape.
 
 ``target='minimum'`` makes every model positive definite: eigenvalues are
 replaced by their absolute values and floored at ``floor`` times the largest
@@ -896,9 +900,13 @@ class _CoordinateSolver(Solver):
         return move
 
 
+#: The models by name; :mod:`ase_maud.nearfield` adds ``'near'`` (imported
+#: below, once :class:`SpringsModel`, which it derives from, is defined).
 MODELS: dict[str, type[StiffnessModel]] = {
     cls.name: cls for cls in (SecantModel, BFGSModel, NodalModel, GlobalModel,
                               ExactModel, SpringsModel)}
+
+from . import nearfield  # noqa: E402, F401
 
 
 def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
@@ -946,7 +954,7 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
     taken = {'floor', *_EXTRA_OPTIONS.get(cls, ())}
     for option in set(options) - taken:
         check(option, options[option])
-    if cls in (GlobalModel, SpringsModel):
+    if issubclass(cls, (GlobalModel, SpringsModel)):
         options['nearest'] = nearest
         taken.add('nearest')
     return cls(target=target, **{k: v for k, v in options.items() if k in taken})

@@ -132,12 +132,12 @@ def test_fixed_atoms_and_cartesian_components_stay(seed):
     assert np.abs(atoms.positions - start).max() > 0.1
 
 
-@pytest.mark.parametrize('model', ['exact', 'springs', 'global', 'nodal', 'secant'])
+@pytest.mark.parametrize('model', ['exact', 'springs', 'global', 'nodal', 'secant', 'near'])
 @pytest.mark.parametrize('seed', [2, 3])
 def test_restart_reproduces_uninterrupted_run(tmp_path, model, seed):
     # the springs model's L-BFGS memory, the secant model's learnt kappa, the
     # momentum of the nodal one and where the global one built its P all come
-    # back from the files
+    # back from the files; the near one finds its pairs at every step
     straight = build('hanging_net', 8, seed=seed)
     with Maud(straight, logfile=None, model=model) as opt:
         opt.run(fmax=1e-300, steps=30)

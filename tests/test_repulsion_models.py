@@ -1,8 +1,8 @@
-"""tools/repulsion_models.py's near-field prototypes (the springs' Hessian
-plus the repulsion's near pair blocks, signed; factorised, or solved
-matrix-free by truncated CG) against the dense Hessian and finite
-differences of the forces on small scenes, and runs of them to L-BFGS-B's
-minimum."""
+"""tools/repulsion_models.py's factorised near-field prototype (the springs'
+Hessian plus the repulsion's near pair blocks, signed, factorised) against
+the dense Hessian and finite differences of the forces on small scenes, and
+runs of it to L-BFGS-B's minimum; the package's matrix-free model
+(``model='near'``) is tested in test_nearfield.py."""
 
 import itertools
 import runpy
@@ -143,34 +143,3 @@ def test_a_run_reaches_lbfgsb_minimum(seed):
     assert atoms.get_potential_energy() == pytest.approx(peer.get_potential_energy(),
                                                          rel=1e-10)
     assert same_point(atoms, peer, distance_atol=1e-4)   # or its mirror image
-
-
-@pytest.mark.parametrize('scene, seed', [('hanging_net', 12), ('net2d', 13)])
-def test_the_matrix_free_p_is_the_factorised_one(scene, seed, monkeypatch):
-    atoms = relaxed(scene, 5, seed)
-    dim = atoms.calc.potential.dim
-    cg_model, factor_model = TOOL['NearCGModel'](cutoff=1.5), NearFieldModel(cutoff=1.5)
-    solver = cg_model.at(atoms)
-    free = free_dofs(atoms, dim)
-    v = np.zeros((len(atoms), 3))
-    v[:, :dim][free] = np.random.default_rng(seed).standard_normal(free.sum())
-    pv = solver.dot(v)
-    assert not pv[:, :dim][~free].any() and not pv[:, dim:].any()
-    np.testing.assert_allclose(pv[:, :dim][free], factor_model.matrix(atoms) @ v[:, :dim][free],
-                               rtol=1e-10, atol=1e-12 * np.abs(pv).max())
-    monkeypatch.setattr(solver, 'rtol', 1e-12)
-    monkeypatch.setattr(solver, 'maxiter', 1000)
-    forces = atoms.get_forces() + v * 1e-2
-    np.testing.assert_allclose(solver.solve(forces), factor_model.factor(atoms).solve(forces),
-                               rtol=1e-6, atol=1e-9 * np.abs(forces).max())
-
-
-@pytest.mark.parametrize('seed', [2, 5])
-def test_the_matrix_free_model_reaches_lbfgsb_minimum(seed):
-    start = build('hub_net', 6, seed=seed)
-    start.positions += np.where(free_dofs(start, 3), np.random.default_rng(seed).uniform(
-        -0.2, 0.2, start.positions.shape), 0.0)
-    atoms, peer = fresh_copy(start), fresh_copy(start)
-    assert Maud(atoms, model=TOOL['NearCGModel'](), logfile=None).run(fmax=1e-6, steps=500)
-    assert OPTIMIZERS['L-BFGS-B'](peer).run(fmax=1e-6, steps=5000)
-    assert same_point(atoms, peer, distance_atol=1e-4)

@@ -9,12 +9,17 @@ CPU seconds and the energy reached, to ``--fmax`` (in ``Q a``), one thread::
 
 A scene is ``name:size`` (:func:`ase_maud.scenes.build`, seed 0) or
 ``compas:<sample>`` (a compas sample mesh); a variant is ``L-BFGS-B``, a
-``model=`` name of :class:`ase_maud.Maud`, ``near`` / ``near-<k>``: the
-prototype :class:`NearFieldModel` below, factorised at every step or kept
-for ``k`` steps, or ``near-cg``: the same ``P`` solved matrix-free by
-truncated CG (:class:`NearCGModel`). Neither measured a clear CPU win over
-the springs model (docs/benchmarks.md), so they live here, not in the
-package.
+``model=`` name of :class:`ase_maud.Maud` (``near``: the package's
+near-field model, :mod:`ase_maud.nearfield`), ``near-all``: that model with
+the repulsion block of every sprung pair (``per_point=None``, the
+prototype's pairs), or ``near-lu`` / ``near-lu-<k>``: the prototype
+:class:`NearFieldModel` below, the same ``P`` less the springs model's shifts,
+factorised at every step or kept for ``k`` steps. The factorised prototype
+measured no CPU win over the springs model (docs/benchmarks.md), so it lives
+here, not in the package. ``H v`` counts Hessian-vector products (each
+about a force call, none here); ``P v`` the near-field model's sparse
+products with its ``P`` (``work.near_products``, O(pairs) each), which the
+CPU seconds hold but the calls do not.
 """
 
 from __future__ import annotations
@@ -32,29 +37,18 @@ import numpy as np  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
 from ase import Atoms  # noqa: E402
 from scipy.sparse.linalg import splu  # noqa: E402
-from scipy.spatial import cKDTree  # noqa: E402
 
 from ase_maud import Maud, physics  # noqa: E402
 from ase_maud.bench.optimizers import OPTIMIZERS  # noqa: E402
 from ase_maud.bench.report import write_csv  # noqa: E402
 from ase_maud.bench.runner import calls_and_cpu, fresh_copy  # noqa: E402
 from ase_maud.dofs import free_dofs, rigid_body_modes  # noqa: E402
+from ase_maud.nearfield import NearModel, near_pairs  # noqa: E402
 from ase_maud.scenes import build  # noqa: E402
 from ase_maud.stiffness import Solver, SpringsModel, _DofSolver, _floating  # noqa: E402
 
 #: The most steps the near-field model waits before it tries ``P`` again.
 NEAR_RETRY_MAX = 4
-
-
-def near_pairs(x: np.ndarray, springs: np.ndarray, cutoff: float) -> np.ndarray:
-    """The pairs ``(i, j)`` (two index arrays, ``i < j``, each pair once) of
-    the points ``x`` (N, dim) nearer than ``cutoff`` times their median
-    nearest-neighbour distance, and the sprung pairs."""
-    tree = cKDTree(x)
-    spacing = np.median(tree.query(x, k=2)[0][:, 1])
-    pairs = np.concatenate([tree.query_pairs(cutoff * spacing, output_type='ndarray'),
-                            springs]).reshape(-1, 2)
-    return np.unique(np.sort(pairs, axis=1), axis=0).T
 
 
 class NearFieldModel(SpringsModel):
@@ -76,7 +70,7 @@ class NearFieldModel(SpringsModel):
     short of the far field, is not invariant under rotations). Only
     ``target='minimum'`` uses ``P``; the step rule is the springs model's."""
 
-    name = 'near'
+    name = 'near-lu'
 
     def __init__(self, target: str = 'minimum', floor: float | None = None,
                  cutoff: float = 1.5, reuse: int = 1):
@@ -153,108 +147,8 @@ class NearSolver(_DofSolver):
 SCENES = ['neighbour_graph:1000', 'neighbour_graph:2000', 'all_pairs:300',
           'compas:mesh_100_faces.json', 'compas:mesh_110_faces.json',
           'compas:faces_big.obj', 'hub_net:48']
-VARIANTS = ['L-BFGS-B', 'springs', 'global', 'nodal', 'near', 'near-10', 'near-cg']
-
-
-class NearCGModel(SpringsModel):
-    """The near-field prototype's ``P`` (:class:`NearFieldModel`) solved
-    matrix-free: Steihaug's truncated conjugate gradients
-    (:func:`ase_maud.descent.truncated_newton`, to its relative residual,
-    stopped on negative curvature) with ``P v`` summed over the pairs and
-    the springs model as preconditioner; no factorisation, no definiteness
-    test (the first iterate is the springs model's move)."""
-
-    name = 'near-cg'
-
-    def __init__(self, target: str = 'minimum', floor: float | None = None,
-                 cutoff: float = 1.5, reuse: int = 10):
-        super().__init__(target, floor)
-        self.cutoff, self.reuse = float(cutoff), int(reuse)
-        self._pairs: tuple[np.ndarray, np.ndarray, Solver, np.ndarray, int] | None = None
-
-    def pairs(self, atoms: Atoms, springs: Solver) -> tuple[np.ndarray, np.ndarray]:
-        """The near and sprung pairs ``(i, j)``, found again every ``reuse``
-        steps, and the rigid motions then."""
-        kept = self._pairs
-        if kept is not None and kept[2] is springs and kept[4] < self.reuse:
-            self._pairs = (*kept[:4], kept[4] + 1)
-            return kept[0], kept[1], kept[3]
-        potential = atoms.calc.potential
-        dim = potential.dim
-        x = potential.reduced(atoms.positions)[:, :dim]
-        i, j = near_pairs(x, potential.springs, self.cutoff)
-        rigid = rigid_body_modes(atoms.positions, free_dofs(atoms, dim), dim)
-        self._pairs = i, j, springs, rigid, 1
-        return i, j, rigid
-
-    def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
-        springs = super().at(atoms, learnt)
-        if self.target != 'minimum':
-            return springs
-        potential = atoms.calc.potential
-        n, dim = len(atoms), potential.dim
-        i, j, rigid = self.pairs(atoms, springs)
-        x = potential.reduced(atoms.positions)[:, :dim]
-        blocks = potential.Q * physics.repulsion_block(x[i] - x[j])
-        spring_hessian = potential.spring_hessian(n)
-        free = np.zeros((n, 3), dtype=bool)
-        free[:, :dim] = free_dofs(atoms, dim)
-        return NearCGSolver(springs, spring_hessian, i, j, blocks, free, rigid)
-
-
-class NearCGSolver(Solver):
-    """``P^-1 f`` by truncated CG; see :class:`NearCGModel`."""
-
-    rtol, maxiter = 0.5, 50
-
-    def __init__(self, springs, spring_hessian, i, j, blocks, free, rigid):
-        self.springs, self.spring_hessian = springs, spring_hessian
-        self.i, self.j, self.blocks, self.free, self.rigid = i, j, blocks, free, rigid
-        #: ``P v`` products so far.
-        self.products = 0
-
-    def dot(self, v: np.ndarray) -> np.ndarray:
-        """``P v`` (N, 3), zero on held coordinates."""
-        self.products += 1
-        n, dim = len(v), self.blocks.shape[-1]
-        u = v[:, :dim]
-        out = np.zeros_like(v)
-        out[:, :dim] = (self.spring_hessian @ u.ravel()).reshape(n, dim)
-        w = np.einsum('pab,pb->pa', self.blocks, u[self.i] - u[self.j])
-        for c in range(dim):
-            out[:, c] += (np.bincount(self.i, w[:, c], n) - np.bincount(self.j, w[:, c], n))
-        out[~self.free] = 0.0
-        return out
-
-    def _cg(self, forces: np.ndarray) -> np.ndarray:
-        """CG on ``P d = forces`` preconditioned by the springs model, to
-        the relative residual :attr:`rtol`; on negative curvature the
-        iterate so far (the springs model's move at the first)."""
-        move, residual = np.zeros_like(forces), forces.copy()
-        z = self.springs.solve(residual)
-        direction, rz = z, np.vdot(residual, z)
-        goal = self.rtol * np.linalg.norm(forces)
-        for k in range(self.maxiter):
-            h = self.dot(direction)
-            curvature = np.vdot(direction, h)
-            if curvature <= 0:
-                return move if k else z
-            alpha = rz / curvature
-            move += alpha * direction
-            residual -= alpha * h
-            if np.linalg.norm(residual) <= goal:
-                break
-            z = self.springs.solve(residual)
-            rz, last = np.vdot(residual, z), rz
-            direction = z + (rz / last) * direction
-        return move
-
-    def solve(self, forces):
-        move = self._cg(np.asarray(forces, dtype=float))
-        dim = self.blocks.shape[-1]
-        flat = move[:, :dim][self.free[:, :dim]]
-        move[:, :dim][self.free[:, :dim]] = flat - self.rigid @ (self.rigid.T @ flat)
-        return move
+VARIANTS = ['L-BFGS-B', 'springs', 'near', 'near-all', 'global', 'nodal', 'near-lu',
+            'near-lu-10']
 
 
 def scene(spec: str):
@@ -269,21 +163,21 @@ def scene(spec: str):
 
 def run(start, unit: float, variant: str, fmax: float, steps: int) -> dict:
     atoms = fresh_copy(start)
-    hvp = 0
+    hvp = pv = 0
     if variant in OPTIMIZERS and variant != 'Maud':
         optimiser = OPTIMIZERS[variant](atoms)
-    elif variant == 'near-cg':
-        optimiser = Maud(atoms, model=NearCGModel(), logfile=None)
-    elif variant.startswith('near'):
-        reuse = int(variant.partition('-')[2] or 1)
+    elif variant == 'near-all':
+        optimiser = Maud(atoms, model=NearModel(per_point=None), logfile=None)
+    elif variant.startswith('near-lu'):
+        reuse = int(variant.removeprefix('near-lu').lstrip('-') or 1)
         optimiser = Maud(atoms, model=NearFieldModel(reuse=reuse), logfile=None)
     else:
         optimiser = Maud(atoms, model=variant, logfile=None)
     calls, cpu, done = calls_and_cpu(atoms, optimiser, fmax * unit, steps)
     if isinstance(optimiser, Maud):
-        hvp = optimiser.model.work.total
+        hvp, pv = optimiser.model.work.total, optimiser.model.work.near_products
     return {'points': len(atoms), 'variant': variant, 'converged': done, 'calls': calls,
-            'hvp': hvp, 'cpu_s': round(cpu, 3), 'energy': atoms.get_potential_energy()}
+            'hvp': hvp, 'pv': pv, 'cpu_s': round(cpu, 3), 'energy': atoms.get_potential_energy()}
 
 
 def main() -> None:
@@ -306,15 +200,16 @@ def main() -> None:
     lines = [f'Measured {datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC, one thread, '
              f'fmax {args.fmax:g} Q a: `python tools/repulsion_models.py '
              f'{" ".join(sys.argv[1:])}`', '',
-             '| scene | N | variant | converged | calls + H v | CPU s | calls / L-BFGS-B '
-             '| CPU / L-BFGS-B | energy |', '|---|---|---|---|---|---|---|---|---|']
+             '| scene | N | variant | converged | calls + H v | P v | CPU s | calls / L-BFGS-B '
+             '| CPU / L-BFGS-B | energy |', '|---|---|---|---|---|---|---|---|---|---|']
     for row in rows:
         peer = next((r for r in rows if r['scene'] == row['scene']
                      and r['variant'] == 'L-BFGS-B'), row)
         total = row['calls'] + row['hvp']
         hvp = f' + {row["hvp"]}' if row['hvp'] else ''
         lines.append(f'| {row["scene"]} | {row["points"]} | {row["variant"]} | '
-                     f'{row["converged"]} | {row["calls"]}{hvp} | {row["cpu_s"]:.2f} | '
+                     f'{row["converged"]} | {row["calls"]}{hvp} | {row["pv"]} | '
+                     f'{row["cpu_s"]:.2f} | '
                      f'{total / peer["calls"]:.2f} | {row["cpu_s"] / peer["cpu_s"]:.2f} | '
                      f'{row["energy"]:.10g} |')
     print('\n'.join(lines))

@@ -66,10 +66,6 @@ NEAR_CUTOFF = 1.5
 #: hub's spokes), at most 12 N of a denser one (a cluster whose every pair
 #: is sprung keeps only its near pairs).
 SPRUNG_PER_POINT = 12
-#: The median nearest-neighbour distance is taken over about this many
-#: points (every k-th): a query of every point cost a third of a force call
-#: at 2000 points.
-SPACING_SAMPLE = 500
 #: Relative residual of the truncated CG, and its most ``P`` products a step.
 NEAR_RTOL, NEAR_MAXITER = 0.5, 50
 
@@ -78,15 +74,13 @@ def near_pairs(x: np.ndarray, springs: np.ndarray,
                cutoff: float) -> tuple[np.ndarray, np.ndarray]:
     """The pairs ``(i, j)`` (two index arrays, ``i < j``, each pair once): the
     ``springs`` (K, 2) and the pairs of the points ``x`` (N, dim) nearer than
-    ``cutoff`` times their median nearest-neighbour distance (over every
-    ``N //`` :data:`SPACING_SAMPLE`-th point)."""
+    ``cutoff`` times their median nearest-neighbour distance."""
     n = len(x)
     springs = np.sort(np.asarray(springs, dtype=np.int64).reshape(-1, 2), axis=1)
     if n < 2:
         return springs[:, 0], springs[:, 1]
     tree = cKDTree(x)
-    sample = x[::max(1, n // SPACING_SAMPLE)]
-    spacing = float(np.median(tree.query(sample, k=2)[0][:, 1]))
+    spacing = float(np.median(tree.query(x, k=2)[0][:, 1]))
     near = tree.query_pairs(cutoff * spacing, output_type='ndarray').astype(np.int64)
     if len(springs) and len(near):
         sprung = np.sort(springs[:, 0] * n + springs[:, 1])

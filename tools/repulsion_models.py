@@ -7,7 +7,7 @@ CPU seconds and the energy reached, to ``--fmax`` (in ``Q a``), one thread::
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
         python tools/repulsion_models.py --out docs/bench/repulsion
 
-A scene is ``name:size`` (:func:`ase_maud.scenes.build`, seed 0) or
+A scene is ``name:size[:seed]`` (:func:`ase_maud.scenes.build`, seed 0 by default) or
 ``compas:<sample>`` (a compas sample mesh); a variant is ``L-BFGS-B``, a
 ``model=`` name of :class:`ase_maud.Maud` (``near``: the package's
 near-field model, :mod:`ase_maud.nearfield`), ``near-all``: that model with
@@ -153,12 +153,12 @@ VARIANTS = ['L-BFGS-B', 'springs', 'near', 'near-all', 'global', 'nodal', 'near-
 
 def scene(spec: str):
     """The start of ``spec`` and its unit of force ``Q a`` (``a`` of a compas net)."""
-    name, size = spec.split(':')
+    name, size, *seed = spec.split(':')
     if name == 'compas':
         from compas_nets import net, sample_dir
         atoms, a, _ = net(sample_dir() / size)
         return atoms, a
-    return build(name, int(size)), 1.0
+    return build(name, int(size), seed=int(seed[0]) if seed else 0), 1.0
 
 
 def run(start, unit: float, variant: str, fmax: float, steps: int) -> dict:

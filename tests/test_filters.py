@@ -13,7 +13,7 @@ from ase.optimize import BFGS
 from ase_maud import Maud
 from ase_maud.scenes import build
 
-MODELS = ['auto', 'exact', 'springs', 'nodal', 'global', 'secant']
+MODELS = ['auto', 'exact', 'springs', 'nodal', 'global', 'secant', 'near']
 
 
 def subset_scene(seed):

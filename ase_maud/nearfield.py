@@ -58,8 +58,8 @@ from .neighbours import NearestDistances
 from .stiffness import MODELS, Solver, SpringsModel
 
 #: Pairs nearer than this many median nearest-neighbour distances get their
-#: repulsion block (1.5: about 2 pairs a point in a free graph; 2.5 no
-#: better on the spectra of docs/benchmarks.md).
+#: repulsion block (about 2 a point in a free graph; the spectra of
+#: docs/benchmarks.md, "Repulsion-dominated scenes").
 NEAR_CUTOFF = 1.5
 #: ... and the springs with an end that has at most this many springs:
 #: every spring of a graph of lower degree (nets, meshes, free graphs, a

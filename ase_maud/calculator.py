@@ -36,7 +36,7 @@ from ase.calculators.calculator import Calculator, all_changes
 from numpy.typing import ArrayLike
 
 from . import backends, physics, topology
-from .checks import check
+from .checks import all_finite, check
 from .potential import MaudPotential
 
 #: Relative tolerance on the spread of z for a ``dim=2`` scene.
@@ -381,7 +381,7 @@ class MaudCalculator(Calculator):
             results['stiffness'] = Q * blocks
         if want_hessian:
             results['hessian'] = potential.whole_hessian(h_rep)
-        bad = [name for name, value in results.items() if not _all_finite(value)]
+        bad = [name for name, value in results.items() if not all_finite(value)]
         if bad:
             if potential.repulsive:
                 raise_on_closest(scaled, a)   # 1/L, 1/L**2 or the Hessian's 1/L**3
@@ -471,14 +471,6 @@ def _diagonal_blocks(hessian: np.ndarray, dim: int) -> np.ndarray:
     index = np.arange(n)
     blocks[:, :dim, :dim] = hessian.reshape(n, dim, n, dim)[index, :, index, :]
     return backends.blocks_to_voigt(blocks)
-
-
-def _all_finite(value: float | np.ndarray) -> bool:
-    """Whether every entry of ``value`` (a number or an array) is finite: its
-    sum is (one pass; a sum that overflows is checked entry by entry)."""
-    if isinstance(value, np.ndarray):
-        return math.isfinite(value.sum()) or bool(np.isfinite(value).all())
-    return math.isfinite(value)
 
 
 def raise_on_closest(scaled: np.ndarray, a: float) -> None:

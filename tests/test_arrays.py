@@ -151,3 +151,31 @@ def test_a_run_with_no_finite_step_says_so_once_in_its_log(seed, watched, monkey
         opt.run(fmax=1e-6)
     assert log.getvalue().count('Maud: stopped:') == 1
     assert f'Maud: stopped: {error.value}' in log.getvalue()
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_a_step_that_moves_nothing_costs_no_call_on_arrays_either(seed, monkeypatch):
+    """Every third step made a zero move (as a step cut to nothing would be):
+    ASE's loop asks the calculator nothing there (the results held are of
+    those positions), and neither does the run on arrays."""
+    from ase_maud.strategy import Minimise
+
+    step = Minimise.step
+
+    def some_still(self, state, *args):
+        move = step(self, state, *args)
+        return move * 0.0 if state.k % 3 == 2 else move
+
+    monkeypatch.setattr(Minimise, 'step', some_still)
+    runs = []
+    for watched in (False, True):
+        atoms = build('hanging_net', 6, seed=seed)
+        with CallRecorder(atoms.calc) as recorder:
+            with Maud(atoms, logfile=None, model='springs', beta_max=0.5) as opt:
+                if watched:
+                    opt.attach(lambda: None)
+                opt.run(fmax=1e-6, steps=30)
+        runs.append((opt.nsteps, len(recorder.samples), atoms.positions.copy()))
+    (steps, calls, quiet), (also, watched_calls, watched) = runs
+    assert steps == also and calls == watched_calls < steps + 1
+    np.testing.assert_array_equal(quiet, watched)

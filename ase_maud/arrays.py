@@ -2,19 +2,20 @@
 plumbing, for a scene no one watches step by step.
 
 ASE's loop asks the optimizable for the forces and the energy several times
-a step, each request a property lookup with its change detection, and moves
-the atoms through their constraints; on a scene of tens of points that is
-most of a step. :func:`run` makes the same steps as ASE's loop with
-:class:`~ase_maud.optimizer.Maud`'s ``step`` (same positions, bit for bit),
-but per step it moves the positions array, asks the calculator once for the
-energy, forces and Hessian together (one pass of its kernel) and hands that
-Hessian to the local model directly (:func:`relax`). It applies where
-:func:`applies` says: plain ``Atoms`` whose only constraints hold
-coordinates (``FixAtoms``, ``FixCartesian``), the exact model seeking a
-minimum, and no trajectory, restart file or attached observer (the log is
-written as ASE writes it). The calculator holds the results of the last
-positions throughout, so a run stopped at any step leaves the atoms and
-their results consistent.
+a step, each request a property lookup with its change detection and a copy
+of the atoms, and moves the atoms through their constraints; on a scene of
+tens of points that is most of a step. :func:`run` makes the same steps as
+ASE's loop with :class:`~ase_maud.optimizer.Maud`'s ``step`` (same positions,
+calls and log, bit for bit), but per step it moves the positions array and
+asks the calculator once for the energy, forces and whatever the local model
+needs (the exact model's Hessian: one pass of its kernel), then builds the
+local model there (:func:`relax`). It applies where :func:`applies` says:
+plain ``Atoms`` whose only constraints hold coordinates (``FixAtoms``,
+``FixCartesian``) and a MaudCalculator, a run seeking a minimum, and no
+trajectory, restart file or attached observer (the log is written as ASE
+writes it). The calculator holds the results of the last positions
+throughout, so a run stopped at any step leaves the atoms and their results
+consistent.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from .calculator import MaudCalculator
 from .dofs import free_dofs
 from .monitor import MaudError, RunMonitor
 from .search import merit_tolerance
-from .stiffness import ExactModel
+from .stiffness import StiffnessModel
 from .strategy import LocalAt, MaudState, Strategy
 
 
@@ -41,12 +42,11 @@ def applies(opt: Any) -> bool:
     :class:`~ase_maud.optimizer.Maud`) can go on arrays: its system plain
     Atoms with a MaudCalculator (it computes the results of positions it is
     handed, :meth:`~ase_maud.MaudCalculator.compute`), held by coordinate
-    masks only, the exact model seeking a minimum, and nothing watching it
-    per step (a trajectory, a restart file, an attached observer)."""
-    atoms, model = opt.atoms, opt.model
+    masks only, seeking a minimum, and nothing watching it per step (a
+    trajectory, a restart file, an attached observer)."""
+    atoms = opt.atoms
     return (type(atoms) is Atoms and isinstance(atoms.calc, MaudCalculator)
-            and isinstance(model, ExactModel) and model.target == 'minimum'
-            and not opt.observers and opt.restart is None
+            and opt.model.target == 'minimum' and not opt.observers and opt.restart is None
             and all(isinstance(c, (FixAtoms, FixCartesian)) for c in atoms.constraints))
 
 
@@ -63,7 +63,7 @@ def log_line(logfile: IO | None, name: str, step: int, energy: float, fmax: floa
                   f'{energy:15.6f} {fmax:15.6f}\n')
 
 
-def relax(atoms: Atoms, model: ExactModel, strategy: Strategy, state: MaudState,
+def relax(atoms: Atoms, model: StiffnessModel, strategy: Strategy, state: MaudState,
           monitor: RunMonitor, fmax: float, step: Callable[[], int],
           no_step: Callable[[str], None]) -> Iterator[tuple[float, float]]:
     """The energy and the largest force at the start, then after each step
@@ -74,31 +74,35 @@ def relax(atoms: Atoms, model: ExactModel, strategy: Strategy, state: MaudState,
     calc = atoms.calc
     held = ~free_dofs(atoms, 3)
     positions = atoms.arrays['positions']
-    hessian = np.empty(0)
 
-    def evaluate(moved: bool = True) -> tuple[float, np.ndarray]:
-        nonlocal hessian
-        if moved:
-            results = calc.compute(atoms, ['hessian'])
-            model.work.hessians += 1   # as the optimizer counts its evaluations
-        else:   # the results held, if they are of these positions
-            calc.get_property('hessian', atoms)
-            results = calc.results
-        forces = results['forces'].copy()
+    def held_results() -> tuple[float, np.ndarray]:
+        """The energy and forces the calculator holds (held components zero)."""
+        forces = calc.results['forces'].copy()
         forces[held] = 0.0
-        hessian = results['hessian']
-        return results['energy'], forces
+        return calc.results['energy'], forces
+
+    def evaluate(moved: bool) -> tuple[float, np.ndarray]:
+        """The energy and forces at the positions and what the model needs
+        there, asked for (and counted) as the optimizer's evaluation asks:
+        computed anew if the positions ``moved``, else from the results held
+        (computed if they lack it)."""
+        needed = model.needs(atoms)
+        if moved:
+            calc.compute(atoms, [needed or 'forces'])
+        else:
+            calc.get_property(needed or 'forces', atoms)
+        model.work.hessians += needed == 'hessian'
+        return held_results()
 
     def local_at(x: np.ndarray) -> Any:
-        if not np.array_equal(x, positions):   # a point of an earlier run
-            positions[:] = x
-            evaluate()
+        positions[:] = x   # (elsewhere: where a resumed run's step began)
         try:
-            return model.local(hessian, atoms)
+            return model.at(atoms, state.model)
         except np.linalg.LinAlgError as error:
             no_step(f'the {model.name} stiffness model failed ({error})')
 
-    energy, forces = evaluate(moved=False)
+    calc.get_property('forces', atoms)   # the optimizer's first evaluation (counted there)
+    energy, forces = held_results()
     fmax_now = float(np.linalg.norm(forces, axis=1).max())
     while True:
         yield energy, fmax_now
@@ -106,9 +110,10 @@ def relax(atoms: Atoms, model: ExactModel, strategy: Strategy, state: MaudState,
                            forces, accuracy.noise(calc), local_at, no_step)
         x[held] = positions[held]
         strategy.moved(state, x)
+        moved = not np.array_equal(x, positions)
         positions[:] = x
         accuracy.ask(calc, fmax, fmax_now)
-        energy, forces = evaluate()
+        energy, forces = evaluate(moved)
         fmax_now = float(np.linalg.norm(forces, axis=1).max())
 
 

@@ -24,6 +24,7 @@ names the atoms (or ``a`` and ``Q``), never a NaN.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Sequence
 from typing import Any
@@ -35,7 +36,7 @@ from ase.calculators.calculator import Calculator, all_changes
 from numpy.typing import ArrayLike
 
 from . import backends, physics, topology
-from .checks import check
+from .checks import all_finite, check
 from .potential import MaudPotential
 
 #: Relative tolerance on the spread of z for a ``dim=2`` scene.
@@ -272,16 +273,19 @@ class MaudCalculator(Calculator):
             ('cell', old.cell.array, atoms.cell.array), ('pbc', old.pbc, atoms.pbc))
             if not (was == now).all()]
 
-    def _hold(self, atoms: Atoms) -> None:
+    def _hold(self, atoms: Atoms, system_changes: Sequence[str]) -> None:
         """Keep what :meth:`check_state` compares next time (ASE's
         ``Calculator.calculate`` keeps ``atoms.copy()``, and ASE's
         ``get_property`` has made one already): the copy held is updated in
-        place when no more than the positions changed, and made anew
-        otherwise."""
+        place when ``system_changes`` (what :meth:`check_state` found, or
+        what :meth:`compute` is told) name the positions alone and the atoms
+        and their constraints are as many as held, and made anew otherwise."""
         old = self.atoms
+        if old is atoms:
+            return
         if (old is None or len(old) != len(atoms)
                 or len(old.constraints) != len(atoms.constraints)
-                or set(self.check_state(atoms)) - {'positions'}):
+                or not set(system_changes) <= {'positions'}):
             self.atoms = atoms.copy()
         else:
             old.arrays['positions'][:] = atoms.arrays['positions']
@@ -289,8 +293,9 @@ class MaudCalculator(Calculator):
     def compute(self, atoms: Atoms, properties: Sequence[str]) -> dict[str, Any]:
         """The ``properties`` of ``atoms`` computed now, in one call (what
         ``get_property`` does after a move, without its change detection and
-        copy of the atoms): for an optimizer that moves the positions itself.
-        Returns :attr:`results`."""
+        copy of the atoms): for an optimizer that moves the positions itself,
+        so ``atoms`` differ from those of the last call in their positions
+        only. Returns :attr:`results`."""
         with self._lock:
             self.results = {}
             self.calculate(atoms, properties, ['positions'])
@@ -332,7 +337,7 @@ class MaudCalculator(Calculator):
                   properties: Sequence[str] = ('energy',),
                   system_changes: Sequence[str] = all_changes) -> None:
         if atoms is not None:
-            self._hold(atoms)
+            self._hold(atoms, system_changes)
         positions = self.check_atoms(self.atoms)
         potential = self.potential
         dim, a, Q = potential.dim, potential.a, potential.Q
@@ -349,9 +354,6 @@ class MaudCalculator(Calculator):
             else:
                 (e_rep, f_rep, block6), choice = backends.evaluate(
                     self.parameters, scaled, dim, want_blocks)
-            if not (np.isfinite(e_rep) and np.isfinite(f_rep).all() and (
-                    block6 is None or np.isfinite(block6).all())):
-                raise_on_closest(scaled, a)
             backend, tolerance = choice.backend.name, choice.tolerance
             e_unit, f_unit = potential.energy_unit, potential.force_unit
         else:   # a = 0: springs and loads alone, in the user's units (x' = x), times Q
@@ -379,11 +381,10 @@ class MaudCalculator(Calculator):
             results['stiffness'] = Q * blocks
         if want_hessian:
             results['hessian'] = potential.whole_hessian(h_rep)
-        bad = [name for name, value in results.items()
-               if not np.isfinite(value).all()]
+        bad = [name for name, value in results.items() if not all_finite(value)]
         if bad:
             if potential.repulsive:
-                raise_on_closest(scaled, a)   # the Hessian's 1/L**3
+                raise_on_closest(scaled, a)   # 1/L, 1/L**2 or the Hessian's 1/L**3
             raise ValueError(f'the {", ".join(bad)} overflow float64 at a = '
                              f'{a!r}, Q = {Q!r} (energies scale as a^2 Q, '
                              'forces as a Q): choose units nearer the scene')
@@ -396,8 +397,8 @@ class MaudCalculator(Calculator):
         self.results.update(results, free_energy=results['energy'])
         self.last_backend = backend
         self.last_tolerance = max(held or 0.0, tolerance)
-        self.last_force_scale = potential.force_unit * float(
-            np.sqrt(np.einsum('ij,ij->i', f_rep, f_rep).max(initial=0.0))
+        self.last_force_scale = potential.force_unit * (
+            math.sqrt((f_rep * f_rep).sum(axis=1).max(initial=0.0))
             if potential.repulsive else 0.0)
 
     def get_stiffness(self, atoms: Atoms | None = None) -> np.ndarray:

@@ -160,6 +160,15 @@ def check(name: str, value: Any, rule_name: str | None = None) -> Any:
     raise ValueError(f'{name} must be {rule.accepted}, got {value!r}')
 
 
+def all_finite(value: float | np.ndarray) -> bool:
+    """Whether every entry of ``value`` (a number or an array) is finite: its
+    sum is (one pass; a sum that overflows is checked entry by entry). The
+    one test of computed results (arguments are checked by their rules)."""
+    if isinstance(value, np.ndarray):
+        return math.isfinite(value.sum()) or bool(np.isfinite(value).all())
+    return math.isfinite(value)
+
+
 def check_each(name: str, values: Any, what: str) -> np.ndarray:
     """Every entry of the array ``values`` checked against ``RULES[name]`` (a
     number rule): a float array of its shape, or a ValueError naming

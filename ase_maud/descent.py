@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
+import numba
 import numpy as np
 
 from .search import reach
@@ -51,18 +52,51 @@ def keeps_pair(s: np.ndarray, y: np.ndarray) -> bool:
 def lbfgs(solve: Callable[[np.ndarray], np.ndarray], forces: np.ndarray,
           pairs: Sequence[Pair]) -> np.ndarray:
     """The L-BFGS direction over ``pairs`` (oldest first) with ``solve``
-    (``K^-1``) as the initial inverse Hessian; ``K^-1 f`` with no pairs."""
+    (``K^-1``) as the initial inverse Hessian; ``K^-1 f`` with no pairs. The
+    two loops are compiled (:func:`_newest_first`, :func:`_oldest_first`):
+    in numpy each pair costs four calls, most of a step on tens of points."""
     if not pairs:
         return solve(forces)
+    s = np.stack([pair[0] for pair in pairs]).reshape(len(pairs), -1)
+    y = np.stack([pair[1] for pair in pairs]).reshape(len(pairs), -1)
+    q, alphas = _newest_first(s, y, np.asarray(forces, dtype=float).ravel())
+    z = np.asarray(solve(q.reshape(forces.shape)), dtype=float).ravel()
+    return _oldest_first(s, y, alphas, z).reshape(forces.shape)
+
+
+@numba.njit(cache=True)
+def _newest_first(s: np.ndarray, y: np.ndarray,
+                  forces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two-loop recursion's first loop, pairs (rows of ``s`` and ``y``)
+    newest first: ``alpha_i = s_i.q / s_i.y_i``, ``q -= alpha_i y_i``;
+    returns ``q`` and the ``alpha``s (by row)."""
     q = forces.copy()
-    alphas = []
-    for s, y in reversed(pairs):
-        alpha = np.vdot(s, q) / np.vdot(s, y)
-        q -= alpha * y
-        alphas.append(alpha)
-    z = solve(q)
-    for (s, y), alpha in zip(pairs, reversed(alphas), strict=True):
-        z += s * (alpha - np.vdot(y, z) / np.vdot(s, y))
+    alphas = np.empty(s.shape[0])
+    for i in range(s.shape[0] - 1, -1, -1):
+        sq = sy = 0.0
+        for k in range(s.shape[1]):
+            sq += s[i, k] * q[k]
+            sy += s[i, k] * y[i, k]
+        alphas[i] = sq / sy
+        for k in range(s.shape[1]):
+            q[k] -= alphas[i] * y[i, k]
+    return q, alphas
+
+
+@numba.njit(cache=True)
+def _oldest_first(s: np.ndarray, y: np.ndarray, alphas: np.ndarray,
+                  z: np.ndarray) -> np.ndarray:
+    """The second loop, oldest first, from ``z = K^-1 q``: ``z += s_i
+    (alpha_i - y_i.z / s_i.y_i)``; returns ``z`` (a new array)."""
+    z = z.copy()
+    for i in range(s.shape[0]):
+        yz = sy = 0.0
+        for k in range(s.shape[1]):
+            yz += y[i, k] * z[k]
+            sy += s[i, k] * y[i, k]
+        beta = alphas[i] - yz / sy
+        for k in range(s.shape[1]):
+            z[k] += beta * s[i, k]
     return z
 
 

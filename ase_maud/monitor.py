@@ -191,7 +191,7 @@ class RunMonitor:
         """Raise DivergenceError or StagnationError (module docstring) at
         ``step``; ``gamma0`` is the step factor's start, ``tolerance`` the
         slack of a merit comparison."""
-        centre = x.mean(axis=0)
+        centre = x.sum(axis=0) / len(x)
         size = np.linalg.norm(x - centre, axis=1).max()
         if self.size0 is None:
             self.size0 = max(size, self.length_scale * len(x), np.finfo(float).tiny)

@@ -28,6 +28,8 @@ class NearestDistances:
         size = self.image_size or len(x)
         if size < 2:
             distances = np.full(len(x), np.inf)
+        elif size == len(x):
+            distances = _nearest(x)
         else:
             distances = np.concatenate([_nearest(image)
                                         for image in x.reshape(-1, size, x.shape[1])])

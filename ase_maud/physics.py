@@ -129,17 +129,6 @@ def spring_terms(positions: np.ndarray, springs: np.ndarray,
     return float(spring_energy(d, Q).sum()), forces
 
 
-def spring_incidence(springs: np.ndarray, natoms: int) -> sp.csr_matrix:
-    """The spring graph's incidence matrix, (K, natoms): row ``s`` of spring
-    ``(i, j)`` holds +1 at ``i`` and -1 at ``j``, so that its product with
-    the positions gives every spring's ``d = r_i - r_j`` (exactly: one
-    subtraction each)."""
-    pairs = np.asarray(springs, dtype=int).reshape(-1, 2)
-    rows = np.repeat(np.arange(len(pairs)), 2)
-    data = np.tile([1.0, -1.0], len(pairs))
-    return sp.csr_matrix((data, (rows, pairs.ravel())), shape=(len(pairs), natoms))
-
-
 def spring_nodal_blocks(springs: np.ndarray, natoms: int, Q: float | np.ndarray,
                         dim: int) -> np.ndarray:
     """The springs' part of the nodal blocks, the weighted degree times

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike
@@ -158,15 +159,13 @@ class MaudPotential:
     def spring_terms(self, scaled: np.ndarray) -> tuple[float, np.ndarray]:
         """Energy and forces (N, 3) of the springs at ``scaled`` positions
         (units of ``a``), at ``a = Q = 1``: :func:`.physics.spring_terms`'s
-        law, ``Q q L**2 / 2`` and ``-Q q d``, summed by the spring graph's
-        incidence matrix (kept once per N, dense while it is small: two
-        products a call)."""
+        law, ``Q q L**2 / 2`` and ``-Q q d``, summed spring by spring in one
+        compiled pass (:func:`_spring_sums`)."""
         n = len(scaled)
-        incidence, transpose = self._kept(('incidence', n), lambda: _with_transpose(
-            physics.spring_incidence(self._springs_within(n), n)))
-        d = incidence @ scaled
-        pull = d * (self.q[:, None] if self.q is not None else 1.0)
-        return 0.5 * float(np.einsum('ij,ij->', d, pull)), -(transpose @ pull)
+        springs, q = self._kept(('spring sums', n), lambda: (
+            np.ascontiguousarray(self._springs_within(n), dtype=np.int64),
+            np.broadcast_to(np.asarray(self.stiffnesses, float), len(self.springs)).copy()))
+        return _spring_sums(np.ascontiguousarray(scaled, dtype=float), springs, q)
 
     def spring_hessian(self, natoms: int) -> sp.csr_matrix:
         """The springs' exact, constant Hessian ``Q (L_q (x) I_dim)``
@@ -237,20 +236,23 @@ class MaudPotential:
         return hv.reshape(v.shape)
 
 
-#: The most entries an incidence matrix kept dense may have (below it, a
-#: BLAS product costs less than a sparse one's overhead).
-DENSE_INCIDENCE_ENTRIES = 1 << 16
-
-
-def _with_transpose(matrix: sp.csr_matrix) -> tuple[sp.csr_matrix | np.ndarray,
-                                                    sp.csr_matrix | np.ndarray]:
-    """``matrix`` and its transpose, for fast products: both dense while
-    they have at most :data:`DENSE_INCIDENCE_ENTRIES` entries, else both in
-    rows (csr)."""
-    if np.prod(matrix.shape) <= DENSE_INCIDENCE_ENTRIES:
-        dense = matrix.toarray()
-        return dense, np.ascontiguousarray(dense.T)
-    return matrix, sp.csr_matrix(matrix.T)
+@numba.njit(fastmath=False, cache=True)
+def _spring_sums(x: np.ndarray, springs: np.ndarray,
+                 q: np.ndarray) -> tuple[float, np.ndarray]:
+    """``sum_s q_s |d_s|**2 / 2`` and the forces (N, 3): ``-q_s d_s`` on
+    ``i`` and ``+q_s d_s`` on ``j`` of every spring ``s = (i, j)``, ``d_s =
+    x_i - x_j`` (:func:`.physics.spring_terms`'s law; ``x`` (N, 3))."""
+    forces = np.zeros((x.shape[0], 3))
+    energy = 0.0
+    for s in range(springs.shape[0]):
+        i, j = springs[s, 0], springs[s, 1]
+        for k in range(3):
+            d = x[i, k] - x[j, k]
+            pull = q[s] * d
+            energy += 0.5 * d * pull
+            forces[i, k] -= pull
+            forces[j, k] += pull
+    return energy, forces
 
 
 def _flat_entries(rows: np.ndarray, cols: np.ndarray, data: np.ndarray,

@@ -130,9 +130,8 @@ class Limits:
     maxstep_size: float | None = None
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
-        limit = np.full(len(x), np.inf)
-        if self.maxstep_nn is not None:
-            limit = self.maxstep_nn * self.nearest(x)
+        limit = (np.full(len(x), np.inf) if self.maxstep_nn is None
+                 else self.maxstep_nn * self.nearest(x))
         if self.maxstep is not None:
             limit = np.minimum(limit, self.maxstep)
         if self.maxstep_size is not None and len(x) > 1:

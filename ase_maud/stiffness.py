@@ -69,7 +69,7 @@ from scipy.sparse.linalg import LinearOperator, cg, splu
 
 from . import physics
 from .analysis import Work
-from .checks import check
+from .checks import all_finite, check
 from .dofs import PROJECTIONS, allowed_basis, free_dofs, internal_basis, rigid_body_modes
 from .neighbours import NearestDistances
 from .topology import spring_components
@@ -209,12 +209,24 @@ class _DofSolver(Solver):
     def __init__(self, free: np.ndarray):
         self.free = free  # (N, dim) mask
         self.dim = free.shape[1]
+        flat = np.flatnonzero(free)
+        #: The free components' flat indices into an (N, 3) array (taken and
+        #: put by index: cheaper than the mask on a scene of tens of points).
+        self.index = flat if self.dim == 3 else 3 * (flat // self.dim) + flat % self.dim
 
     def solve(self, forces: np.ndarray) -> np.ndarray:
-        move = np.zeros((len(self.free), 3))
-        rhs = np.asarray(forces, dtype=float).reshape(-1, 3)[:, :self.dim]
-        move[:, :self.dim][self.free] = self._solve(rhs[self.free])
-        return move
+        return self._scatter(self._solve(self._gather(forces)))
+
+    def _gather(self, move: np.ndarray) -> np.ndarray:
+        """The free components (n,) of a move (N, 3)."""
+        return np.asarray(move, dtype=float).reshape(-1).take(self.index)
+
+    def _scatter(self, v: np.ndarray) -> np.ndarray:
+        """Free components (n,) or (n, k) as moves (N, 3) or (k, N, 3), zero
+        where held."""
+        out = np.zeros((*v.shape[1:], 3 * len(self.free)))
+        out[..., self.index] = v.T
+        return out.reshape(*v.shape[1:], len(self.free), 3)
 
     @abstractmethod
     def _solve(self, rhs: np.ndarray) -> np.ndarray:
@@ -406,7 +418,7 @@ class ExactModel(StiffnessModel):
     def local(self, hessian: np.ndarray, atoms: Atoms) -> Solver:
         """The model of the dense ``hessian`` (dim N, dim N) at ``atoms``'
         positions (its constraints say which moves are allowed)."""
-        if not np.isfinite(hessian).all():
+        if not all_finite(hessian):
             raise np.linalg.LinAlgError('the Hessian is not finite')
         dim = hessian.shape[0] // len(atoms)
         basis = self.basis(atoms, dim)
@@ -420,10 +432,10 @@ class ExactModel(StiffnessModel):
             matrix, basis = hessian.take(kept, axis=0).take(kept, axis=1), None
         else:
             matrix = hessian if basis is None else basis.T @ hessian @ basis
-        eigen = _EigenSolver(matrix, basis, free, self._absolute)
         if self.target == 'minimum':
-            return _CholeskySolver.of(matrix, basis, free, self.floor) or eigen
-        return eigen
+            return (_CholeskySolver.of(matrix, basis, free, self.floor)
+                    or _EigenSolver(matrix, basis, free, self._absolute))
+        return _EigenSolver(matrix, basis, free, self._absolute)
 
     def basis(self, atoms: Atoms, dim: int) -> np.ndarray | None:
         """:func:`allowed_basis`, kept while the constraints are the same;
@@ -459,14 +471,8 @@ class _DenseSolver(_DofSolver):
         return v if self.basis is None else self.basis @ v
 
     def _moves(self, v: np.ndarray) -> np.ndarray:
-        """Free components (n,) or (n, k) as moves (N, 3) or (k, N, 3)."""
-        flat = self._out(v)
-        out = np.zeros((*flat.shape[1:], len(self.free), 3))
-        out[..., :self.dim][..., self.free] = flat.T
-        return out
-
-    def _gather(self, move: np.ndarray) -> np.ndarray:
-        return np.asarray(move, dtype=float).reshape(-1, 3)[:, :self.dim][self.free]
+        """Components (n,) or (n, k) in the basis as moves (N, 3) or (k, N, 3)."""
+        return self._scatter(self._out(v))
 
     def dot(self, move: np.ndarray) -> np.ndarray:
         return self._moves(self.matrix @ self._into(self._gather(move)))

@@ -9,6 +9,7 @@ from ase.cluster import Icosahedron
 
 from ase_maud import Maud
 from ase_maud.accuracy import ACCURACY_FRACTION
+from ase_maud.dofs import free_dofs
 from ase_maud.scenes import build
 
 pytest.importorskip('fmm3dpy')
@@ -49,15 +50,28 @@ def test_maud_reaches_fmax_on_the_fmm_path(seed):
         reference.get_potential_energy(), rel=1e-10)
 
 
-def test_asked_tolerance_is_a_fraction_of_fmax():
+@pytest.mark.parametrize('watched', [False, True])
+def test_asked_tolerance_is_a_fraction_of_fmax(watched):
+    """Each call asks for a force error of a tenth of the larger of the run's
+    fmax and the largest force (on the free points) of the point before it,
+    on arrays and in ASE's loop."""
     atoms = build('hanging_net', 10, seed=2)
+    free = free_dofs(atoms, 3)
     seen = _record_tolerances(atoms.calc)
+    largest = []
+    calculate = atoms.calc.calculate
+
+    def recording(*args, **kwargs):
+        calculate(*args, **kwargs)
+        largest.append(np.linalg.norm(atoms.calc.results['forces'] * free, axis=1).max())
+    atoms.calc.calculate = recording
     with Maud(atoms, logfile=None) as opt:
+        if watched:
+            opt.attach(lambda: None)
         assert opt.run(fmax=1e-4, steps=500)
-    _, tol, scale = seen[-1]
-    # Near the end the run asks for a force error of a tenth of fmax.
-    assert tol * scale == pytest.approx(
-        ACCURACY_FRACTION * max(1e-4, opt.fmax_now), rel=1e-12)
+    assert len(seen) > 10
+    for (_, tol, scale), before in zip(seen[-5:], largest[-6:-1], strict=True):
+        assert tol * scale == pytest.approx(ACCURACY_FRACTION * max(1e-4, before), rel=1e-12)
 
 
 def test_calculators_without_tol_are_left_alone():

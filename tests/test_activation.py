@@ -14,6 +14,7 @@ from ase_maud.activation import SaddleSearch, search_saddles
 from ase_maud.analysis import classify
 from ase_maud.bench.runner import fresh_copy
 from ase_maud.landscape import landscape, same_point
+from ase_maud.stiffness import EXACT_MAX_DOFS
 
 #: The benchmark's own scenes (tools/saddles.py): ``chords`` (a ring with a
 #: chord from each point to the one a third of the way round, 2D) and ``rim``
@@ -54,10 +55,11 @@ def test_local_activation_reaches_a_verified_saddle_on_a_chord_ring():
 
 @pytest.mark.integration
 def test_local_activation_reaches_a_verified_saddle_on_a_dome():
-    """A net of 8 x 8 with its whole rim fixed (a dome), local attempts
-    only: a verified saddle from at least 5 of 8 seeds (measured 8 of 10,
-    rim:8 seeds 10-19)."""
-    reached = sum(verified(search_saddles(relaxed('rim', 8, seed), modes=0, local=6,
+    """A net of 7 x 7 with its whole rim fixed (a dome), local attempts
+    only: a verified saddle from at least 5 of 8 seeds (measured 2026-12-03:
+    6 of these 8, 3 of 4 on seeds 28-31; 8 x 8, a fifth slower: 6 of these
+    8, and 8 of 10 on seeds 10-19)."""
+    reached = sum(verified(search_saddles(relaxed('rim', 7, seed), modes=0, local=6,
                                           wanted=1, budget=500, seed=seed))
                   for seed in range(20, 28))
     assert reached >= 5
@@ -65,16 +67,20 @@ def test_local_activation_reaches_a_verified_saddle_on_a_dome():
 
 @pytest.mark.integration
 def test_local_activation_on_the_springs_model():
-    """A chord ring of 100 points (200 free coordinates: the whole scene is
-    released on the springs model): a verified saddle from at least one of
-    4 seeds (measured 2 of 3 on seeds 0-2 and 1 of these 4 after the merge
-    with the small-scene changes, --modes 0 --local 6 --budget 1000: the
-    springs model's release spends many budgets, and the rate is far below
-    issue 31's goal, docs/bench/saddles.md)."""
-    reached = sum(verified(search_saddles(relaxed('chords', 100, seed), modes=0, local=6,
+    """A chord ring of 80 points (160 free coordinates, above EXACT_MAX_DOFS:
+    the whole scene is released on the springs model): a verified saddle
+    from at least 2 of 4 seeds (measured 2026-12-03, --modes 0 --local 6
+    --budget 1000: 3 of these 4, seeds 10 and 13 each with a release, 13's
+    ending on the saddle; 4 of 4 on seeds 14-17. At 100 points 1 of these
+    4, in half as long again: the springs model's release spends many
+    budgets, and the rate is far below issue 31's goal,
+    docs/bench/saddles.md)."""
+    size = 80
+    assert 2 * size > EXACT_MAX_DOFS   # 2D, nothing fixed
+    reached = sum(verified(search_saddles(relaxed('chords', size, seed), modes=0, local=6,
                                           wanted=1, budget=1000, seed=seed))
                   for seed in (10, 11, 12, 13))
-    assert reached >= 1
+    assert reached >= 2
 
 
 def test_a_search_that_finds_nothing_says_what_it_tried():

@@ -47,6 +47,35 @@ def test_a_run_on_arrays_is_the_watched_run_bit_for_bit(scene, seed):
     assert quiet_log == log
 
 
+@pytest.mark.parametrize('model', ['springs', 'global', 'nodal', 'secant', 'bfgs'])
+@pytest.mark.parametrize('scene', [('hanging_net', 8), ('all_pairs', 12), ('tree', 20)],
+                         ids=lambda s: f'{s[0]}:{s[1]}')
+@pytest.mark.parametrize('seed', [11, 12])
+def test_every_model_runs_on_arrays_as_in_the_watched_run(model, scene, seed):
+    """Each model seeking a minimum makes the same steps on arrays as in ASE's
+    loop: positions, energy, steps, calculator calls (none where a step
+    moves nothing, none for a model kept) and log, converged or stopped at
+    ``steps``."""
+    name, size = scene
+    runs = []
+    for watched in (False, True):
+        atoms = build(name, size, seed=seed)
+        if name == 'tree':   # a held point
+            atoms.set_constraint(FixAtoms([0]))
+        log = io.StringIO()
+        with CallRecorder(atoms.calc) as recorder:
+            with Maud(atoms, logfile=log, model=model) as opt:
+                if watched:
+                    opt.attach(lambda: None)
+                converged = opt.run(fmax=1e-6, steps=150)
+        runs.append((atoms, opt.nsteps, converged, _steps_of_log(log), len(recorder.samples)))
+    (quiet, steps, done, quiet_log, quiet_calls), (watched, *rest) = runs
+    assert [steps, done, quiet_log, quiet_calls] == rest
+    assert steps > 0
+    np.testing.assert_array_equal(quiet.positions, watched.positions)
+    assert quiet.get_potential_energy() == watched.get_potential_energy()
+
+
 def test_a_run_on_arrays_keeps_held_coordinates_and_stops_at_steps():
     atoms = build('all_pairs', 16, seed=13)
     start = atoms.positions.copy()
@@ -70,7 +99,7 @@ def test_a_run_leaves_the_calculators_tolerance_as_the_user_set_it(seed, watched
     """The run asks the calculator for coarser sums far from the answer
     (``ase_maud.accuracy.ask``); the user's ``tol`` is back when it ends, so a
     trajectory's or a later run's calculator parameters are the user's."""
-    atoms = build('hanging_net', 30, seed=seed)   # the springs model: not on arrays
+    atoms = build('hanging_net', 30, seed=seed)   # the springs model
     atoms.calc.set(tol=1e-7)
     asked = []
     set_tolerance = atoms.calc.set_tolerance
@@ -122,3 +151,31 @@ def test_a_run_with_no_finite_step_says_so_once_in_its_log(seed, watched, monkey
         opt.run(fmax=1e-6)
     assert log.getvalue().count('Maud: stopped:') == 1
     assert f'Maud: stopped: {error.value}' in log.getvalue()
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_a_step_that_moves_nothing_costs_no_call_on_arrays_either(seed, monkeypatch):
+    """Every third step made a zero move (as a step cut to nothing would be):
+    ASE's loop asks the calculator nothing there (the results held are of
+    those positions), and neither does the run on arrays."""
+    from ase_maud.strategy import Minimise
+
+    step = Minimise.step
+
+    def some_still(self, state, *args):
+        move = step(self, state, *args)
+        return move * 0.0 if state.k % 3 == 2 else move
+
+    monkeypatch.setattr(Minimise, 'step', some_still)
+    runs = []
+    for watched in (False, True):
+        atoms = build('hanging_net', 6, seed=seed)
+        with CallRecorder(atoms.calc) as recorder:
+            with Maud(atoms, logfile=None, model='springs', beta_max=0.5) as opt:
+                if watched:
+                    opt.attach(lambda: None)
+                opt.run(fmax=1e-6, steps=30)
+        runs.append((opt.nsteps, len(recorder.samples), atoms.positions.copy()))
+    (steps, calls, quiet), (also, watched_calls, watched) = runs
+    assert steps == also and calls == watched_calls < steps + 1
+    np.testing.assert_array_equal(quiet, watched)

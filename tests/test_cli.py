@@ -156,9 +156,11 @@ def test_the_default_scene_hangs_under_its_weight(tmp_path, capsys):
     assert relaxed.get_potential_energy() == pytest.approx(
         reference.get_potential_energy(), rel=1e-10)
     np.testing.assert_allclose(relaxed.positions, reference.positions, atol=1e-6)
+    # The free points hang 0.32 a or more lower: fmax 1e-5 (275 BFGS steps where
+    # 1e-7 takes 1003) puts the unloaded net within 5e-6 a of its minimum.
     unloaded = build('hanging_net')
     with BFGS(unloaded, logfile=None) as opt:
-        assert opt.run(fmax=1e-7, steps=2000)
+        assert opt.run(fmax=1e-5, steps=2000)
     free = np.flatnonzero(relaxed.calc.parameters['loads'][:, 2])
     assert len(free) == 36 and (relaxed.positions[free, 2] < unloaded.positions[free, 2]).all()
 

@@ -1,5 +1,7 @@
 """The landscape around a minimum (ase_maud.landscape) against ASE's basin hopping."""
 
+import functools
+
 import numpy as np
 import pytest
 from ase.optimize.basin import BasinHopping
@@ -20,12 +22,31 @@ def _minimum(scene, size, seed):
     return atoms
 
 
+@functools.cache
+def _landscape(scene, size, seed):
+    """The scene's minimum and its landscape (two modes), computed once for
+    the tests that read them (none changes either)."""
+    minimum = _minimum(scene, size, seed)
+    return minimum, landscape(minimum, modes=2, fmax=FMAX)
+
+
+@pytest.fixture(scope='module')
+def client():
+    """A client of two local dask workers (processes, one thread each),
+    started once for the module's tests."""
+    distributed = pytest.importorskip('distributed')
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        yield client
+
+
 @pytest.mark.parametrize('scene, size, seed', [
     ('all_pairs2d', 9, 0), ('all_pairs2d', 9, 1), ('all_pairs', 6, 0), ('all_pairs', 7, 1)])
 def test_landscape_is_minima_joined_by_index_one_saddles(scene, size, seed):
     """Each saddle is a verified index-1 point above both minima it joins,
     each minimum a verified minimum, and no two of either are the same."""
-    found = landscape(_minimum(scene, size, seed), modes=2, fmax=FMAX)
+    _, found = _landscape(scene, size, seed)
     assert found.saddles and found.failed == 0
     for saddle in found.saddles:
         point = classify(fresh_copy(saddle), ftol=FMAX)
@@ -42,7 +63,7 @@ def test_landscape_is_minima_joined_by_index_one_saddles(scene, size, seed):
 def test_basin_hopping_finds_no_minimum_the_landscape_misses(scene, size, seed):
     """Every minimum a seeded basin-hopping run (30 hops, Maud as its local
     optimiser) visits is one of the landscape's, the lowest among them."""
-    found = landscape(_minimum(scene, size, seed), modes=2, fmax=FMAX)
+    _, found = _landscape(scene, size, seed)
     atoms = build(scene, size, seed=seed)
     visited = []
 
@@ -77,26 +98,20 @@ def _graph(found):
 
 
 @pytest.mark.parametrize('scene, size, seed', [('all_pairs2d', 9, 0), ('all_pairs', 6, 1)])
-def test_a_landscape_on_two_workers_is_the_one_in_process(scene, size, seed):
-    distributed = pytest.importorskip('distributed')
-    minimum = _minimum(scene, size, seed)
-    here = landscape(minimum, modes=2, fmax=FMAX)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster, \
-            distributed.Client(cluster) as client:
-        spread = landscape(minimum, modes=2, fmax=FMAX, client=client)
+def test_a_landscape_on_two_workers_is_the_one_in_process(scene, size, seed, client):
+    minimum, here = _landscape(scene, size, seed)
+    spread = landscape(minimum, modes=2, fmax=FMAX, client=client)
     assert _graph(spread) == _graph(here) and here.saddles
 
 
 @pytest.mark.integration
 @pytest.mark.parametrize('seed', range(2))
-def test_a_large_landscape_on_two_workers_is_the_one_in_process(seed):
+def test_a_large_landscape_on_two_workers_is_the_one_in_process(seed, client):
     """Above the exact model's size (a tree of 60 points, 177 free
     coordinates, above EXACT_MAX_DOFS: the springs model's lowest modes
     climb) the landscape finds verified saddles, and two dask workers find
     the same graph (seeds 0-3 measured to pass at 60 points; 100 points took
     three times as long)."""
-    distributed = pytest.importorskip('distributed')
     minimum = _minimum('tree', 60, seed)
     assert 3 * (len(minimum) - 1) > EXACT_MAX_DOFS   # the root is fixed
     here = landscape(minimum, modes=1, fmax=FMAX, steps=500)
@@ -104,8 +119,5 @@ def test_a_large_landscape_on_two_workers_is_the_one_in_process(seed):
     for saddle in here.saddles:
         point = classify(fresh_copy(saddle), ftol=FMAX)
         assert point.verdict == 'saddle' and point.index == 1
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster, \
-            distributed.Client(cluster) as client:
-        spread = landscape(minimum, modes=1, fmax=FMAX, steps=500, client=client)
+    spread = landscape(minimum, modes=1, fmax=FMAX, steps=500, client=client)
     assert _graph(spread) == _graph(here)

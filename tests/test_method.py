@@ -148,6 +148,31 @@ def test_lbfgs_memory_over_a_poor_model_converges_downhill(seed):
     assert np.all(np.diff(energies) <= 1e-12 * np.abs(energies[1:]))
 
 
+@pytest.mark.parametrize('seed', range(4))
+def test_lbfgs_is_the_bfgs_inverse_update_of_its_initial_model(seed):
+    """The two-loop recursion over m pairs applies the matrix the BFGS
+    inverse update builds from ``K^-1``, pair by pair, oldest first:
+    ``H <- (I - rho s y^T) H (I - rho y s^T) + rho s s^T``."""
+    rng = np.random.default_rng(seed)
+    n, m = int(rng.integers(3, 12)), int(rng.integers(1, 30))
+    root = rng.normal(size=(3 * n, 3 * n))
+    K = root @ root.T + 3 * n * np.eye(3 * n)
+    pairs = []
+    for _ in range(m):
+        s = rng.normal(size=(n, 3))
+        y = (K @ s.ravel() + 0.3 * rng.normal(size=3 * n)).reshape(n, 3)   # s.y > 0
+        pairs.append((s, y))
+    H = np.linalg.inv(K)
+    for s, y in pairs:
+        rho = 1.0 / np.vdot(s, y)
+        left = np.eye(3 * n) - rho * np.outer(s.ravel(), y.ravel())
+        H = left @ H @ left.T + rho * np.outer(s.ravel(), s.ravel())
+    forces = rng.normal(size=(n, 3))
+    direction = lbfgs(lambda f: np.linalg.solve(K, f.ravel()).reshape(f.shape), forces, pairs)
+    np.testing.assert_allclose(direction.ravel(), H @ forces.ravel(), rtol=1e-9,
+                               atol=1e-12 * np.abs(H @ forces.ravel()).max())
+
+
 def test_an_uphill_step_is_taken_back_with_half_the_gamma():
     quadratic = Quadratic(3)
     rule = method()

@@ -193,7 +193,7 @@ def test_pair_chunks_give_every_pair_once(n, chunk):
 @pytest.mark.parametrize('seed', range(3))
 @pytest.mark.parametrize('dim', [2, 3])
 def test_the_potentials_spring_sums_are_the_pair_law(seed, dim):
-    """``MaudPotential.spring_terms`` (incidence products) equals the pair law
+    """``MaudPotential.spring_terms`` (the compiled sum) equals the pair law
     summed spring by spring (:func:`physics.spring_terms`), with and without
     force densities."""
     rng = np.random.default_rng(seed)

@@ -22,8 +22,12 @@ SCENE = ('hanging_net', 8)
 
 
 def reference_energy(seed):
+    """BFGS's minimum energy from the scene's start. To fmax 1e-5 it lies
+    within 4e-13 relative of the minimum (seeds 0-4, against Maud to 1e-6;
+    measured 2026-12-03), far inside the tests' 1e-9: 250-300 steps where
+    fmax 1e-8 took 440-1570."""
     atoms = build(*SCENE, seed=seed)
-    BFGS(atoms, logfile=None).run(fmax=1e-8, steps=3000)
+    BFGS(atoms, logfile=None).run(fmax=1e-5, steps=3000)
     return atoms.get_potential_energy()
 
 

@@ -35,16 +35,17 @@ def dome(size: int, seed: int):
 
 @pytest.mark.integration
 def test_the_snap_through_saddle_of_a_dome_is_verified_and_met_by_the_climbing_image():
-    """6x6 points, seeds 0-5: each saddle is index 1 with no zero curvature
-    and forces below 1e-6 (classified again from a fresh calculator), above
-    both minima. The band, relaxed on with its climbing image to fmax 1e-3
-    (at most 300 steps), has its highest image at the saddle's energy to
-    1e-6 of the barrier on most seeds (measured: 4 of 6, each within 2.3e-7;
-    on 3 the band did not converge, on 4 it settled 0.2 % away; seeds 6 and
-    7: 7 agrees, 6 does not converge)."""
+    """5x5 points (9 free), seeds 0-5: each saddle is index 1 with no zero
+    curvature and forces below 1e-6 (classified again from a fresh
+    calculator), above both minima. The band, relaxed on with its climbing
+    image to fmax 1e-3 (at most 300 steps), has its highest image at the
+    saddle's energy to 1e-6 of the barrier on most seeds (measured
+    2026-12-03: 6 of 6, within 1.3e-7 but seed 5's 8.9e-7; seeds 6-9 agree
+    too, within 5.3e-7. On 6x6 domes, three times as long, 4 of 6: on 3 the
+    band did not converge, on 4 it settled 0.2 % away)."""
     agree = 0
     for seed in range(6):
-        first, second = dome(6, seed)
+        first, second = dome(5, seed)
         found = saddle_between(first, second)
         assert found.saddle is not None, found.outcome
         point = classify(fresh_copy(found.saddle))
@@ -63,7 +64,7 @@ def test_the_snap_through_saddle_of_a_dome_is_verified_and_met_by_the_climbing_i
         top = max(image.get_potential_energy() for image in found.band[1:-1])
         barrier = top - first.get_potential_energy()
         agree += barrier == pytest.approx(found.barriers[0], rel=1e-6)
-    assert agree >= 3
+    assert agree >= 4
 
 
 @pytest.mark.parametrize('seed', [0, 1, 2])

@@ -25,8 +25,9 @@ from ase.filters import Filter
 from .calculator import MaudCalculator
 from .checks import check
 from .dofs import PROJECTIONS, free_dofs
+from .models import choose_model
 from .neighbours import NearestDistances
-from .stiffness import SecantModel, StiffnessModel, choose_model
+from .stiffness import SecantModel, StiffnessModel
 from .strategy import STEP_DEFAULTS, StepRule, Strategy, compose, step_rule
 from .subset import SubsetView
 
@@ -54,7 +55,7 @@ def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
              steps: dict[str, Any], order: int, mode: Any,
              **options: Any) -> Assembly:
     """The :class:`Assembly` of a run on ``atoms`` (module docstring):
-    ``model`` a name (:func:`~ase_maud.stiffness.choose_model`, with
+    ``model`` a name (:func:`~ase_maud.models.choose_model`, with
     ``options``: ``method``, ``floor``, ``kappa0``) or a model; ``steps`` the
     user's step keywords (checked), ``order`` and ``mode`` a saddle search's."""
     system = atoms.__ase_optimizable__() if hasattr(

@@ -520,8 +520,8 @@ def build_parser() -> argparse.ArgumentParser:
     from . import backends as registry
     from .bench.optimizers import OPTIMIZERS
     from .checks import RULES
+    from .models import MODELS
     from .scenes import SCENES, SUITES
-    from .stiffness import MODELS
 
     parser, commands = _top_parser()
 

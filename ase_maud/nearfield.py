@@ -55,7 +55,7 @@ from . import physics
 from .analysis import Work
 from .dofs import free_dofs, rigid_body_modes
 from .neighbours import NearestDistances
-from .stiffness import MODELS, Solver, SpringsModel
+from .stiffness import Solver, SpringsModel
 
 #: Pairs nearer than this many median nearest-neighbour distances get their
 #: repulsion block (about 2 a point in a free graph; the spectra of
@@ -225,6 +225,3 @@ class NearSolver(Solver):
             direction = z + (rz / last) * direction
             product = residual + self._r(z) + (rz / last) * product
         return move
-
-
-MODELS[NearModel.name] = NearModel

@@ -18,6 +18,7 @@ from ase_maud.descent import (
     mode_steps,
     truncated_newton,
 )
+from ase_maud.models import MODELS
 from ase_maud.monitor import ENERGY_PROGRESS, DivergenceError, RunMonitor, StagnationError
 from ase_maud.neighbours import NearestDistances
 from ase_maud.search import (
@@ -28,7 +29,7 @@ from ase_maud.search import (
     reaches,
     trust_region,
 )
-from ase_maud.stiffness import MODELS, DampedSolver, StiffnessModel
+from ase_maud.stiffness import DampedSolver, StiffnessModel
 from ase_maud.strategy import STEP_DEFAULTS, MaudState, Point, compose, step_rule
 
 

@@ -13,9 +13,9 @@ from ase_maud.analysis import classify, same_point
 from ase_maud.bench.optimizers import OPTIMIZERS
 from ase_maud.bench.runner import fresh_copy
 from ase_maud.dofs import free_dofs
+from ase_maud.models import MODELS, choose_model
 from ase_maud.nearfield import NearModel, near_pairs, sparse_springs
 from ase_maud.scenes import build
-from ase_maud.stiffness import MODELS, choose_model
 
 
 def jiggled(name, size, seed, by=0.1):

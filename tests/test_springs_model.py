@@ -12,9 +12,10 @@ from ase_maud import Maud, MaudCalculator
 from ase_maud.analysis import classify
 from ase_maud.descent import MIN_PAIR_COSINE
 from ase_maud.dofs import free_dofs
+from ase_maud.models import choose_model
 from ase_maud.potential import MaudPotential
 from ase_maud.scenes import build
-from ase_maud.stiffness import SpringsModel, choose_model
+from ase_maud.stiffness import SpringsModel
 from ase_maud.strategy import Minimise
 
 

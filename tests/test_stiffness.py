@@ -10,6 +10,7 @@ from ase.optimize import BFGS
 from ase.optimize.precon import PreconFIRE, PreconLBFGS
 
 from ase_maud import Maud, MaudCalculator
+from ase_maud.models import choose_model
 from ase_maud.precon import MaudPrecon
 from ase_maud.scenes import SCENES, build
 from ase_maud.stiffness import (
@@ -19,7 +20,6 @@ from ase_maud.stiffness import (
     NodalModel,
     SecantModel,
     allowed_basis,
-    choose_model,
     free_dofs,
     internal_basis,
     rigid_body_modes,

@@ -54,7 +54,7 @@ def lbfgs(solve: Callable[[np.ndarray], np.ndarray], forces: np.ndarray,
     """The L-BFGS direction over ``pairs`` (oldest first) with ``solve``
     (``K^-1``) as the initial inverse Hessian; ``K^-1 f`` with no pairs. The
     two loops are compiled (:func:`_newest_first`, :func:`_oldest_first`):
-    in numpy each pair costs four calls, most of a step on tens of points."""
+    in numpy each pair would cost four calls."""
     if not pairs:
         return solve(forces)
     s = np.stack([pair[0] for pair in pairs]).reshape(len(pairs), -1)

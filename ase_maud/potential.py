@@ -236,7 +236,7 @@ class MaudPotential:
         return hv.reshape(v.shape)
 
 
-@numba.njit(fastmath=False, cache=True)
+@numba.njit(cache=True)
 def _spring_sums(x: np.ndarray, springs: np.ndarray,
                  q: np.ndarray) -> tuple[float, np.ndarray]:
     """``sum_s q_s |d_s|**2 / 2`` and the forces (N, 3): ``-q_s d_s`` on

@@ -75,9 +75,9 @@ class Maud(Resumable):
     ----------
     atoms : Atoms (or anything with ``__ase_optimizable__``)
         The system to relax.
-    model : 'auto', 'exact', 'global', 'nodal', 'bfgs', 'secant', 'springs', 'near' or a
-            StiffnessModel
-        The stiffness ``K`` of the step (:func:`ase_maud.models.choose_model`);
+    model : 'auto', a name of ``ase_maud.models.MODELS`` or a StiffnessModel
+        The stiffness ``K`` of the step (:func:`ase_maud.models.choose_model`:
+        'exact', 'global', 'nodal', 'bfgs', 'secant', 'springs', 'near');
         ``method`` ('tensor' or 'scalar') is the nodal model's, ``floor`` a
         model's relative eigenvalue floor, ``kappa0`` the secant and bfgs models' start.
     target : 'minimum', 'stationary', 'saddle' or None

@@ -76,8 +76,7 @@ class Maud(Resumable):
     atoms : Atoms (or anything with ``__ase_optimizable__``)
         The system to relax.
     model : 'auto', a name of ``ase_maud.models.MODELS`` or a StiffnessModel
-        The stiffness ``K`` of the step (:func:`ase_maud.models.choose_model`:
-        'exact', 'global', 'nodal', 'bfgs', 'secant', 'springs', 'near');
+        The stiffness ``K`` of the step (:func:`ase_maud.models.choose_model`);
         ``method`` ('tensor' or 'scalar') is the nodal model's, ``floor`` a
         model's relative eigenvalue floor, ``kappa0`` the secant and bfgs models' start.
     target : 'minimum', 'stationary', 'saddle' or None

@@ -55,7 +55,7 @@ from . import physics
 from .analysis import Work
 from .dofs import free_dofs, rigid_body_modes
 from .neighbours import NearestDistances
-from .stiffness import Solver, SpringsModel
+from .stiffness import Solver, SpringsModel, _held_at_zero
 
 #: Pairs nearer than this many median nearest-neighbour distances get their
 #: repulsion block (about 2 a point in a free graph; the spectra of
@@ -175,27 +175,22 @@ class NearSolver(Solver):
         self.free, self.rigid, self.work = free, rigid, work
         self.dim = free.shape[1]
 
-    def _held_at_zero(self, move: np.ndarray) -> np.ndarray:
-        move[:, self.dim:] = 0.0
-        move[:, :self.dim][~self.free] = 0.0
-        return move
-
     def _r(self, v: np.ndarray) -> np.ndarray:
         """``R v`` (N, 3) on the free coordinates, one product counted."""
         self.work.near_products += 1
         stretch = self.incidence @ v[:, :self.dim]
         out = np.zeros_like(v)
         out[:, :self.dim] = self.incidence.T @ np.einsum('pab,pb->pa', self.blocks, stretch)
-        return self._held_at_zero(out)
+        return _held_at_zero(out, self.free)
 
     def dot(self, v: np.ndarray) -> np.ndarray:
         """``P v`` (N, 3), force per length, zero on held coordinates (the
         springs' part by its own product: for a check, not the CG)."""
-        v = self._held_at_zero(np.array(v, dtype=float).reshape(-1, 3))
+        v = _held_at_zero(np.array(v, dtype=float).reshape(-1, 3), self.free)
         return self.springs.dot(v) + self._r(v)
 
     def solve(self, forces: np.ndarray) -> np.ndarray:
-        residual = self._held_at_zero(np.array(forces, dtype=float).reshape(-1, 3))
+        residual = _held_at_zero(np.array(forces, dtype=float).reshape(-1, 3), self.free)
         move = self._cg(residual)
         flat = move[:, :self.dim][self.free]
         move[:, :self.dim][self.free] = flat - self.rigid @ (self.rigid.T @ flat)

@@ -171,3 +171,20 @@ def test_another_calculators_spreading_run_ends_by_fmax_as_with_bfgs(seed):
     assert np.linalg.norm(fresh.get_forces(), axis=1).max() <= 0.01
     size = np.linalg.norm(start - start.mean(axis=0), axis=1).max()
     assert np.ptp(ends[Maud].positions, axis=0).max() > 8 * size   # it did spread
+
+
+@pytest.mark.parametrize('seed', range(5))
+def test_spring_components_are_the_graphs_components(seed):
+    """Two atoms share a label exactly when a path of springs joins them
+    (checked by merging labels spring by spring), springs in any order,
+    isolated atoms alone."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 40))
+    pairs = rng.integers(0, n, size=(int(rng.integers(0, 2 * n)), 2))
+    springs = pairs[pairs[:, 0] != pairs[:, 1]]
+    labels = spring_components(n, springs)
+    group = np.arange(n)
+    for i, j in springs:   # the closure, slowly
+        group[group == group[j]] = group[i]
+    same = labels[:, None] == labels[None, :]
+    np.testing.assert_array_equal(same, group[:, None] == group[None, :])

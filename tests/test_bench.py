@@ -385,3 +385,21 @@ def test_ase_systems_tool_counts_every_image_and_caps_hops():
     assert not converged and calls == 3 * 4   # 3 inner images, 4 evaluations each
     calls, _, lowest = tool['basin']('LJ13', 1, BFGS, 1, 0.01, 5)
     assert lowest.endswith('(2 not converged in 5 steps)')
+
+
+@pytest.mark.parametrize('seed', [int(s) for s in np.random.default_rng(32).integers(0, 10**4, 2)])
+def test_ase_systems_race_reaches_a_chain_own_lowest_at_its_own_calls(seed):
+    """tools/ase_systems.py --race: racing BFGS's own BasinHopping chain (the
+    same seed, so the same moves) to its lowest energy reaches it within its
+    calls, at the relaxation that first found it; an unreachable target stops
+    once the calls are spent."""
+    from ase.optimize import BFGS
+    tool = runpy.run_path(str(Path(__file__).parent.parent / 'tools' / 'ase_systems.py'))
+    calls, _, lowest = tool['basin']('LJ7', seed, BFGS, 3, 0.01, 2000)
+    target = float(lowest.split()[0])
+    reached, spent, cpu, hops, best = tool['race']('LJ7', seed, BFGS, calls, target, 0.01, 2000)
+    assert reached == spent and 0 < reached <= calls and hops <= 3 and cpu > 0
+    assert abs(best - target) <= 1e-3
+    reached, spent, _, hops, best = tool['race']('LJ7', seed, BFGS, calls, target - 10, 0.01,
+                                                   2000)
+    assert reached is None and spent >= calls and best >= target - 1e-3

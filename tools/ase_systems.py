@@ -14,6 +14,7 @@ no column for a band.
 
     python tools/ase_systems.py --seeds 0 1 2 --fmax 0.01 --steps 2000 --csv runs.csv
     python tools/ase_systems.py --basin 20 --systems LJ13 LJ38 --seeds 0 1 2
+    python tools/ase_systems.py --basin 20 --race --systems LJ13 LJ38 --seeds 0 1 2
     python tools/ase_systems.py --hops 8 --systems LJ38 --seeds 0 1 2 3 4 5 \
         --optimizers Maud BFGS --csv hops.csv
     python tools/ase_systems.py --systems LJ7 LJ13 LJ38 --seeds $(seq 0 19) \
@@ -110,6 +111,44 @@ def basin(system: str, seed: int, opt, hops: int, fmax: float, steps: int):
     return counter.calls, time.process_time() - start, lowest
 
 
+class _Reached(Exception):
+    """Stops a race of :func:`race` (its energy reached, or its calls spent)."""
+
+
+def race(system: str, seed: int, opt, budget: int, target: float, fmax: float,
+         steps: int, tolerance: float = 1e-3):
+    """ASE's BasinHopping as in :func:`basin` (the same seed, so the same first
+    moves), its hops going on until a local relaxation ends at most
+    ``tolerance`` above ``target`` (another optimizer's lowest energy) or the
+    calls reach ``budget`` (that optimizer's calls): (calls when the target
+    was reached or None, calls spent, CPU s, hops, lowest energy)."""
+    from ase.optimize.basin import BasinHopping
+    atoms = SYSTEMS[system](seed).target
+    counter = Counted([atoms])
+    relaxed: list[float] = []
+
+    class Racing(capped(opt, steps, [])):
+        def run(self, fmax=0.05, steps=None):
+            converged = super().run(fmax=fmax)
+            relaxed.append(self.optimizable.get_value())
+            if relaxed[-1] <= target + tolerance or counter.calls >= budget:
+                raise _Reached
+            return converged
+
+    np.random.seed(seed)   # BasinHopping draws from numpy's global generator
+    start = time.process_time()
+    try:   # the first relaxation is BasinHopping's construction's
+        with BasinHopping(atoms, temperature=1.0, dr=0.5, optimizer=Racing, fmax=fmax,
+                          logfile=None, trajectory=None, optimizer_logfile=None) as hopping:
+            hopping.run(10**6)
+    except _Reached:
+        pass
+    cpu = time.process_time() - start
+    lowest = min(relaxed)
+    reached = counter.calls if lowest <= target + tolerance else None
+    return reached, counter.calls, cpu, len(relaxed) - 1, lowest
+
+
 def hops(system: str, seed: int, count: int, optimizers: dict, fmax: float, steps: int):
     """Rows (system, seed, hop, optimizer, calls, energy, converged) of
     ``count`` BasinHopping moves (each coordinate moved uniformly within
@@ -148,6 +187,10 @@ def main() -> None:
                         help='instead: BasinHopping of this many hops, Maud against BFGS '
                         'or the --optimizers given (each local relaxation at most --steps '
                         'steps)')
+    parser.add_argument('--race', action='store_true',
+                        help='with --basin: BFGS makes --basin hops; then Maud hops from the '
+                        'same seed until it reaches BFGS\'s lowest energy (within 1e-3) or '
+                        'spends BFGS\'s calls')
     parser.add_argument('--hops', type=int, default=0,
                         help='instead: this many BasinHopping moves from the minimum BFGS '
                         'reaches from each start, each relaxed by every optimizer (--csv)')
@@ -175,6 +218,21 @@ def main() -> None:
         rows = [row for system in args.systems for seed in args.seeds
                 for row in hops(system, seed, args.hops, optimizers, args.fmax, args.steps)]
         _write(args.csv, rows)
+        return
+    if args.basin and args.race:
+        print('| system | seed | BFGS: calls, CPU, lowest | Maud: calls to BFGS\'s lowest '
+              '(within BFGS\'s calls), hops, CPU, lowest |')
+        print('|---|---|---|---|')
+        for system in args.systems:
+            for seed in args.seeds:
+                calls, cpu, lowest = basin(system, seed, BFGS, args.basin, args.fmax, args.steps)
+                target = float(lowest.split()[0])
+                reached, spent, maud_cpu, count, maud_lowest = race(
+                    system, seed, Maud, calls, target, args.fmax, args.steps)
+                verdict = (f'{reached} ({reached / calls:.2f}x)' if reached is not None
+                           else f'not reached in {spent}')
+                print(f'| {system} | {seed} | {calls}, {cpu:.1f} s, {lowest} | {verdict}, '
+                      f'{count} hops, {maud_cpu:.1f} s, {maud_lowest:.4f} |', flush=True)
         return
     if args.basin:   # Maud and BFGS unless --optimizers names others (ASE's classes)
         hopping = optimizers if args.optimizers else {

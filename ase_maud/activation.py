@@ -119,6 +119,9 @@ class Attempt:
     hessians: int = 0
     cpu_s: float = 0.0
     energy: float = float('nan')
+    #: the index in :attr:`SaddleSearch.saddles` of the saddle it reached
+    #: ('saddle' or 'known saddle'; None otherwise)
+    saddle: int | None = None
 
     @property
     def cost(self) -> int:
@@ -156,12 +159,28 @@ class SaddleSearch:
         """CPU seconds of the attempts."""
         return sum(a.cpu_s for a in self.attempts)
 
+    @property
+    def coverage(self) -> float | None:
+        """The estimated share of the saddles this search's attempts reach
+        that it found: Good and Turing's ``1 - f1 / n`` over the ``n``
+        attempts that reached a saddle, ``f1`` of the saddles reached by one
+        attempt only (a saddle met once suggests others not met yet); None
+        before any attempt reached one. An estimate for attempts drawn alike:
+        saddles no kind of attempt made here can reach are not in it."""
+        reached = np.bincount([a.saddle for a in self.attempts if a.saddle is not None],
+                              minlength=len(self.saddles))
+        if not reached.sum():
+            return None
+        return 1.0 - float((reached == 1).sum()) / float(reached.sum())
+
     def report(self) -> str:
         """What was found and tried, one attempt a line; a search that found
         no saddle says so first."""
         head = (f'{len(self.saddles)} index-1 saddles' if self.saddles
                 else 'no index-1 saddle found')
-        lines = [f'{head} in {len(self.attempts)} attempts, {self.cost} force-call '
+        coverage = ('' if self.coverage is None else
+                    f' (estimated {self.coverage:.0%} of those its attempts reach)')
+        lines = [f'{head}{coverage} in {len(self.attempts)} attempts, {self.cost} force-call '
                  f'equivalents ({self.work.total} for the minimum\'s modes), '
                  f'{self.cpu_s:.2f} CPU s:']
         return '\n'.join(lines + ['  ' + a.describe() for a in self.attempts])
@@ -217,10 +236,12 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     def merge(results: list[tuple[Atoms | None, Attempt]]) -> None:
         for saddle, attempt in results:
             if saddle is not None:
-                if any(same_point(s, saddle, energy_rtol, distance_atol)
-                       for s in found.saddles):
-                    attempt.outcome = 'known saddle'
+                known = next((i for i, s in enumerate(found.saddles)
+                              if same_point(s, saddle, energy_rtol, distance_atol)), None)
+                if known is not None:
+                    attempt.outcome, attempt.saddle = 'known saddle', known
                 elif not enough():
+                    attempt.saddle = len(found.saddles)
                     found.saddles.append(saddle)
             found.attempts.append(attempt)
 

@@ -10,7 +10,7 @@ import pytest
 from ase.filters import Filter
 
 from ase_maud import Maud
-from ase_maud.activation import SaddleSearch, search_saddles
+from ase_maud.activation import Attempt, SaddleSearch, search_saddles
 from ase_maud.analysis import classify
 from ase_maud.bench.runner import fresh_copy
 from ase_maud.landscape import landscape, same_point
@@ -111,6 +111,14 @@ def test_saddles_found_are_distinct_and_every_attempt_is_counted():
         assert not any(same_point(saddle, other) for other in search.saddles[:i])
     found = sum(a.outcome == 'saddle' for a in search.attempts)
     assert found == len(search.saddles)
+    first = [a.saddle for a in search.attempts if a.outcome == 'saddle']
+    assert first == list(range(len(search.saddles)))   # each saddle's first finder
+    for k, attempt in enumerate(search.attempts):      # a repeat names one found before
+        if attempt.outcome == 'known saddle':
+            assert attempt.saddle in first[:sum(a.outcome == 'saddle'
+                                                for a in search.attempts[:k])]
+        elif attempt.outcome != 'saddle':
+            assert attempt.saddle is None
     assert all(a.outcome for a in search.attempts)
     assert all(a.cost == a.calls + a.hvp_vectors + a.hessians for a in search.attempts)
 
@@ -146,3 +154,19 @@ def test_a_saddle_search_on_a_filter_follows_a_move_of_its_atoms():
     assert opt.found.index == 1
     with pytest.raises(ValueError, match='6 points'):
         Maud(Filter(atoms, indices=region), target='saddle', mode=np.zeros((18, 3)))
+
+
+@pytest.mark.parametrize('seed', [int(s) for s in np.random.default_rng(31).integers(0, 10**4, 3)])
+def test_coverage_is_good_turing_over_the_attempts_that_reached_a_saddle(seed):
+    """``SaddleSearch.coverage``: one minus the share of the attempts that
+    reached a saddle no other attempt reached (random tallies; attempts that
+    reached none do not count); None while no attempt reached a saddle."""
+    rng = np.random.default_rng(seed)
+    hits = rng.integers(1, 5, rng.integers(1, 6))   # attempts reaching each saddle
+    attempts = [Attempt('mode', 0, saddle=int(i)) for i, n in enumerate(hits) for _ in range(n)]
+    attempts += [Attempt('local', 1, outcome='budget')] * int(rng.integers(0, 4))
+    search = SaddleSearch(saddles=[None] * len(hits), attempts=list(rng.permutation(attempts)))
+    singles = sum(1 for n in hits if n == 1)
+    assert search.coverage == pytest.approx(1 - singles / hits.sum())
+    assert f'estimated {search.coverage:.0%}' in search.report()
+    assert SaddleSearch(attempts=[Attempt('mode', 0, outcome='budget')]).coverage is None

@@ -28,12 +28,15 @@ one side of its unstable mode back into the start, up to relabelling) and its ba
 the start is below ``--window`` (units of ``Q a^2``). The **fraction** is the share of the
 reference's counted saddles that the default landscape found too
 (:func:`ase_maud.analysis.same_point`); ``default_only`` counts the default's counted
-saddles that the reference missed. Cost: :attr:`ase_maud.landscape.Landscape.cost`, every
-calculator call, Hessian-vector product vector and Hessian of the whole map (the start's
-classification, the attempts, the saddles' classifications and descents), in force-call
-equivalents, and ``time.process_time`` CPU seconds (every thread: run with one), both also
-per counted saddle found. Each saddle the default missed is printed with its barrier and
-the reference attempt that found it. Rows go to ``OUT/landscape_completeness.csv``. Run::
+saddles that the reference missed; ``estimated`` is the landscape's own estimate of its
+completeness (:attr:`ase_maud.activation.SaddleSearch.coverage`, from its attempts alone,
+over every saddle they reach, counted or not). Cost:
+:attr:`ase_maud.landscape.Landscape.cost`, every calculator call, Hessian-vector product
+vector and Hessian of the whole map (the start's classification, the attempts, the saddles'
+classifications and descents), in force-call equivalents, and ``time.process_time`` CPU
+seconds (every thread: run with one), both also per counted saddle found. Each saddle the
+default missed is printed with its barrier and the reference attempt that found it. Rows
+go to ``OUT/landscape_completeness.csv``. Run::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
         python tools/landscape_completeness.py --out landscape_completeness
@@ -65,7 +68,8 @@ RELAX_FMAX = 1e-8
 
 COLUMNS = ('scene', 'natoms', 'seed', 'window', 'threads', 'run', 'modes', 'local',
            'attempts', 'ratio', 'saddles', 'counted', 'reference', 'found', 'fraction',
-           'default_only', 'minima', 'failed', 'cost', 'cost_per_saddle', 'cpu_s', 'cpu_per_saddle')
+           'estimated', 'default_only', 'minima', 'failed', 'cost', 'cost_per_saddle', 'cpu_s',
+           'cpu_per_saddle')
 
 
 def minimum(scene: str, size: int, seed: int) -> Atoms:
@@ -135,6 +139,8 @@ def compare(scene: str, size: int, seed: int, window: float, factor: int, ref_se
                      'found': sum(found) if run == 'default' else len(theirs),
                      'fraction': (round(sum(found) / len(theirs), 3)
                                   if theirs and run == 'default' else ''),
+                     'estimated': ('' if result.search.coverage is None
+                                   else round(result.search.coverage, 3)),
                      'default_only': only if run == 'default' else '',
                      'minima': len(result.minima), 'failed': result.failed,
                      'cost': result.cost,

@@ -92,6 +92,8 @@ SOLVE_RTOL = 1e-10
 #: Relative residual of the multigrid solves of the springs model, whose
 #: solution only starts the L-BFGS recursion.
 SPRINGS_RTOL = 1e-6
+#: The smallest positive float: the floor of eigenvalues made safe to divide by.
+TINY = np.finfo(float).tiny
 
 
 
@@ -194,8 +196,7 @@ class StiffnessModel(ABC):
         """Eigenvalues made safe to divide by: ``|lambda|`` (or signed, for
         ``'stationary'``) floored at ``floor`` times the largest of each row."""
         size = np.abs(values)
-        floor = np.maximum(self.floor * size.max(axis=-1, keepdims=True),
-                           np.finfo(float).tiny)
+        floor = np.maximum(self.floor * size.max(axis=-1, keepdims=True), TINY)
         safe = np.maximum(size, floor)
         if self.target == 'stationary':
             safe = np.where(values < 0, -safe, safe)
@@ -341,7 +342,7 @@ class NodalModel(StiffnessModel):
         values, vectors = np.linalg.eigh(blocks)
         size = np.abs(values)
         if self.method == 'scalar':
-            floor = np.maximum(self.floor * size.max(axis=1), np.finfo(float).tiny)
+            floor = np.maximum(self.floor * size.max(axis=1), TINY)
             total = (size if self.target == 'minimum' else values).sum(axis=1)
             trace = np.where(total < 0, -1.0, 1.0) * np.maximum(np.abs(total), floor)
             return _TraceSolver(trace, free)
@@ -516,7 +517,8 @@ def _cholesky(matrix: np.ndarray, shift: float) -> np.ndarray | None:
     ``scipy.linalg.cho_factor`` calls it, without its checks and batching
     wrapper, which cost as much as the factorisation on tens of unknowns), or
     None if not definite."""
-    shifted = matrix + shift * np.eye(len(matrix))
+    shifted = matrix + 0.0   # a copy with positive zeros, as matrix + shift I has them
+    shifted.flat[::len(matrix) + 1] += shift
     factor, info = dpotrf(shifted, lower=False, clean=False, overwrite_a=True)
     return factor if info == 0 else None
 

@@ -214,6 +214,8 @@ class _DofSolver(Solver):
         #: The free components' flat indices into an (N, 3) array (taken and
         #: put by index: cheaper than the mask on a scene of tens of points).
         self.index = flat if self.dim == 3 else 3 * (flat // self.dim) + flat % self.dim
+        #: Every component is free: a move's components are its (N, 3) array.
+        self.every = self.index.size == 3 * len(free)
 
     def solve(self, forces: np.ndarray) -> np.ndarray:
         return self._scatter(self._solve(self._gather(forces)))
@@ -224,7 +226,10 @@ class _DofSolver(Solver):
 
     def _scatter(self, v: np.ndarray) -> np.ndarray:
         """Free components (n,) or (n, k) as moves (N, 3) or (k, N, 3), zero
-        where held."""
+        where held; a move (n,) of every component is ``v`` reshaped (each
+        solve's ``v`` is its own array)."""
+        if self.every and v.ndim == 1:
+            return v.reshape(len(self.free), 3)
         out = np.zeros((*v.shape[1:], 3 * len(self.free)))
         out[..., self.index] = v.T
         return out.reshape(*v.shape[1:], len(self.free), 3)

@@ -32,7 +32,7 @@ from . import accuracy
 from .calculator import MaudCalculator
 from .dofs import free_dofs
 from .monitor import MaudError, RunMonitor
-from .search import merit_tolerance
+from .search import lengths, merit_tolerance
 from .stiffness import StiffnessModel
 from .strategy import LocalAt, MaudState, Strategy
 
@@ -73,12 +73,14 @@ def relax(atoms: Atoms, model: StiffnessModel, strategy: Strategy, state: MaudSt
     raises)."""
     calc = atoms.calc
     held = ~free_dofs(atoms, 3)
+    holds = bool(held.any())
     positions = atoms.arrays['positions']
 
     def held_results() -> tuple[float, np.ndarray]:
         """The energy and forces the calculator holds (held components zero)."""
         forces = calc.results['forces'].copy()
-        forces[held] = 0.0
+        if holds:
+            forces[held] = 0.0
         return calc.results['energy'], forces
 
     def evaluate(moved: bool) -> tuple[float, np.ndarray]:
@@ -103,18 +105,19 @@ def relax(atoms: Atoms, model: StiffnessModel, strategy: Strategy, state: MaudSt
 
     calc.get_property('forces', atoms)   # the optimizer's first evaluation (counted there)
     energy, forces = held_results()
-    fmax_now = float(np.linalg.norm(forces, axis=1).max())
+    fmax_now = float(lengths(forces).max())
     while True:
         yield energy, fmax_now
         x = next_positions(strategy, state, monitor, step(), positions.copy(), energy,
                            forces, accuracy.noise(calc), local_at, no_step)
-        x[held] = positions[held]
+        if holds:
+            x[held] = positions[held]
         strategy.moved(state, x)
         moved = not np.array_equal(x, positions)
         positions[:] = x
         accuracy.ask(calc, fmax, fmax_now)
         energy, forces = evaluate(moved)
-        fmax_now = float(np.linalg.norm(forces, axis=1).max())
+        fmax_now = float(lengths(forces).max())
 
 
 def next_positions(strategy: Strategy, state: MaudState, monitor: RunMonitor, step: int,

@@ -48,6 +48,7 @@ from ase import Atoms
 
 from .calculator import MaudCalculator
 from .checks import as_number, as_whole
+from .search import lengths
 
 
 class MaudError(RuntimeError):
@@ -192,11 +193,11 @@ class RunMonitor:
         ``step``; ``gamma0`` is the step factor's start, ``tolerance`` the
         slack of a merit comparison."""
         centre = x.sum(axis=0) / len(x)
-        size = np.linalg.norm(x - centre, axis=1).max()
+        size = lengths(x - centre).max()
         if self.size0 is None:
             self.size0 = max(size, self.length_scale * len(x), np.finfo(float).tiny)
             self.centre0 = centre
-        fmax = float(np.linalg.norm(forces, axis=1).max(initial=0.0))
+        fmax = float(lengths(forces).max(initial=0.0))
         if not self.bounded:
             self._judge_growth(step, x, forces, size, np.linalg.norm(centre - self.centre0))
         if fmax < (1 - FMAX_PROGRESS) * self.best[0]:

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .neighbours import NearestDistances
-from .stiffness import DampedSolver
+from .stiffness import TINY, DampedSolver
 
 #: How far from 1 the ratio of an energy change to its prediction may be
 #: for a trust fraction to grow (by half), and beyond which it halves.
@@ -54,6 +54,13 @@ TRUST_GOOD, TRUST_BAD = 0.25, 0.75
 #: a coarser ``mu`` took more steps: docs/optimizer.md).
 DAMPING_TOLERANCE = 2e-3
 DAMPING_TRIALS = 14
+
+
+def lengths(rows: np.ndarray) -> np.ndarray:
+    """Each row's length (N,) of an (N, 3) array: the formula of
+    ``np.linalg.norm(rows, axis=1)``, the same digits, without its argument
+    handling (several calls a step)."""
+    return np.sqrt(np.add.reduce(rows * rows, axis=1))
 
 
 def merit_tolerance(merit: float, noise: float = 1e-12) -> float:
@@ -135,7 +142,7 @@ class Limits:
         if self.maxstep is not None:
             limit = np.minimum(limit, self.maxstep)
         if self.maxstep_size is not None and len(x) > 1:
-            size = np.linalg.norm(x - x.mean(axis=0), axis=1).max()
+            size = lengths(x - x.mean(axis=0)).max()
             limit = np.minimum(limit, self.maxstep_size * size)
         return limit
 
@@ -166,7 +173,7 @@ def bound(step: np.ndarray, limit: np.ndarray, whole: bool = False) -> np.ndarra
     """Scale each point's move down to its allowed length, or (``whole``)
     the whole move by the one factor that brings every point within its
     length (a descent direction stays one)."""
-    length = np.linalg.norm(step, axis=1)
+    length = lengths(step)
     scale = np.divide(limit, length, out=np.ones_like(length),
                       where=length > limit)
     if whole:
@@ -176,7 +183,7 @@ def bound(step: np.ndarray, limit: np.ndarray, whole: bool = False) -> np.ndarra
 
 def longest(move: np.ndarray, limit: np.ndarray) -> float:
     """The largest ratio of a point's move to its limit."""
-    return float((np.linalg.norm(move, axis=1) / limit).max(initial=0.0))
+    return float((lengths(move) / limit).max(initial=0.0))
 
 
 def trust_region(model: DampedSolver, forces: np.ndarray, newton: np.ndarray, gamma: float,
@@ -219,10 +226,9 @@ def damping(moves: Callable[[float], np.ndarray | None], gamma: float,
     that fit (at first the slope -1 of a move ``f / mu``; never below the
     bracket's geometric middle), then by false position (Illinois)."""
     def excess(move: np.ndarray | None) -> float:
-        return np.inf if move is None else float(np.log(max(gamma * longest(move, limit),
-                                                            np.finfo(float).tiny)))
+        return np.inf if move is None else float(np.log(max(gamma * longest(move, limit), TINY)))
 
-    high = max(scale, np.finfo(float).tiny)
+    high = max(scale, TINY)
     best = moves(high)
     while (f_high := excess(best)) > 0:
         high *= 10.0

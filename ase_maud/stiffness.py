@@ -92,6 +92,8 @@ SOLVE_RTOL = 1e-10
 #: Relative residual of the multigrid solves of the springs model, whose
 #: solution only starts the L-BFGS recursion.
 SPRINGS_RTOL = 1e-6
+#: The smallest positive float: the floor of eigenvalues made safe to divide by.
+TINY = np.finfo(float).tiny
 
 
 
@@ -194,8 +196,7 @@ class StiffnessModel(ABC):
         """Eigenvalues made safe to divide by: ``|lambda|`` (or signed, for
         ``'stationary'``) floored at ``floor`` times the largest of each row."""
         size = np.abs(values)
-        floor = np.maximum(self.floor * size.max(axis=-1, keepdims=True),
-                           np.finfo(float).tiny)
+        floor = np.maximum(self.floor * size.max(axis=-1, keepdims=True), TINY)
         safe = np.maximum(size, floor)
         if self.target == 'stationary':
             safe = np.where(values < 0, -safe, safe)
@@ -213,6 +214,8 @@ class _DofSolver(Solver):
         #: The free components' flat indices into an (N, 3) array (taken and
         #: put by index: cheaper than the mask on a scene of tens of points).
         self.index = flat if self.dim == 3 else 3 * (flat // self.dim) + flat % self.dim
+        #: Every component is free: a move's components are its (N, 3) array.
+        self.every = self.index.size == 3 * len(free)
 
     def solve(self, forces: np.ndarray) -> np.ndarray:
         return self._scatter(self._solve(self._gather(forces)))
@@ -223,7 +226,10 @@ class _DofSolver(Solver):
 
     def _scatter(self, v: np.ndarray) -> np.ndarray:
         """Free components (n,) or (n, k) as moves (N, 3) or (k, N, 3), zero
-        where held."""
+        where held; a move (n,) of every component is ``v`` reshaped (each
+        solve's ``v`` is its own array)."""
+        if self.every and v.ndim == 1:
+            return v.reshape(len(self.free), 3)
         out = np.zeros((*v.shape[1:], 3 * len(self.free)))
         out[..., self.index] = v.T
         return out.reshape(*v.shape[1:], len(self.free), 3)
@@ -341,7 +347,7 @@ class NodalModel(StiffnessModel):
         values, vectors = np.linalg.eigh(blocks)
         size = np.abs(values)
         if self.method == 'scalar':
-            floor = np.maximum(self.floor * size.max(axis=1), np.finfo(float).tiny)
+            floor = np.maximum(self.floor * size.max(axis=1), TINY)
             total = (size if self.target == 'minimum' else values).sum(axis=1)
             trace = np.where(total < 0, -1.0, 1.0) * np.maximum(np.abs(total), floor)
             return _TraceSolver(trace, free)
@@ -516,7 +522,8 @@ def _cholesky(matrix: np.ndarray, shift: float) -> np.ndarray | None:
     ``scipy.linalg.cho_factor`` calls it, without its checks and batching
     wrapper, which cost as much as the factorisation on tens of unknowns), or
     None if not definite."""
-    shifted = matrix + shift * np.eye(len(matrix))
+    shifted = matrix + 0.0   # a copy with positive zeros, as matrix + shift I has them
+    shifted.flat[::len(matrix) + 1] += shift
     factor, info = dpotrf(shifted, lower=False, clean=False, overwrite_a=True)
     return factor if info == 0 else None
 

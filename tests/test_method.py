@@ -24,6 +24,7 @@ from ase_maud.neighbours import NearestDistances
 from ase_maud.search import (
     DAMPING_TOLERANCE,
     damping,
+    lengths,
     merit_change,
     reach,
     reaches,
@@ -718,6 +719,17 @@ def test_damping_finds_its_move_in_a_few_solves(seed):
     assert ratio.max() <= 1 + 1e-12
     assert ratio.max() >= 0.99
     assert len(mus) <= 7
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_lengths_are_numpys_norm_to_the_last_bit(seed):
+    """The step layer's row lengths are ``np.linalg.norm(x, axis=1)``'s
+    digits exactly, over scales from 1e-150 to 1e150, with zero and signed
+    zero rows."""
+    rng = np.random.default_rng(seed)
+    x = rng.standard_normal((40, 3)) * 10.0 ** rng.integers(-150, 150, size=(40, 1))
+    x[:3] = [[0.0, 0.0, 0.0], [-0.0, 0.0, -0.0], [-0.0, 2.0, 0.0]]
+    assert lengths(x).tobytes() == np.linalg.norm(x, axis=1).tobytes()
 
 
 def test_exact_models_solver_is_cholesky_where_definite_and_eigen_where_not():

@@ -407,3 +407,22 @@ def test_exact_model_selects_held_coordinates_and_projects_other_constraints(see
     condition = np.abs(projected).sum(axis=1).max() / np.linalg.eigvalsh(projected).min()
     assert np.linalg.norm(move.ravel() - newton) <= 2e-8 * condition * np.linalg.norm(newton)
     assert abs(np.dot(move[planar], normal)) <= 1e-9 * np.abs(move).max()
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_cholesky_factor_is_that_of_the_matrix_plus_its_shift_times_identity(seed):
+    """The exact model's shifted Cholesky factor has the digits of LAPACK's
+    factor of ``matrix + shift I`` (zeros of either sign among the entries),
+    and None where that matrix is not definite."""
+    from scipy.linalg.lapack import dpotrf
+
+    from ase_maud.stiffness import _cholesky
+    rng = np.random.default_rng(seed)
+    a = rng.standard_normal((12, 30))
+    matrix = a @ a.T + 30.0 * np.eye(12)   # definite with any two entries zeroed
+    matrix[0, 5] = matrix[5, 0] = -0.0
+    matrix[1, 7] = matrix[7, 1] = 0.0
+    for shift in (0.0, 1e-8, 3.0):
+        expected = dpotrf(matrix + shift * np.eye(12), lower=False, clean=False)[0]
+        assert _cholesky(matrix, shift).tobytes() == expected.tobytes()
+    assert _cholesky(matrix - 1e3 * np.eye(12), 1.0) is None

@@ -178,8 +178,9 @@ class SaddleSearch:
         no saddle says so first."""
         head = (f'{len(self.saddles)} index-1 saddles' if self.saddles
                 else 'no index-1 saddle found')
-        coverage = ('' if self.coverage is None else
-                    f' (estimated {self.coverage:.0%} of those its attempts reach)')
+        estimate = self.coverage
+        coverage = ('' if estimate is None else
+                    f' (estimated {estimate:.0%} of those its attempts reach)')
         lines = [f'{head}{coverage} in {len(self.attempts)} attempts, {self.cost} force-call '
                  f'equivalents ({self.work.total} for the minimum\'s modes), '
                  f'{self.cpu_s:.2f} CPU s:']

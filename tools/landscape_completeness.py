@@ -98,8 +98,8 @@ def counted(found: Landscape, window: float) -> list[tuple[Atoms, float, Attempt
     """The saddles of ``found`` that join its start (minimum 0), their barrier above it
     below ``window``: (saddle, barrier, the attempt that found it)."""
     search = found.search
-    finders = [a for a in search.attempts if a.outcome == 'saddle']
-    by_saddle = {id(s): a for s, a in zip(search.saddles, finders, strict=True)}
+    finders = {a.saddle: a for a in search.attempts if a.outcome == 'saddle'}
+    by_saddle = {id(s): finders[i] for i, s in enumerate(search.saddles)}
     energy = found.minima[0].get_potential_energy()
     return [(saddle, saddle.get_potential_energy() - energy, by_saddle[id(saddle)])
             for saddle, pair in zip(found.saddles, found.joins, strict=True)

@@ -36,10 +36,12 @@ that passes a test given, ``connected``: the landscape's asks whether it
 joins the minimum): until new searches stop finding new saddles.
 
 3. **A path**, if none of these found a saddle and a second minimum of the
-   scene is given (``partner``): a band of images between the two, its
-   highest image refined to a verified index-1 saddle
-   (:func:`ase_maud.transition.saddle_between`): a dome's snap-through, a
-   whole-scene path no local push reaches.
+   scene is given (``partner``), or asked for as the minimum's mirror image
+   (``mirror``: through the plane of its fixed points,
+   :func:`ase_maud.transition.reflection`, relaxed, its calls counted): a
+   band of images between the two, its highest image refined to a verified
+   index-1 saddle (:func:`ase_maud.transition.saddle_between`): a dome's
+   snap-through, a whole-scene path no local push reaches.
 
 An attempt is rejected, and said so, when the region's saddle lies along the
 direction of a saddle already found (the cosine between the two moves from
@@ -74,7 +76,7 @@ from .dofs import free_dofs
 from .monitor import MaudError
 from .optimizer import Maud
 from .stiffness import EXACT_MAX_DOFS
-from .transition import check_same_scene, saddle_between
+from .transition import check_same_scene, reflection, saddle_between
 
 #: A local region: the free points within this many times the centre
 #: point's nearest-neighbour distance.
@@ -191,7 +193,8 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
                    budget: int | None = BUDGET, fmax: float = 1e-6, steps: int = 1000,
                    seed: int = 0, energy_rtol: float = 1e-8, distance_atol: float = 1e-4,
                    client: Any = None, point: StationaryPoint | None = None,
-                   partner: Atoms | None = None, window: float | None = None,
+                   partner: Atoms | None = None, mirror: bool = False,
+                   window: float | None = None,
                    connected: Callable[[Atoms], bool] | None = None) -> SaddleSearch:
     """The :class:`SaddleSearch` from the minimum ``minimum`` (a MaudCalculator
     scene relaxed to ``fmax``; see the module docstring): climbs along its
@@ -210,6 +213,11 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     (:func:`~ase_maud.transition.saddle_between`; no budget but its own
     steps; a partner that is not a configuration of the same scene is a
     ValueError before any attempt, :func:`~ase_maud.transition.check_same_scene`).
+    ``mirror``: the second minimum is ``minimum``'s mirror image through
+    the plane of its fixed points (a ValueError before any attempt if they
+    span none, or with a ``partner`` too), relaxed to ``fmax`` within
+    ``steps`` only if the attempts found no saddle (the path's attempt
+    counts its calls; if it relaxes back to ``minimum`` there is no path).
     ``window``: a barrier (energy units, above the minimum): the
     search goes on in rounds like the first (the next ``modes`` modes both
     ways, ``local`` more points) while a round finds a new saddle whose
@@ -227,6 +235,10 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
         wanted = check('wanted', wanted, 'count')
     if partner is not None:
         check_same_scene(minimum, partner)
+    if mirror:
+        if partner is not None:
+            raise ValueError('give a partner or mirror=True, not both')
+        partner = reflection(minimum)   # relaxed only if the attempts find nothing
     found = SaddleSearch()
     if point is None:
         point = classify(minimum, ftol=np.inf, work=found.work)
@@ -274,7 +286,7 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
         if window is None or enough() or used_up or below() == before:
             break
     if partner is not None and not found.saddles:
-        merge([_path(minimum, partner, fmax)])
+        merge([_path(minimum, partner, fmax, steps if mirror else None, distance_atol)])
     return found
 
 
@@ -418,12 +430,31 @@ def _settle(atoms: Atoms, tally: _Tally, held: np.ndarray, rest: np.ndarray,
     return None
 
 
-def _path(minimum: Atoms, partner: Atoms, fmax: float) -> tuple[Atoms | None, Attempt]:
-    """The saddle between ``minimum`` and ``partner`` by a band of images."""
+def _path(minimum: Atoms, partner: Atoms, fmax: float, relax: int | None = None,
+          distance_atol: float = 0.0) -> tuple[Atoms | None, Attempt]:
+    """The saddle between ``minimum`` and ``partner`` by a band of images;
+    ``partner`` first relaxed in at most ``relax`` steps if given (a mirror
+    image: its calls and CPU seconds counted in the attempt), no path if no
+    point then lies further than ``distance_atol`` from its place in
+    ``minimum`` (a mirror image has the pair distances of its original, so
+    :func:`~ase_maud.analysis.same_point` cannot tell them apart)."""
+    attempt = Attempt('path', 0)
+    if relax is not None:
+        cpu = time.process_time()
+        with CallRecorder(partner.calc) as calls:
+            relaxed = Maud(partner, logfile=None).run(fmax=fmax, steps=relax)
+        attempt.calls, attempt.cpu_s = len(calls.samples), time.process_time() - cpu
+        if not relaxed:
+            attempt.outcome = f'the mirror image did not relax to fmax {fmax:g} in {relax} steps'
+            return None, attempt
+        if np.abs(partner.positions - minimum.positions).max() <= distance_atol:
+            attempt.outcome = 'the mirror image relaxed back to the minimum'
+            return None, attempt
     found = saddle_between(minimum, partner, fmax=fmax)
-    attempt = Attempt('path', 0, outcome=found.outcome or 'saddle', calls=found.calls,
-                      hvp_vectors=found.work.hvp_vectors, hessians=found.work.hessians,
-                      cpu_s=found.cpu_s)
+    attempt.outcome = found.outcome or 'saddle'
+    attempt.calls += found.calls
+    attempt.hvp_vectors, attempt.hessians = found.work.hvp_vectors, found.work.hessians
+    attempt.cpu_s += found.cpu_s
     if found.saddle is not None:
         attempt.energy = found.saddle.get_potential_energy()
     return found.saddle, attempt

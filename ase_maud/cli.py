@@ -264,7 +264,8 @@ def saddles(args: argparse.Namespace) -> int:
     with _dask_client(args.workers, args.scheduler) as client:
         found = landscape(atoms, modes=args.modes, fmax=args.fmax, steps=args.steps,
                           client=client, local=args.local, budget=args.budget,
-                          seed=args.seed, partner=partner, window=args.window)
+                          seed=args.seed, partner=partner, mirror=args.mirror,
+                          window=args.window)
     print(found.search.report())
     energies = [m.get_potential_energy() for m in found.minima]
     barriers = [s.get_potential_energy() for s in found.saddles]
@@ -282,19 +283,15 @@ def saddles(args: argparse.Namespace) -> int:
 
 
 def _partner(args: argparse.Namespace, minimum: Atoms) -> Atoms | None:
-    """The second minimum of ``ase-maud saddles`` (None without --partner or
-    --mirror): the points of the --partner file (its last frame, read as the
-    net is) on the net of ``minimum``, relaxed by Maud to --fmax, or the
-    mirror image of ``minimum`` through the plane of its fixed points
-    (:func:`ase_maud.transition.mirrored`). A ValueError names a --partner
+    """The second minimum of ``ase-maud saddles`` given as --partner (None
+    without): the points of that file (its last frame, read as the net is)
+    on the net of ``minimum``, relaxed by Maud to --fmax (--mirror asks the
+    search for the mirror image instead). A ValueError names a --partner
     file whose points are not the net's, or one that does not relax."""
     from .bench.runner import fresh_copy
     from .io import read_net
     from .optimizer import Maud
-    from .transition import mirrored
 
-    if args.mirror:
-        return mirrored(minimum, fmax=args.fmax, steps=args.steps)
     if args.partner is None:
         return None
     read = read_net(args.partner, **_net_options(args))
@@ -708,7 +705,8 @@ def build_parser() -> argparse.ArgumentParser:
     second.add_argument('--mirror', action='store_true',
                         help='the second minimum is the mirror image of the net through '
                         'the plane of its fixed points, relaxed (a dome and its '
-                        'snap-through; ase_maud.transition.mirrored)')
+                        'snap-through; ase_maud.transition.reflection), relaxed only if '
+                        'the climbs and local activations find no saddle')
     spread = p.add_mutually_exclusive_group()
     spread.add_argument('--workers', type=_ruled('count', int), metavar='N',
                         help='run the climbs and descents on a dask LocalCluster of N '

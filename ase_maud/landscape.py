@@ -97,7 +97,7 @@ class Landscape:
 def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 1000,
               energy_rtol: float = ENERGY_RTOL, distance_atol: float = DISTANCE_ATOL,
               client: Any = None, local: int = 0, budget: int | None = None,
-              seed: int = 0, partner: Atoms | None = None,
+              seed: int = 0, partner: Atoms | None = None, mirror: bool = False,
               window: float | None = None) -> Landscape:
     """The :class:`Landscape` around the minimum ``atoms`` (a MaudCalculator
     scene relaxed to ``fmax``; a ValueError if it is not a minimum): the
@@ -112,7 +112,10 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
     ``partner``: a second minimum of the scene (a dome's mirror image,
     :func:`~ase_maud.transition.mirrored`): if the search found no saddle,
     the one a band of images between the two reaches
-    (:func:`~ase_maud.transition.saddle_between`). ``window``: a barrier
+    (:func:`~ase_maud.transition.saddle_between`); ``mirror``: that second
+    minimum is ``atoms``' mirror image through the plane of its fixed points,
+    relaxed only if needed (:func:`~ase_maud.activation.search_saddles`).
+    ``window``: a barrier
     above the minimum (energy units): the search goes on in rounds like the
     first (the next ``modes`` modes, ``local`` more points) while a round
     finds a new saddle below it that joins the minimum (each new saddle
@@ -149,7 +152,7 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
     found.search = search_saddles(start, modes=modes, local=local, budget=budget,
                                   fmax=fmax, steps=steps, seed=seed, energy_rtol=energy_rtol,
                                   distance_atol=distance_atol, client=client, point=point,
-                                  partner=partner, window=window,
+                                  partner=partner, mirror=mirror, window=window,
                                   connected=None if window is None else joins_start)
     distinct = found.search.saddles   # the saddles found, each once
     found.failed += sum(a.outcome not in _NOT_FAILED for a in found.search.attempts)

@@ -172,17 +172,26 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
 
 
 def mirrored(minimum: Atoms, fmax: float = 1e-6, steps: int = 5000) -> Atoms:
-    """The mirror image of ``minimum`` (a MaudCalculator scene with at least
-    three fixed points not on one line: a net with its rim fixed, say): a
-    copy with its own calculator whose free points are reflected through the
-    plane fitted (least squares) to the fixed points, relaxed by Maud to
+    """The mirror image of ``minimum`` (:func:`reflection`) relaxed by Maud to
     ``fmax`` in at most ``steps`` steps. A ValueError if the fixed points do
     not span a plane, or the relaxation does not converge."""
+    image = reflection(minimum)
+    if not Maud(image, logfile=None).run(fmax=fmax, steps=steps):
+        raise ValueError(f'the mirror image did not relax to fmax {fmax:g} in {steps} steps')
+    return image
+
+
+def reflection(minimum: Atoms) -> Atoms:
+    """A copy of ``minimum`` (a MaudCalculator scene with at least three
+    fixed points not on one line: a net with its rim fixed, say) with its own
+    calculator, its free points reflected through the plane fitted (least
+    squares) to the fixed points; not relaxed. A ValueError if the fixed
+    points do not span a plane."""
     fixed = ~free_dofs(minimum, 3).any(axis=1)
     rim = minimum.positions[fixed]
     if len(rim) < 3 or np.linalg.matrix_rank(rim - rim.mean(axis=0), tol=1e-9) < 2:
-        raise ValueError(f'mirrored needs at least three fixed points not on one line to '
-                         f'fit a plane to; this scene has {len(rim)} fixed points'
+        raise ValueError(f'a mirror image needs at least three fixed points not on one line '
+                         f'to fit a plane to; this scene has {len(rim)} fixed points'
                          f'{"" if len(rim) < 3 else ", all on one line"}')
     centre = rim.mean(axis=0)
     normal = np.linalg.svd(rim - centre)[2][2]
@@ -191,8 +200,6 @@ def mirrored(minimum: Atoms, fmax: float = 1e-6, steps: int = 5000) -> Atoms:
     height = (positions[~fixed] - centre) @ normal
     positions[~fixed] -= 2 * height[:, None] * normal
     image.positions = positions
-    if not Maud(image, logfile=None).run(fmax=fmax, steps=steps):
-        raise ValueError(f'the mirror image did not relax to fmax {fmax:g} in {steps} steps')
     return image
 
 

@@ -154,6 +154,42 @@ def test_a_saddle_search_that_found_nothing_takes_the_path_to_the_partner():
     assert classify(fresh_copy(found.saddles[0])).index == 1
 
 
+@pytest.mark.parametrize('seed', [5, 7])
+def test_a_saddle_search_asked_for_the_mirror_takes_the_path_to_it_and_counts_it(seed):
+    """``mirror=True`` with nothing else tried: the one attempt relaxes the
+    minimum's reflection through its rim's plane (its calls counted in the
+    attempt, beyond the band's and the refinement's own) and reaches the
+    saddle the band to the mirrored minimum reaches: verified index 1, the
+    same point."""
+    first, second = dome(6, seed)
+    found = search_saddles(first, modes=0, local=0, mirror=True)
+    given = search_saddles(first, modes=0, local=0, partner=second)
+    assert [a.kind for a in found.attempts] == ['path'] and len(found.saddles) == 1
+    assert found.attempts[0].calls > given.attempts[0].calls
+    assert classify(fresh_copy(found.saddles[0])).index == 1
+    assert same_point(found.saddles[0], given.saddles[0])
+
+
+def test_a_mirror_that_relaxes_back_to_the_minimum_gives_no_path():
+    """A flat net held at its rim (the springs alone, no load: every point in
+    the rim's plane) is its own mirror image: the attempt says so, costs its
+    one relaxation's calls, and finds no saddle; a partner and ``mirror``
+    together, or a scene with no plane of fixed points, are refused before
+    any attempt."""
+    flat = DOMES(5, 0)
+    flat.positions[:, 2] = 0.0
+    assert Maud(flat, logfile=None).run(fmax=1e-8, steps=5000)
+    found = search_saddles(flat, modes=0, local=0, mirror=True)
+    assert not found.saddles and found.attempts[0].kind == 'path'
+    assert found.attempts[0].outcome == 'the mirror image relaxed back to the minimum'
+    assert found.attempts[0].calls >= 1
+    with pytest.raises(ValueError, match='not both'):
+        search_saddles(flat, modes=0, local=0, partner=flat, mirror=True)
+    free = build('net3d', 4, seed=0)
+    with pytest.raises(ValueError, match='at least three fixed points'):
+        search_saddles(free, modes=0, local=0, mirror=True)
+
+
 def test_the_landscape_takes_the_path_where_its_climbs_found_nothing():
     """Climbs cut off by a budget of 5 force-call equivalents find nothing:
     the landscape's one saddle is the band's (the two climbs counted as

@@ -9,7 +9,10 @@ corners fixed; ``rim``: the net with its whole rim fixed, which buckles into a d
 tube of ``size`` rings of ``size`` points with both end rings fixed). From each start and seed
 (the scene's and the search's: which points are activated) one search for one saddle
 (``wanted=1``): ``--modes`` whole-scene climbs both ways, then up to ``--local`` activations, each
-attempt within ``--budget`` force-call equivalents, to ``--fmax``.
+attempt within ``--budget`` force-call equivalents, to ``--fmax``; with ``--mirror``, where those
+found nothing on a scene with a plane of fixed points, the path to the minimum's mirror image
+through it (``search_saddles(mirror=True)``: the image's relaxation, the band and the refinement
+counted as one attempt, with no budget but their steps).
 
 Counted per search: the calculator's calls, the Hessian-vector product vectors and the Hessians
 (:class:`ase_maud.analysis.Work`, the minimum's modes included), their sum (force-call
@@ -41,6 +44,11 @@ from ase_maud.scenes import build
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from saddles import OWN_SCENES  # noqa: E402  (the benchmark's own scenes)
 
+#: The scenes with fixed points to fit a plane to (the tube's two end rings too): ``--mirror``
+#: gives their searches the path to the mirror image through that plane where the climbs and
+#: local activations find no saddle.
+MIRRORED = ('rim', 'corners', 'tube')
+
 
 def minimum(scene: str, size: int, seed: int):
     """The scene relaxed to fmax 1e-9 (a ValueError if that is not a minimum) and its
@@ -60,7 +68,8 @@ def one(start: str, seed: int, args: argparse.Namespace) -> dict:
     atoms, point = minimum(scene, int(size), seed)
     cpu = time.process_time()
     found = search_saddles(atoms, modes=args.modes, local=args.local, wanted=1,
-                           budget=args.budget, fmax=args.fmax, steps=args.steps, seed=seed)
+                           budget=args.budget, fmax=args.fmax, steps=args.steps, seed=seed,
+                           mirror=args.mirror and scene in MIRRORED)
     cpu = time.process_time() - cpu
     row = {'start': start, 'seed': seed, 'natoms': len(atoms), 'found': bool(found.saddles),
            'calls': sum(a.calls for a in found.attempts),
@@ -123,6 +132,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--budget', type=int, default=500)
     parser.add_argument('--fmax', type=float, default=1e-6)
     parser.add_argument('--steps', type=int, default=1000)
+    parser.add_argument('--mirror', action='store_true',
+                        help='where nothing else found a saddle, the path to the mirror image '
+                        f'through the plane of the fixed points (scenes {", ".join(MIRRORED)})')
     parser.add_argument('--out', type=Path, default=Path('activation'))
     parser.add_argument('--tables-from', type=Path, metavar='CSV',
                         help='write the table of the rows of a CSV this tool wrote, running '

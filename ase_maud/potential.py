@@ -208,9 +208,9 @@ class MaudPotential:
         once per N, not converted at every call); ``repulsion`` is overwritten."""
         n = len(repulsion) // self.dim
         flat, data = self._kept(('hessian entries', n), lambda: _flat_entries(
-            *physics.spring_hessian_entries(self._springs_within(n),
-                                            self.Q * self.stiffnesses, self.dim),
-            len(repulsion)))
+            np.ascontiguousarray(self._springs_within(n), dtype=np.int64),
+            np.broadcast_to(np.asarray(self.Q * self.stiffnesses, float),
+                            len(self.springs)).copy(), self.dim, n))
         repulsion *= self.Q
         repulsion.ravel()[flat] += data
         return repulsion
@@ -255,10 +255,52 @@ def _spring_sums(x: np.ndarray, springs: np.ndarray,
     return energy, forces
 
 
-def _flat_entries(rows: np.ndarray, cols: np.ndarray, data: np.ndarray,
-                  size: int) -> tuple[np.ndarray, np.ndarray]:
-    """The flat indices into a dense (size, size) array of the entries
-    ``(rows, cols, data)``, each once, and their values (a repeated entry's
-    summed): no sparse matrix is built on the way."""
-    flat, which = np.unique(rows.astype(np.int64) * size + cols, return_inverse=True)
-    return flat, np.bincount(which, weights=data, minlength=len(flat))
+@numba.njit(cache=True)
+def _flat_entries(springs: np.ndarray, weights: np.ndarray, dim: int,
+                  natoms: int) -> tuple[np.ndarray, np.ndarray]:
+    """The entries of the springs' Hessian ``L_w (x) I_dim`` (``w`` the
+    springs' ``weights``: :func:`.physics.spring_hessian_entries`'s matrix)
+    as flat indices into a dense (dim N, dim N) array, each once, and their
+    values: first the diagonal of every atom on a spring (the sum of its
+    springs' ``w``, the springs where it is the first end in their order,
+    then those where it is the second), then every sprung pair's ``-w`` both
+    ways (summed over the pair's springs, in either order, in their order).
+    The same values to the bit as those entries summed by ``np.bincount`` in
+    their order, without the sort of all ``4 dim K`` of them."""
+    count = springs.shape[0]
+    degree = np.zeros(natoms)
+    sprung = np.zeros(natoms, dtype=np.bool_)
+    for end in range(2):
+        for s in range(count):
+            degree[springs[s, end]] += weights[s]
+            sprung[springs[s, end]] = True
+    keys = np.empty(2 * count, dtype=np.int64)   # (row, column) atoms of -w, row-major
+    for s in range(count):
+        keys[s] = springs[s, 0] * natoms + springs[s, 1]
+        keys[count + s] = springs[s, 1] * natoms + springs[s, 0]
+    order = np.argsort(keys, kind='mergesort')   # stable: the springs' order kept
+    pairs = np.empty(2 * count, dtype=np.int64)
+    sums = np.zeros(2 * count)
+    unique = -1
+    for k in order:
+        if unique < 0 or keys[k] != pairs[unique]:
+            unique += 1
+            pairs[unique] = keys[k]
+        sums[unique] += -weights[k % count]
+    atoms = np.flatnonzero(sprung)
+    size = dim * natoms
+    flat = np.empty(dim * (len(atoms) + unique + 1), dtype=np.int64)
+    data = np.empty(len(flat))
+    at = 0
+    for atom in atoms:
+        for axis in range(dim):
+            flat[at] = (dim * atom + axis) * (size + 1)
+            data[at] = degree[atom]
+            at += 1
+    for p in range(unique + 1):
+        row, column = pairs[p] // natoms, pairs[p] % natoms
+        for axis in range(dim):
+            flat[at] = (dim * row + axis) * size + dim * column + axis
+            data[at] = sums[p]
+            at += 1
+    return flat, data

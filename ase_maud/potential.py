@@ -143,8 +143,7 @@ class MaudPotential:
         """Raise ValueError if a spring names an atom beyond ``natoms`` or
         the loads are not one per atom (:func:`.springs.check_range`,
         :meth:`check_loads`)."""
-        if natoms <= self._kept('highest index', lambda: int(self.springs.max(initial=-1))):
-            check_range(self.springs, natoms)
+        self._springs_within(natoms)
         self.check_loads(natoms)
 
     # -- the springs: exact, constant ----------------------------------------
@@ -181,7 +180,11 @@ class MaudPotential:
             natoms, self._springs_within(natoms)))
 
     def _springs_within(self, natoms: int) -> np.ndarray:
-        check_range(self.springs, natoms)
+        """The springs, once :func:`.springs.check_range` has found none
+        beyond ``natoms`` atoms (looked for only if the highest index,
+        kept, is not below ``natoms``)."""
+        if natoms <= self._kept('highest index', lambda: int(self.springs.max(initial=-1))):
+            check_range(self.springs, natoms)
         return self.springs
 
     def _kept(self, key: tuple | str, build):

@@ -56,7 +56,7 @@ def check_springs(springs: ArrayLike | None,
         check_range(pairs, natoms)
     _refuse_first(pairs[:, 0] == pairs[:, 1], pairs, 'ties an atom to itself')
     ordered = np.sort(pairs, axis=1)
-    rows = ordered[np.lexsort((ordered[:, 1], ordered[:, 0]))]   # np.unique(axis=0) cost 5x
+    rows = ordered[np.lexsort((ordered[:, 1], ordered[:, 0]))]   # np.unique(axis=0) is slower
     repeated = (rows[1:] == rows[:-1]).all(axis=1)
     if repeated.any():   # the first of the pairs in order listed twice
         i, j = rows[np.argmax(repeated)]

@@ -264,46 +264,52 @@ def _flat_entries(springs: np.ndarray, weights: np.ndarray, dim: int,
     """The entries of the springs' Hessian ``L_w (x) I_dim`` (``w`` the
     springs' ``weights``: :func:`.physics.spring_hessian_entries`'s matrix)
     as flat indices into a dense (dim N, dim N) array, each once, and their
-    values: first the diagonal of every atom on a spring (the sum of its
-    springs' ``w``, the springs where it is the first end in their order,
-    then those where it is the second), then every sprung pair's ``-w`` both
-    ways (summed over the pair's springs, in either order, in their order).
-    The same values to the bit as those entries summed by ``np.bincount`` in
-    their order, without the sort of all ``4 dim K`` of them."""
+    values, row by row: an atom's diagonal (the sum of its springs' ``w``)
+    and its sprung pairs' ``-w`` (summed over the pair's springs, if it is
+    listed more than once, in either order). The springs of an atom are
+    summed where it is their first end, in their order, then where it is
+    their second: the order in which ``np.bincount`` sums those entries as
+    listed, so the values are the same to the last bit; no sort."""
     count = springs.shape[0]
-    degree = np.zeros(natoms)
-    sprung = np.zeros(natoms, dtype=np.bool_)
+    starts = np.zeros(natoms + 1, dtype=np.int64)   # each atom's springs, in that order
+    for s in range(count):
+        starts[springs[s, 0] + 1] += 1
+        starts[springs[s, 1] + 1] += 1
+    for atom in range(natoms):
+        starts[atom + 1] += starts[atom]
+    other = np.empty(2 * count, dtype=np.int64)
+    weight = np.empty(2 * count)
+    fill = starts[:natoms].copy()
     for end in range(2):
         for s in range(count):
-            degree[springs[s, end]] += weights[s]
-            sprung[springs[s, end]] = True
-    keys = np.empty(2 * count, dtype=np.int64)   # (row, column) atoms of -w, row-major
-    for s in range(count):
-        keys[s] = springs[s, 0] * natoms + springs[s, 1]
-        keys[count + s] = springs[s, 1] * natoms + springs[s, 0]
-    order = np.argsort(keys, kind='mergesort')   # stable: the springs' order kept
-    pairs = np.empty(2 * count, dtype=np.int64)
-    sums = np.zeros(2 * count)
-    unique = -1
-    for k in order:
-        if unique < 0 or keys[k] != pairs[unique]:
-            unique += 1
-            pairs[unique] = keys[k]
-        sums[unique] += -weights[k % count]
-    atoms = np.flatnonzero(sprung)
+            atom = springs[s, end]
+            other[fill[atom]] = springs[s, 1 - end]
+            weight[fill[atom]] = weights[s]
+            fill[atom] += 1
+    rows = np.empty(natoms + 2 * count, dtype=np.int64)   # the entries, atom by atom
+    columns = np.empty(len(rows), dtype=np.int64)
+    sums = np.zeros(len(rows))
+    slot = np.full(natoms, -1, dtype=np.int64)   # a column's entry (this row's if > diagonal)
+    entries = 0
+    for row in range(natoms):
+        if starts[row] == starts[row + 1]:
+            continue
+        diagonal = entries
+        rows[diagonal], columns[diagonal] = row, row
+        entries += 1
+        for p in range(starts[row], starts[row + 1]):
+            sums[diagonal] += weight[p]
+            column = other[p]
+            if slot[column] <= diagonal:
+                slot[column] = entries
+                rows[entries], columns[entries] = row, column
+                entries += 1
+            sums[slot[column]] += -weight[p]
     size = dim * natoms
-    flat = np.empty(dim * (len(atoms) + unique + 1), dtype=np.int64)
-    data = np.empty(len(flat))
-    at = 0
-    for atom in atoms:
+    flat = np.empty(dim * entries, dtype=np.int64)
+    data = np.empty(dim * entries)
+    for e in range(entries):
         for axis in range(dim):
-            flat[at] = (dim * atom + axis) * (size + 1)
-            data[at] = degree[atom]
-            at += 1
-    for p in range(unique + 1):
-        row, column = pairs[p] // natoms, pairs[p] % natoms
-        for axis in range(dim):
-            flat[at] = (dim * row + axis) * size + dim * column + axis
-            data[at] = sums[p]
-            at += 1
+            flat[dim * e + axis] = (dim * rows[e] + axis) * size + dim * columns[e] + axis
+            data[dim * e + axis] = sums[e]
     return flat, data

@@ -25,6 +25,8 @@ import numpy as np
 def as_whole(value: Any) -> int | None:
     """``value`` as an int if it is a whole number (an integer, numpy's
     included, or a finite float with no fraction; never a bool), else None."""
+    if type(value) is int:   # the usual case, without the abstract classes' tests
+        return value
     if isinstance(value, bool) or not isinstance(value, Real):
         return None
     if isinstance(value, Integral):
@@ -34,6 +36,8 @@ def as_whole(value: Any) -> int | None:
 
 def as_number(value: Any) -> float | None:
     """``value`` as a finite float (never a bool), else None."""
+    if type(value) is float:   # the usual case, without the abstract classes' tests
+        return value if math.isfinite(value) else None
     if isinstance(value, bool) or not isinstance(value, Real):
         return None
     if isinstance(value, Integral):

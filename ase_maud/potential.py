@@ -143,8 +143,7 @@ class MaudPotential:
         """Raise ValueError if a spring names an atom beyond ``natoms`` or
         the loads are not one per atom (:func:`.springs.check_range`,
         :meth:`check_loads`)."""
-        if natoms <= self._kept('highest index', lambda: int(self.springs.max(initial=-1))):
-            check_range(self.springs, natoms)
+        self._springs_within(natoms)
         self.check_loads(natoms)
 
     # -- the springs: exact, constant ----------------------------------------
@@ -181,7 +180,11 @@ class MaudPotential:
             natoms, self._springs_within(natoms)))
 
     def _springs_within(self, natoms: int) -> np.ndarray:
-        check_range(self.springs, natoms)
+        """The springs, once :func:`.springs.check_range` has found none
+        beyond ``natoms`` atoms (looked for only if the highest index,
+        kept, is not below ``natoms``)."""
+        if natoms <= self._kept('highest index', lambda: int(self.springs.max(initial=-1))):
+            check_range(self.springs, natoms)
         return self.springs
 
     def _kept(self, key: tuple | str, build):
@@ -208,9 +211,9 @@ class MaudPotential:
         once per N, not converted at every call); ``repulsion`` is overwritten."""
         n = len(repulsion) // self.dim
         flat, data = self._kept(('hessian entries', n), lambda: _flat_entries(
-            *physics.spring_hessian_entries(self._springs_within(n),
-                                            self.Q * self.stiffnesses, self.dim),
-            len(repulsion)))
+            np.ascontiguousarray(self._springs_within(n), dtype=np.int64),
+            np.broadcast_to(np.asarray(self.Q * self.stiffnesses, float),
+                            len(self.springs)).copy(), self.dim, n))
         repulsion *= self.Q
         repulsion.ravel()[flat] += data
         return repulsion
@@ -255,10 +258,58 @@ def _spring_sums(x: np.ndarray, springs: np.ndarray,
     return energy, forces
 
 
-def _flat_entries(rows: np.ndarray, cols: np.ndarray, data: np.ndarray,
-                  size: int) -> tuple[np.ndarray, np.ndarray]:
-    """The flat indices into a dense (size, size) array of the entries
-    ``(rows, cols, data)``, each once, and their values (a repeated entry's
-    summed): no sparse matrix is built on the way."""
-    flat, which = np.unique(rows.astype(np.int64) * size + cols, return_inverse=True)
-    return flat, np.bincount(which, weights=data, minlength=len(flat))
+@numba.njit(cache=True)
+def _flat_entries(springs: np.ndarray, weights: np.ndarray, dim: int,
+                  natoms: int) -> tuple[np.ndarray, np.ndarray]:
+    """The entries of the springs' Hessian ``L_w (x) I_dim`` (``w`` the
+    springs' ``weights``: :func:`.physics.spring_hessian_entries`'s matrix)
+    as flat indices into a dense (dim N, dim N) array, each once, and their
+    values, row by row: an atom's diagonal (the sum of its springs' ``w``)
+    and its sprung pairs' ``-w`` (summed over the pair's springs, if it is
+    listed more than once, in either order). The springs of an atom are
+    summed where it is their first end, in their order, then where it is
+    their second: the order in which ``np.bincount`` sums those entries as
+    listed, so the values are the same to the last bit; no sort."""
+    count = springs.shape[0]
+    starts = np.zeros(natoms + 1, dtype=np.int64)   # each atom's springs, in that order
+    for s in range(count):
+        starts[springs[s, 0] + 1] += 1
+        starts[springs[s, 1] + 1] += 1
+    for atom in range(natoms):
+        starts[atom + 1] += starts[atom]
+    other = np.empty(2 * count, dtype=np.int64)
+    weight = np.empty(2 * count)
+    fill = starts[:natoms].copy()
+    for end in range(2):
+        for s in range(count):
+            atom = springs[s, end]
+            other[fill[atom]] = springs[s, 1 - end]
+            weight[fill[atom]] = weights[s]
+            fill[atom] += 1
+    rows = np.empty(natoms + 2 * count, dtype=np.int64)   # the entries, atom by atom
+    columns = np.empty(len(rows), dtype=np.int64)
+    sums = np.zeros(len(rows))
+    slot = np.full(natoms, -1, dtype=np.int64)   # a column's entry (this row's if > diagonal)
+    entries = 0
+    for row in range(natoms):
+        if starts[row] == starts[row + 1]:
+            continue
+        diagonal = entries
+        rows[diagonal], columns[diagonal] = row, row
+        entries += 1
+        for p in range(starts[row], starts[row + 1]):
+            sums[diagonal] += weight[p]
+            column = other[p]
+            if slot[column] <= diagonal:
+                slot[column] = entries
+                rows[entries], columns[entries] = row, column
+                entries += 1
+            sums[slot[column]] += -weight[p]
+    size = dim * natoms
+    flat = np.empty(dim * entries, dtype=np.int64)
+    data = np.empty(dim * entries)
+    for e in range(entries):
+        for axis in range(dim):
+            flat[dim * e + axis] = (dim * rows[e] + axis) * size + dim * columns[e] + axis
+            data[dim * e + axis] = sums[e]
+    return flat, data

@@ -33,27 +33,62 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 
+import numba
 import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian
 from numpy.typing import ArrayLike
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
 
 from .checks import check_each
+from .springs import check_springs
 
 
 def spring_components(natoms: int, springs: ArrayLike) -> np.ndarray:
-    """Label of the spring-graph component of every atom, shape (natoms,)
-    (SciPy's ``connected_components`` on the springs as a csr graph, built
-    row by row directly: through a coo matrix the conversion cost more than
-    the search on a scene of tens of points)."""
-    springs = np.asarray(springs, dtype=int).reshape(-1, 2)
-    rows = springs[np.argsort(springs[:, 0], kind='stable')]
-    starts = np.zeros(natoms + 1, dtype=int)
-    np.cumsum(np.bincount(rows[:, 0], minlength=natoms), out=starts[1:])
-    graph = csr_matrix((np.ones(len(rows)), rows[:, 1], starts), shape=(natoms, natoms))
-    return connected_components(graph, directed=False)[1]
+    """Label of the spring-graph component of every atom, shape (natoms,),
+    int32: the components numbered 0, 1, ... in the order of their lowest
+    atom index (SciPy's ``connected_components(directed=False)``'s labels),
+    an atom on no spring alone. ``springs``: (K, 2) pairs of atom indices
+    below ``natoms``, in any order, repeated or not; a ValueError names the
+    first outside that range. Found by union-find in one compiled pass
+    (:func:`_component_labels`): through a SciPy graph a scene of tens of
+    points paid more for the graph than for the search."""
+    springs = np.ascontiguousarray(np.asarray(springs, dtype=np.int64).reshape(-1, 2))
+    if len(springs) and (springs.min() < 0 or springs.max() >= natoms):
+        check_springs(springs, natoms)   # names the first, and raises
+    return _component_labels(natoms, springs)
+
+
+@numba.njit(cache=True)
+def _component_labels(natoms: int, springs: np.ndarray) -> np.ndarray:
+    """:func:`spring_components`'s labels: each spring joins the trees of its
+    ends under the lower root (so a root is its component's lowest atom),
+    then the atoms, in order, number their roots as first met."""
+    parent = np.arange(natoms)
+    for s in range(springs.shape[0]):
+        a, b = _root(parent, springs[s, 0]), _root(parent, springs[s, 1])
+        if a < b:
+            parent[b] = a
+        elif b < a:
+            parent[a] = b
+    labels = np.empty(natoms, dtype=np.int32)
+    count = 0
+    for atom in range(natoms):
+        root = _root(parent, atom)
+        if root == atom:
+            labels[atom] = count
+            count += 1
+        else:
+            labels[atom] = labels[root]
+    return labels
+
+
+@numba.njit(cache=True)
+def _root(parent: np.ndarray, atom: int) -> int:
+    """The root of ``atom``'s tree in ``parent``, halving the path there."""
+    while parent[atom] != atom:
+        parent[atom] = parent[parent[atom]]
+        atom = parent[atom]
+    return atom
 
 
 def boundary_edges(faces: Iterable[Sequence[int]]) -> np.ndarray:

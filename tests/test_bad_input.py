@@ -1,11 +1,15 @@
 """Every bad input is a ValueError that names the offender."""
 
+import itertools
+import re
+
 import numpy as np
 import pytest
 from ase import Atoms
 
 from ase_maud import backends
 from ase_maud.calculator import MaudCalculator
+from ase_maud.springs import check_springs
 
 #: The exact backends (the fmm one is tested in test_fmm.py).
 BACKENDS = [name for name in backends.names() if backends.get(name).exact]
@@ -35,6 +39,22 @@ def test_bad_springs(springs, match):
     calc = MaudCalculator()
     with pytest.raises(ValueError, match=match):
         calc.set(springs=springs)
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_the_lowest_pair_listed_twice_is_named_with_all_its_springs(seed):
+    """Of several pairs listed twice (in either order), the error names the
+    lowest (by its lower atom, then its higher) and each spring of it."""
+    rng = np.random.default_rng(seed)
+    pairs = np.array(list(itertools.combinations(range(12), 2)))
+    pairs = pairs[rng.choice(len(pairs), 20, replace=False)]
+    twice = pairs[rng.choice(20, 3, replace=False)]
+    springs = np.concatenate([pairs, twice[:, ::-1]])[rng.permutation(23)]
+    low = min(tuple(sorted(pair)) for pair in twice.tolist())
+    named = [k for k, pair in enumerate(springs.tolist()) if tuple(sorted(pair)) == low]
+    with pytest.raises(ValueError, match=re.escape(
+            f'springs {named} all tie atoms {low[0]} and {low[1]}: list each pair once')):
+        check_springs(springs)
 
 
 def test_spring_beyond_last_atom():

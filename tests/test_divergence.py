@@ -15,6 +15,8 @@ from ase import Atoms
 from ase.calculators.calculator import Calculator, all_changes
 from ase.constraints import FixAtoms, FixCartesian, FixedPlane
 from ase.optimize import BFGS
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from ase_maud import DivergenceError, Maud, MaudCalculator, NoEquilibriumError
 from ase_maud.analysis import classify
@@ -188,3 +190,36 @@ def test_spring_components_are_the_graphs_components(seed):
         group[group == group[j]] = group[i]
     same = labels[:, None] == labels[None, :]
     np.testing.assert_array_equal(same, group[:, None] == group[None, :])
+
+
+@pytest.mark.parametrize('seed', range(12))
+def test_spring_components_are_scipys_labels(seed):
+    """The compiled union-find labels the atoms as SciPy's
+    ``connected_components(directed=False)`` does (int32, the components
+    numbered in the order of their lowest atom), springs in any order and
+    orientation: pairs repeated both ways, atoms tied to themselves, atoms
+    on no spring, no springs, and the chains of the proof's test above."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 60))
+    pairs = rng.integers(0, n, size=(int(rng.integers(0, 2 * n)), 2))
+    chain_springs = chain(6, seed=seed).calc.springs
+    cases = [(n, pairs), (n, np.concatenate([pairs, pairs[::2, ::-1], pairs[:3]])),
+             (n, np.concatenate([pairs, np.repeat(rng.integers(0, n, (3, 1)), 2, axis=1)])),
+             (n, np.zeros((0, 2), int)), (6, chain_springs), (6, chain_springs[1:]),
+             (6, chain_springs[1:-1][::-1, ::-1])]
+    for natoms, springs in cases:
+        labels = spring_components(natoms, springs)
+        graph = coo_matrix((np.ones(len(springs)), (springs[:, 0], springs[:, 1])),
+                           shape=(natoms, natoms))
+        expected = connected_components(graph, directed=False)[1]
+        assert labels.dtype == expected.dtype
+        np.testing.assert_array_equal(labels, expected)
+        first = np.unique(labels, return_index=True)[1]
+        assert np.all(np.diff(first) > 0)   # numbered by their lowest atom
+
+
+def test_spring_components_name_a_spring_out_of_range():
+    with pytest.raises(ValueError, match=r'spring 1 \(2, 5\) names an atom beyond'):
+        spring_components(5, [[0, 1], [2, 5]])
+    with pytest.raises(ValueError, match=r'spring 0 \(-1, 2\) has a negative'):
+        spring_components(5, [[-1, 2]])

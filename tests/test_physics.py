@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ase_maud import physics
-from ase_maud.potential import MaudPotential
+from ase_maud.potential import MaudPotential, _flat_entries
 
 #: Central-difference step and tolerance for pair vectors of length ~1.
 STEP = 1e-5
@@ -177,6 +177,59 @@ def test_dense_hessian_sums_the_springs_at_each_point(random_points, dim, seed):
     rows, cols, data = physics.spring_hessian_entries(springs, 0.7 * q, dim)
     np.add.at(dense, (rows, cols), data)
     np.testing.assert_allclose(dense, sparse, rtol=1e-15, atol=1e-15)
+
+
+def summed_entries(springs, weights, dim, n):
+    """The flat indices and values of the springs' Hessian entries summed
+    as c83d28e kept them: ``np.unique`` over all of them, ``np.bincount``
+    in their order."""
+    rows, cols, data = physics.spring_hessian_entries(springs, weights, dim)
+    flat, which = np.unique(rows.astype(np.int64) * dim * n + cols, return_inverse=True)
+    return flat, np.bincount(which, weights=data, minlength=len(flat))
+
+
+@pytest.mark.parametrize('seed', range(8))
+@pytest.mark.parametrize('dim', [2, 3])
+def test_the_kept_hessian_entries_are_the_summed_entries_to_the_bit(dim, seed):
+    """The compiled flat index of the springs' Hessian holds the entries
+    (:func:`summed_entries`), each once, with their values to the last bit:
+    weights over 16 decades (so the order of a sum shows), one or one per
+    spring, atoms on no spring, pairs repeated in both orders."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 30))
+    pairs = rng.integers(0, n, size=(int(rng.integers(1, 3 * n)), 2))
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    if seed % 2:
+        pairs = np.concatenate([pairs, pairs[::2, ::-1], pairs[:3]])
+    for weights in (np.full(len(pairs), 10 ** rng.uniform(-8, 8)),
+                    10 ** rng.uniform(-8, 8, len(pairs))):
+        flat, data = _flat_entries(pairs.astype(np.int64), weights, dim, n)
+        expected_flat, expected = summed_entries(pairs, weights, dim, n)
+        order = np.argsort(flat)
+        np.testing.assert_array_equal(flat[order], expected_flat)
+        assert data[order].tobytes() == expected.tobytes()
+    flat, data = _flat_entries(np.zeros((0, 2), np.int64), np.zeros(0), dim, n)
+    assert flat.size == data.size == 0
+
+
+@pytest.mark.parametrize('seed', range(3))
+@pytest.mark.parametrize('dim', [2, 3])
+def test_the_whole_hessian_adds_the_summed_spring_entries(dim, seed):
+    """``whole_hessian``: ``Q`` times the repulsion's, plus the springs'
+    entries summed as :func:`summed_entries` sums them, byte for byte, with
+    one ``q`` per spring or none."""
+    rng = np.random.default_rng(seed)
+    n = 11
+    springs = random_springs(n, 20, seed)
+    springs[::3] = springs[::3, ::-1]
+    repulsion = rng.standard_normal((dim * n, dim * n))
+    for q in (None, 10 ** rng.uniform(-6, 6, len(springs))):
+        potential = MaudPotential(springs, 1.3, 0.7, dim, q=q)
+        expected = 0.7 * repulsion
+        flat, data = summed_entries(springs, 0.7 * potential.stiffnesses, dim, n)
+        expected.ravel()[flat] += data
+        got = potential.whole_hessian(repulsion.copy())
+        assert got.tobytes() == expected.tobytes()
 
 
 @pytest.mark.parametrize('n, chunk', [(0, 5), (1, 5), (2, 1), (7, 1), (7, 4),

@@ -41,7 +41,9 @@ joins the minimum): until new searches stop finding new saddles.
    :func:`ase_maud.transition.reflection`, relaxed, its calls counted): a
    band of images between the two, its highest image refined to a verified
    index-1 saddle (:func:`ase_maud.transition.saddle_between`): a dome's
-   snap-through, a whole-scene path no local push reaches.
+   snap-through, a whole-scene path no local push reaches. Where the
+   refinement reached a verified saddle that is not the band's (another
+   barrier), that saddle is the attempt's.
 
 An attempt is rejected, and said so, when the region's saddle lies along the
 direction of a saddle already found (the cosine between the two moves from
@@ -432,7 +434,9 @@ def _settle(atoms: Atoms, tally: _Tally, held: np.ndarray, rest: np.ndarray,
 
 def _path(minimum: Atoms, partner: Atoms, fmax: float, relax: int | None = None,
           distance_atol: float = 0.0) -> tuple[Atoms | None, Attempt]:
-    """The saddle between ``minimum`` and ``partner`` by a band of images;
+    """The saddle between ``minimum`` and ``partner`` by a band of images (or,
+    if none, the first verified saddle a refinement from the band reached
+    elsewhere: :attr:`~ase_maud.transition.Transition.elsewhere`);
     ``partner`` first relaxed in at most ``relax`` steps if given (a mirror
     image: its calls and CPU seconds counted in the attempt), no path if no
     point then lies further than ``distance_atol`` from its place in
@@ -451,13 +455,14 @@ def _path(minimum: Atoms, partner: Atoms, fmax: float, relax: int | None = None,
             attempt.outcome = 'the mirror image relaxed back to the minimum'
             return None, attempt
     found = saddle_between(minimum, partner, fmax=fmax)
-    attempt.outcome = found.outcome or 'saddle'
+    saddle = found.saddle or next(iter(found.elsewhere), None)
+    attempt.outcome = 'saddle' if saddle is not None else found.outcome
     attempt.calls += found.calls
     attempt.hvp_vectors, attempt.hessians = found.work.hvp_vectors, found.work.hessians
     attempt.cpu_s += found.cpu_s
-    if found.saddle is not None:
-        attempt.energy = found.saddle.get_potential_energy()
-    return found.saddle, attempt
+    if saddle is not None:
+        attempt.energy = saddle.get_potential_energy()
+    return saddle, attempt
 
 
 def _along(move: np.ndarray, known: list[np.ndarray]) -> bool:

@@ -74,11 +74,16 @@ class Transition:
     energy units), the energy of the band's highest image (``climbing``,
     above the first minimum), the calculator calls of the band (summed over
     its moving images) and of the refinement, the Hessian-vector product
-    vectors and Hessians (``work``), the band's steps and CPU seconds."""
+    vectors and Hessians (``work``), the band's steps and CPU seconds.
+    ``elsewhere``: the verified index-1 saddles a refinement reached that
+    are not the band's (their barrier more than :data:`AGREE` from its
+    highest image's), in the order reached: saddles of the scene, not
+    known to lie between the two minima."""
 
     saddle: Atoms | None
     band: list[Atoms]
     outcome: str = ''
+    elsewhere: list[Atoms] = field(default_factory=list)
     barriers: tuple[float, float] = (float('nan'), float('nan'))
     climbing: float = float('nan')
     band_calls: int = 0
@@ -157,6 +162,8 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
             saddle, found.outcome = _refine(band, fmax, steps, found)
             if saddle is not None:
                 found.outcome = _apart(band, saddle, first)
+                if found.outcome:
+                    found.elsewhere.append(saddle)
             if saddle is not None and not found.outcome:
                 found.saddle = saddle
                 energy = saddle.get_potential_energy()

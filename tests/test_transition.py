@@ -190,6 +190,25 @@ def test_a_mirror_that_relaxes_back_to_the_minimum_gives_no_path():
         search_saddles(free, modes=0, local=0, mirror=True)
 
 
+def test_a_refined_saddle_that_is_not_the_bands_is_kept_apart_and_taken_by_a_search(
+        monkeypatch):
+    """With no tolerance between the refined saddle's barrier and the band's
+    highest image (``AGREE = 0``) no refinement is the band's: the transition
+    has no saddle, but keeps each refinement's verified index-1 saddle in
+    ``elsewhere``; a saddle search's path attempt takes the first of them."""
+    import ase_maud.transition as transition
+    monkeypatch.setattr(transition, 'AGREE', 0.0)
+    first, second = dome(6, 5)
+    found = saddle_between(first, second)
+    assert found.saddle is None and found.outcome
+    assert 1 <= len(found.elsewhere) <= transition.RETRIES + 1
+    for saddle in found.elsewhere:
+        assert classify(fresh_copy(saddle)).index == 1
+    search = search_saddles(first, modes=0, local=0, partner=second)
+    assert search.attempts[0].outcome == 'saddle' and len(search.saddles) == 1
+    assert same_point(search.saddles[0], found.elsewhere[0])
+
+
 def test_the_landscape_takes_the_path_where_its_climbs_found_nothing():
     """Climbs cut off by a budget of 5 force-call equivalents find nothing:
     the landscape's one saddle is the band's (the two climbs counted as

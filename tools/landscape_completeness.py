@@ -10,8 +10,9 @@ must be a verified minimum.
 From it:
 
 - **default**: :func:`ase_maud.landscape.landscape` with its default arguments (its modes,
-  local activations and seed) to ``--fmax``, told the window (``window=``: it goes on in
-  rounds, the next modes each, while a round finds a new saddle below it); with
+  local activations and seed; ``--modes`` sets the modes a round) to ``--fmax``, told the
+  window (``window=``: it goes on in rounds, the next modes each, while a round finds a new
+  saddle below it); with
   ``--one-round``, not told it (one round: what the landscape did before it took a window);
 - **reference**: the same function with ``--factor`` (default 10) times as many attempts
   (:class:`ase_maud.activation.Attempt`: each climb along a mode, one way, or each local
@@ -114,10 +115,12 @@ def timed(start: Atoms, fmax: float, **kwargs) -> tuple[Landscape, float]:
 
 
 def compare(scene: str, size: int, seed: int, window: float, factor: int, ref_seed: int,
-            fmax: float, one_round: bool) -> list[dict]:
-    """The default and reference rows of ``scene``, its missed saddles printed."""
+            fmax: float, one_round: bool, modes: int | None = None) -> list[dict]:
+    """The default and reference rows of ``scene``, its missed saddles printed; ``modes``:
+    the default's modes a round (None: the landscape's own default)."""
     start = minimum(scene, size, seed)
-    default, default_cpu = timed(start, fmax, window=None if one_round else window)
+    default, default_cpu = timed(start, fmax, window=None if one_round else window,
+                                 **({} if modes is None else {'modes': modes}))
     modes, local = allocation(start, factor * len(default.search.attempts))
     reference, reference_cpu = timed(start, fmax, modes=modes, local=local, seed=ref_seed)
     mine, theirs = counted(default, window), counted(reference, window)
@@ -168,6 +171,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--ref-seed', type=int, default=1)
     parser.add_argument('--one-round', action='store_true',
                         help='the default landscape not told the window (one round)')
+    parser.add_argument('--modes', type=int, default=None,
+                        help="the default landscape's modes a round (default: the "
+                        "landscape's own; more than the scene has: every mode, both ways)")
     parser.add_argument('--fmax', type=float, default=1e-6)
     parser.add_argument('--out', type=Path, default=Path('landscape_completeness'))
     args = parser.parse_args(argv)
@@ -178,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
         for size in sizes:
             for seed in args.seeds:
                 for row in compare(scene, size, seed, args.window, factor, args.ref_seed,
-                                   args.fmax, args.one_round):
+                                   args.fmax, args.one_round, args.modes):
                     rows.append(row)
                     print(' '.join(f'{k}={row[k]}' for k in COLUMNS), flush=True)
     args.out.mkdir(parents=True, exist_ok=True)

@@ -455,7 +455,7 @@ def _path(minimum: Atoms, partner: Atoms, fmax: float, relax: int | None = None,
             attempt.outcome = 'the mirror image relaxed back to the minimum'
             return None, attempt
     found = saddle_between(minimum, partner, fmax=fmax)
-    saddle = found.saddle or next(iter(found.elsewhere), None)
+    saddle = found.saddle if found.saddle is not None else next(iter(found.elsewhere), None)
     attempt.outcome = 'saddle' if saddle is not None else found.outcome
     attempt.calls += found.calls
     attempt.hvp_vectors, attempt.hessians = found.work.hvp_vectors, found.work.hessians

@@ -175,6 +175,15 @@ class StiffnessModel(ABC):
         """The model at ``atoms``' current positions, with what it has learnt
         in the run so far (:meth:`observe`)."""
 
+    def of_results(self, atoms: Atoms, results: dict[str, Any],
+                   learnt: dict[str, Any] | None = None) -> Solver:
+        """:meth:`at`, where ``results`` are the calculator's results at
+        ``atoms``' positions, handed over by the loop that computed them
+        (:func:`ase_maud.arrays.relax`, a MaudCalculator's): a model that
+        needs one of them reads it there instead of asking the calculator
+        again (its change detection and copy). This one asks (:meth:`at`)."""
+        return self.at(atoms, learnt)
+
     def todict(self) -> dict[str, Any]:
         """The model's settings, for an optimizer's ``todict``."""
         return {'model': self.name, 'target': self.target, 'floor': self.floor}
@@ -203,19 +212,32 @@ class StiffnessModel(ABC):
         return safe
 
 
+class _Components:
+    """The free components of moves (N, 3) of a scene: its ``free`` (N, dim)
+    mask, their flat indices into an (N, 3) array (taken and put by index:
+    cheaper than the mask on a scene of tens of points) and whether every
+    component is free. Built once for a mask that serves many solvers (the
+    exact model keeps it with its constraints' basis)."""
+
+    def __init__(self, free: np.ndarray):
+        self.free = free
+        self.dim = free.shape[1]
+        flat = np.flatnonzero(free)
+        self.index = flat if self.dim == 3 else 3 * (flat // self.dim) + flat % self.dim
+        self.every = self.index.size == 3 * len(free)
+
+
 class _DofSolver(Solver):
     """Gathers the free components of the forces into a vector, solves, and
     scatters the move back into an (N, 3) array."""
 
-    def __init__(self, free: np.ndarray):
-        self.free = free  # (N, dim) mask
-        self.dim = free.shape[1]
-        flat = np.flatnonzero(free)
-        #: The free components' flat indices into an (N, 3) array (taken and
-        #: put by index: cheaper than the mask on a scene of tens of points).
-        self.index = flat if self.dim == 3 else 3 * (flat // self.dim) + flat % self.dim
+    def __init__(self, components: _Components):
+        self.free = components.free  # (N, dim) mask
+        self.dim = components.dim
+        #: The free components' flat indices into an (N, 3) array.
+        self.index = components.index
         #: Every component is free: a move's components are its (N, 3) array.
-        self.every = self.index.size == 3 * len(free)
+        self.every = components.every
 
     def solve(self, forces: np.ndarray) -> np.ndarray:
         return self._scatter(self._solve(self._gather(forces)))
@@ -417,31 +439,46 @@ class ExactModel(StiffnessModel):
         self._basis: tuple[Any, np.ndarray | None] | None = None
         self._held: np.ndarray | None = None
         self._kept_index = np.empty(0, dtype=np.intp)   # the coordinates not held
+        self._components: _Components | None = None   # of the solvers' moves
 
     def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
         return self.local(atoms.calc.get_property('hessian', atoms), atoms)
 
+    def of_results(self, atoms: Atoms, results: dict[str, Any],
+                   learnt: dict[str, Any] | None = None) -> Solver:
+        """The model of ``results['hessian']`` (a MaudCalculator's, which
+        raises on a non-finite result, so it is not checked again): the loop
+        that computed it hands it over rather than having it asked of the
+        calculator (:meth:`at`, which does when ``results`` hold none)."""
+        hessian = results.get('hessian')
+        return self.at(atoms, learnt) if hessian is None else self._local(hessian, atoms)
+
     def local(self, hessian: np.ndarray, atoms: Atoms) -> Solver:
         """The model of the dense ``hessian`` (dim N, dim N) at ``atoms``'
-        positions (its constraints say which moves are allowed)."""
+        positions (its constraints say which moves are allowed); a
+        LinAlgError if it is not finite."""
         if not all_finite(hessian):
             raise np.linalg.LinAlgError('the Hessian is not finite')
+        return self._local(hessian, atoms)
+
+    def _local(self, hessian: np.ndarray, atoms: Atoms) -> Solver:
+        """:meth:`local` of a finite ``hessian``."""
         dim = hessian.shape[0] // len(atoms)
         basis = self.basis(atoms, dim)
-        free = np.ones((len(atoms), dim), dtype=bool)
         if self.target == 'saddle':
             internal = internal_basis(atoms.positions, dim, basis)
-            return _EigenSolver(internal.T @ hessian @ internal, internal, free,
-                                np.asarray)
-        if (held := self._held) is not None:   # whole coordinates: a selection
-            free, kept = ~held, self._kept_index
+            return _EigenSolver(internal.T @ hessian @ internal, internal,
+                                _Components(np.ones((len(atoms), dim), dtype=bool)), np.asarray)
+        components = self._components
+        if self._held is not None:   # whole coordinates: a selection
+            kept = self._kept_index
             matrix, basis = hessian.take(kept, axis=0).take(kept, axis=1), None
         else:
             matrix = hessian if basis is None else basis.T @ hessian @ basis
         if self.target == 'minimum':
-            return (_CholeskySolver.of(matrix, basis, free, self.floor)
-                    or _EigenSolver(matrix, basis, free, self._absolute))
-        return _EigenSolver(matrix, basis, free, self._absolute)
+            return (_CholeskySolver.of(matrix, basis, components, self.floor)
+                    or _EigenSolver(matrix, basis, components, self._absolute))
+        return _EigenSolver(matrix, basis, components, self._absolute)
 
     def basis(self, atoms: Atoms, dim: int) -> np.ndarray | None:
         """:func:`allowed_basis`, kept while the constraints are the same;
@@ -449,7 +486,9 @@ class ExactModel(StiffnessModel):
         to sign: the constraints hold whole coordinates, as FixAtoms and
         FixCartesian do), :attr:`_held` marks the held ones (N, dim) and
         :attr:`_kept_index` numbers the others, for a selection of the
-        Hessian's rows and columns in place of products."""
+        Hessian's rows and columns in place of products; :attr:`_components`
+        are the free components of the solvers' moves (every one but those
+        held)."""
         key = (len(atoms), dim, [(type(c).__name__, repr(c.todict()))
                                  for c in atoms.constraints])
         if self._basis is None or self._basis[0] != key:
@@ -459,6 +498,8 @@ class ExactModel(StiffnessModel):
                     np.count_nonzero(basis, axis=0) == 1).all():
                 self._held = ~np.abs(basis).sum(axis=1).astype(bool).reshape(-1, dim)
                 self._kept_index = np.flatnonzero(~self._held)
+            self._components = _Components(np.ones((len(atoms), dim), dtype=bool)
+                                           if self._held is None else ~self._held)
         return self._basis[1]
 
 
@@ -466,8 +507,8 @@ class _DenseSolver(_DofSolver):
     """A dense ``matrix`` on the columns of ``basis`` (None: every
     coordinate): moves in and out of that basis, and ``K v``."""
 
-    def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray):
-        super().__init__(free)
+    def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, components: _Components):
+        super().__init__(components)
         self.matrix, self.basis = matrix, basis
 
     def _into(self, rhs: np.ndarray) -> np.ndarray:
@@ -492,18 +533,18 @@ class _CholeskySolver(_DenseSolver, DampedSolver):
 
     definite = True
 
-    def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray,
+    def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, components: _Components,
                  scale: float, factor: np.ndarray):
-        super().__init__(matrix, basis, free)
+        super().__init__(matrix, basis, components)
         self.scale, self.factor = scale, factor
 
     @classmethod
-    def of(cls, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray,
+    def of(cls, matrix: np.ndarray, basis: np.ndarray | None, components: _Components,
            floor: float) -> _CholeskySolver | None:
         """The solver of ``matrix``, or None if it is not definite."""
         scale = float(np.abs(matrix).sum(axis=1).max(initial=0.0))
         factor = _cholesky(matrix, floor * scale)
-        return None if factor is None else cls(matrix, basis, free, scale, factor)
+        return None if factor is None else cls(matrix, basis, components, scale, factor)
 
     def _solve(self, rhs):
         return self._out(dpotrs(self.factor, self._into(rhs))[0])
@@ -537,8 +578,8 @@ class _EigenSolver(_DenseSolver, DampedSolver, ModeSolver):
 
     definite = False
 
-    def __init__(self, matrix, basis, free, absolute):
-        super().__init__(matrix, basis, free)
+    def __init__(self, matrix, basis, components, absolute):
+        super().__init__(matrix, basis, components)
         self.absolute = absolute
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -666,7 +707,7 @@ class _SparseSolver(_DofSolver):
     """A solver that also holds ``P`` on the free DOFs (:attr:`matrix`)."""
 
     def __init__(self, matrix: sp.csr_matrix, free: np.ndarray):
-        super().__init__(free)
+        super().__init__(_Components(free))
         self.matrix = matrix
 
 

@@ -212,32 +212,28 @@ class StiffnessModel(ABC):
         return safe
 
 
-class _Components:
-    """The free components of moves (N, 3) of a scene: its ``free`` (N, dim)
-    mask, their flat indices into an (N, 3) array (taken and put by index:
-    cheaper than the mask on a scene of tens of points) and whether every
-    component is free. Built once for a mask that serves many solvers (the
-    exact model keeps it with its constraints' basis)."""
-
-    def __init__(self, free: np.ndarray):
-        self.free = free
-        self.dim = free.shape[1]
-        flat = np.flatnonzero(free)
-        self.index = flat if self.dim == 3 else 3 * (flat // self.dim) + flat % self.dim
-        self.every = self.index.size == 3 * len(free)
+def _free_index(free: np.ndarray) -> np.ndarray:
+    """The flat indices into an (N, 3) array of the components a ``free``
+    (N, dim) mask frees (taken and put by index: cheaper than the mask on a
+    scene of tens of points)."""
+    flat = np.flatnonzero(free)
+    dim = free.shape[1]
+    return flat if dim == 3 else 3 * (flat // dim) + flat % dim
 
 
 class _DofSolver(Solver):
     """Gathers the free components of the forces into a vector, solves, and
-    scatters the move back into an (N, 3) array."""
+    scatters the move back into an (N, 3) array. ``index`` is
+    :func:`_free_index` of ``free``, given by a caller that keeps it with its
+    mask (the exact model, with its constraints), else found here."""
 
-    def __init__(self, components: _Components):
-        self.free = components.free  # (N, dim) mask
-        self.dim = components.dim
+    def __init__(self, free: np.ndarray, index: np.ndarray | None = None):
+        self.free = free  # (N, dim) mask
+        self.dim = free.shape[1]
         #: The free components' flat indices into an (N, 3) array.
-        self.index = components.index
+        self.index = _free_index(free) if index is None else index
         #: Every component is free: a move's components are its (N, 3) array.
-        self.every = components.every
+        self.every = self.index.size == 3 * len(free)
 
     def solve(self, forces: np.ndarray) -> np.ndarray:
         return self._scatter(self._solve(self._gather(forces)))
@@ -439,7 +435,8 @@ class ExactModel(StiffnessModel):
         self._basis: tuple[Any, np.ndarray | None] | None = None
         self._held: np.ndarray | None = None
         self._kept_index = np.empty(0, dtype=np.intp)   # the coordinates not held
-        self._components: _Components | None = None   # of the solvers' moves
+        self._free = np.ones((0, 3), dtype=bool)   # the solvers' free mask
+        self._free_index = _free_index(self._free)   # ... and its components
 
     def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
         return self.local(atoms.calc.get_property('hessian', atoms), atoms)
@@ -468,17 +465,17 @@ class ExactModel(StiffnessModel):
         if self.target == 'saddle':
             internal = internal_basis(atoms.positions, dim, basis)
             return _EigenSolver(internal.T @ hessian @ internal, internal,
-                                _Components(np.ones((len(atoms), dim), dtype=bool)), np.asarray)
-        components = self._components
+                                np.ones((len(atoms), dim), dtype=bool), None, np.asarray)
+        free, index = self._free, self._free_index
         if self._held is not None:   # whole coordinates: a selection
             kept = self._kept_index
             matrix, basis = hessian.take(kept, axis=0).take(kept, axis=1), None
         else:
             matrix = hessian if basis is None else basis.T @ hessian @ basis
         if self.target == 'minimum':
-            return (_CholeskySolver.of(matrix, basis, components, self.floor)
-                    or _EigenSolver(matrix, basis, components, self._absolute))
-        return _EigenSolver(matrix, basis, components, self._absolute)
+            return (_CholeskySolver.of(matrix, basis, free, index, self.floor)
+                    or _EigenSolver(matrix, basis, free, index, self._absolute))
+        return _EigenSolver(matrix, basis, free, index, self._absolute)
 
     def basis(self, atoms: Atoms, dim: int) -> np.ndarray | None:
         """:func:`allowed_basis`, kept while the constraints are the same;
@@ -486,9 +483,9 @@ class ExactModel(StiffnessModel):
         to sign: the constraints hold whole coordinates, as FixAtoms and
         FixCartesian do), :attr:`_held` marks the held ones (N, dim) and
         :attr:`_kept_index` numbers the others, for a selection of the
-        Hessian's rows and columns in place of products; :attr:`_components`
-        are the free components of the solvers' moves (every one but those
-        held)."""
+        Hessian's rows and columns in place of products; :attr:`_free` is
+        the solvers' free mask (N, dim: every coordinate but those held) and
+        :attr:`_free_index` its components (:func:`_free_index`)."""
         key = (len(atoms), dim, [(type(c).__name__, repr(c.todict()))
                                  for c in atoms.constraints])
         if self._basis is None or self._basis[0] != key:
@@ -498,8 +495,9 @@ class ExactModel(StiffnessModel):
                     np.count_nonzero(basis, axis=0) == 1).all():
                 self._held = ~np.abs(basis).sum(axis=1).astype(bool).reshape(-1, dim)
                 self._kept_index = np.flatnonzero(~self._held)
-            self._components = _Components(np.ones((len(atoms), dim), dtype=bool)
-                                           if self._held is None else ~self._held)
+            self._free = (np.ones((len(atoms), dim), dtype=bool) if self._held is None
+                          else ~self._held)
+            self._free_index = _free_index(self._free)
         return self._basis[1]
 
 
@@ -507,8 +505,9 @@ class _DenseSolver(_DofSolver):
     """A dense ``matrix`` on the columns of ``basis`` (None: every
     coordinate): moves in and out of that basis, and ``K v``."""
 
-    def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, components: _Components):
-        super().__init__(components)
+    def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray,
+                 index: np.ndarray | None):
+        super().__init__(free, index)
         self.matrix, self.basis = matrix, basis
 
     def _into(self, rhs: np.ndarray) -> np.ndarray:
@@ -533,18 +532,18 @@ class _CholeskySolver(_DenseSolver, DampedSolver):
 
     definite = True
 
-    def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, components: _Components,
-                 scale: float, factor: np.ndarray):
-        super().__init__(matrix, basis, components)
+    def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray,
+                 index: np.ndarray | None, scale: float, factor: np.ndarray):
+        super().__init__(matrix, basis, free, index)
         self.scale, self.factor = scale, factor
 
     @classmethod
-    def of(cls, matrix: np.ndarray, basis: np.ndarray | None, components: _Components,
-           floor: float) -> _CholeskySolver | None:
+    def of(cls, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray,
+           index: np.ndarray | None, floor: float) -> _CholeskySolver | None:
         """The solver of ``matrix``, or None if it is not definite."""
         scale = float(np.abs(matrix).sum(axis=1).max(initial=0.0))
         factor = _cholesky(matrix, floor * scale)
-        return None if factor is None else cls(matrix, basis, components, scale, factor)
+        return None if factor is None else cls(matrix, basis, free, index, scale, factor)
 
     def _solve(self, rhs):
         return self._out(dpotrs(self.factor, self._into(rhs))[0])
@@ -578,8 +577,8 @@ class _EigenSolver(_DenseSolver, DampedSolver, ModeSolver):
 
     definite = False
 
-    def __init__(self, matrix, basis, components, absolute):
-        super().__init__(matrix, basis, components)
+    def __init__(self, matrix, basis, free, index, absolute):
+        super().__init__(matrix, basis, free, index)
         self.absolute = absolute
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -707,7 +706,7 @@ class _SparseSolver(_DofSolver):
     """A solver that also holds ``P`` on the free DOFs (:attr:`matrix`)."""
 
     def __init__(self, matrix: sp.csr_matrix, free: np.ndarray):
-        super().__init__(_Components(free))
+        super().__init__(free)
         self.matrix = matrix
 
 

@@ -443,12 +443,13 @@ class ExactModel(StiffnessModel):
 
     def of_results(self, atoms: Atoms, results: dict[str, Any],
                    learnt: dict[str, Any] | None = None) -> Solver:
-        """The model of ``results['hessian']`` (a MaudCalculator's, which
-        raises on a non-finite result, so it is not checked again): the loop
-        that computed it hands it over rather than having it asked of the
-        calculator (:meth:`at`, which does when ``results`` hold none)."""
+        """The model of ``results['hessian']``: the loop that computed it
+        hands it over rather than having it asked of the calculator
+        (:meth:`at`, which does when ``results`` hold none). It is checked
+        as any Hessian is (:meth:`local`): a MaudCalculator's own results
+        are finite, but a subclass's need not be."""
         hessian = results.get('hessian')
-        return self.at(atoms, learnt) if hessian is None else self._local(hessian, atoms)
+        return self.at(atoms, learnt) if hessian is None else self.local(hessian, atoms)
 
     def local(self, hessian: np.ndarray, atoms: Atoms) -> Solver:
         """The model of the dense ``hessian`` (dim N, dim N) at ``atoms``'
@@ -456,10 +457,6 @@ class ExactModel(StiffnessModel):
         LinAlgError if it is not finite."""
         if not all_finite(hessian):
             raise np.linalg.LinAlgError('the Hessian is not finite')
-        return self._local(hessian, atoms)
-
-    def _local(self, hessian: np.ndarray, atoms: Atoms) -> Solver:
-        """:meth:`local` of a finite ``hessian``."""
         dim = hessian.shape[0] // len(atoms)
         basis = self.basis(atoms, dim)
         if self.target == 'saddle':

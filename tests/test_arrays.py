@@ -142,7 +142,7 @@ def test_a_run_with_no_finite_step_says_so_once_in_its_log(seed, watched, monkey
     def failing(self, hessian, atoms):
         raise np.linalg.LinAlgError('no factor')
 
-    monkeypatch.setattr(ExactModel, '_local', failing)
+    monkeypatch.setattr(ExactModel, 'local', failing)
     atoms, log = build('all_pairs', 6 + seed, seed=seed), io.StringIO()
     opt = Maud(atoms, logfile=log)
     if watched:

@@ -97,9 +97,11 @@ def relax(atoms: Atoms, model: StiffnessModel, strategy: Strategy, state: MaudSt
         return held_results()
 
     def local_at(x: np.ndarray) -> Any:
+        here = np.array_equal(x, positions)   # where the calculator's results are
         positions[:] = x   # (elsewhere: where a resumed run's step began)
         try:
-            return model.at(atoms, state.model)
+            return (model.of_results(atoms, calc.results, state.model) if here
+                    else model.at(atoms, state.model))
         except np.linalg.LinAlgError as error:
             no_step(f'the {model.name} stiffness model failed ({error})')
 

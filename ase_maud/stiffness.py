@@ -175,6 +175,15 @@ class StiffnessModel(ABC):
         """The model at ``atoms``' current positions, with what it has learnt
         in the run so far (:meth:`observe`)."""
 
+    def of_results(self, atoms: Atoms, results: dict[str, Any],
+                   learnt: dict[str, Any] | None = None) -> Solver:
+        """:meth:`at`, where ``results`` are the calculator's results at
+        ``atoms``' positions, handed over by the loop that computed them
+        (:func:`ase_maud.arrays.relax`, a MaudCalculator's): a model that
+        needs one of them reads it there instead of asking the calculator
+        again (its change detection and copy). This one asks (:meth:`at`)."""
+        return self.at(atoms, learnt)
+
     def todict(self) -> dict[str, Any]:
         """The model's settings, for an optimizer's ``todict``."""
         return {'model': self.name, 'target': self.target, 'floor': self.floor}
@@ -203,17 +212,26 @@ class StiffnessModel(ABC):
         return safe
 
 
+def _free_index(free: np.ndarray) -> np.ndarray:
+    """The flat indices into an (N, 3) array of the components a ``free``
+    (N, dim) mask frees (taken and put by index: cheaper than the mask on a
+    scene of tens of points)."""
+    flat = np.flatnonzero(free)
+    dim = free.shape[1]
+    return flat if dim == 3 else 3 * (flat // dim) + flat % dim
+
+
 class _DofSolver(Solver):
     """Gathers the free components of the forces into a vector, solves, and
-    scatters the move back into an (N, 3) array."""
+    scatters the move back into an (N, 3) array. ``index`` is
+    :func:`_free_index` of ``free``, given by a caller that keeps it with its
+    mask (the exact model, with its constraints), else found here."""
 
-    def __init__(self, free: np.ndarray):
+    def __init__(self, free: np.ndarray, index: np.ndarray | None = None):
         self.free = free  # (N, dim) mask
         self.dim = free.shape[1]
-        flat = np.flatnonzero(free)
-        #: The free components' flat indices into an (N, 3) array (taken and
-        #: put by index: cheaper than the mask on a scene of tens of points).
-        self.index = flat if self.dim == 3 else 3 * (flat // self.dim) + flat % self.dim
+        #: The free components' flat indices into an (N, 3) array.
+        self.index = _free_index(free) if index is None else index
         #: Every component is free: a move's components are its (N, 3) array.
         self.every = self.index.size == 3 * len(free)
 
@@ -417,31 +435,44 @@ class ExactModel(StiffnessModel):
         self._basis: tuple[Any, np.ndarray | None] | None = None
         self._held: np.ndarray | None = None
         self._kept_index = np.empty(0, dtype=np.intp)   # the coordinates not held
+        self._free = np.ones((0, 3), dtype=bool)   # the solvers' free mask
+        self._free_index = _free_index(self._free)   # ... and its components
 
     def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
         return self.local(atoms.calc.get_property('hessian', atoms), atoms)
 
+    def of_results(self, atoms: Atoms, results: dict[str, Any],
+                   learnt: dict[str, Any] | None = None) -> Solver:
+        """The model of ``results['hessian']``: the loop that computed it
+        hands it over rather than having it asked of the calculator
+        (:meth:`at`, which does when ``results`` hold none). It is checked
+        as any Hessian is (:meth:`local`): a MaudCalculator's own results
+        are finite, but a subclass's need not be."""
+        hessian = results.get('hessian')
+        return self.at(atoms, learnt) if hessian is None else self.local(hessian, atoms)
+
     def local(self, hessian: np.ndarray, atoms: Atoms) -> Solver:
         """The model of the dense ``hessian`` (dim N, dim N) at ``atoms``'
-        positions (its constraints say which moves are allowed)."""
+        positions (its constraints say which moves are allowed); a
+        LinAlgError if it is not finite."""
         if not all_finite(hessian):
             raise np.linalg.LinAlgError('the Hessian is not finite')
         dim = hessian.shape[0] // len(atoms)
         basis = self.basis(atoms, dim)
-        free = np.ones((len(atoms), dim), dtype=bool)
         if self.target == 'saddle':
             internal = internal_basis(atoms.positions, dim, basis)
-            return _EigenSolver(internal.T @ hessian @ internal, internal, free,
-                                np.asarray)
-        if (held := self._held) is not None:   # whole coordinates: a selection
-            free, kept = ~held, self._kept_index
+            return _EigenSolver(internal.T @ hessian @ internal, internal,
+                                np.ones((len(atoms), dim), dtype=bool), None, np.asarray)
+        free, index = self._free, self._free_index
+        if self._held is not None:   # whole coordinates: a selection
+            kept = self._kept_index
             matrix, basis = hessian.take(kept, axis=0).take(kept, axis=1), None
         else:
             matrix = hessian if basis is None else basis.T @ hessian @ basis
         if self.target == 'minimum':
-            return (_CholeskySolver.of(matrix, basis, free, self.floor)
-                    or _EigenSolver(matrix, basis, free, self._absolute))
-        return _EigenSolver(matrix, basis, free, self._absolute)
+            return (_CholeskySolver.of(matrix, basis, free, index, self.floor)
+                    or _EigenSolver(matrix, basis, free, index, self._absolute))
+        return _EigenSolver(matrix, basis, free, index, self._absolute)
 
     def basis(self, atoms: Atoms, dim: int) -> np.ndarray | None:
         """:func:`allowed_basis`, kept while the constraints are the same;
@@ -449,7 +480,9 @@ class ExactModel(StiffnessModel):
         to sign: the constraints hold whole coordinates, as FixAtoms and
         FixCartesian do), :attr:`_held` marks the held ones (N, dim) and
         :attr:`_kept_index` numbers the others, for a selection of the
-        Hessian's rows and columns in place of products."""
+        Hessian's rows and columns in place of products; :attr:`_free` is
+        the solvers' free mask (N, dim: every coordinate but those held) and
+        :attr:`_free_index` its components (:func:`_free_index`)."""
         key = (len(atoms), dim, [(type(c).__name__, repr(c.todict()))
                                  for c in atoms.constraints])
         if self._basis is None or self._basis[0] != key:
@@ -459,6 +492,9 @@ class ExactModel(StiffnessModel):
                     np.count_nonzero(basis, axis=0) == 1).all():
                 self._held = ~np.abs(basis).sum(axis=1).astype(bool).reshape(-1, dim)
                 self._kept_index = np.flatnonzero(~self._held)
+            self._free = (np.ones((len(atoms), dim), dtype=bool) if self._held is None
+                          else ~self._held)
+            self._free_index = _free_index(self._free)
         return self._basis[1]
 
 
@@ -466,8 +502,9 @@ class _DenseSolver(_DofSolver):
     """A dense ``matrix`` on the columns of ``basis`` (None: every
     coordinate): moves in and out of that basis, and ``K v``."""
 
-    def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray):
-        super().__init__(free)
+    def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray,
+                 index: np.ndarray | None):
+        super().__init__(free, index)
         self.matrix, self.basis = matrix, basis
 
     def _into(self, rhs: np.ndarray) -> np.ndarray:
@@ -493,17 +530,17 @@ class _CholeskySolver(_DenseSolver, DampedSolver):
     definite = True
 
     def __init__(self, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray,
-                 scale: float, factor: np.ndarray):
-        super().__init__(matrix, basis, free)
+                 index: np.ndarray | None, scale: float, factor: np.ndarray):
+        super().__init__(matrix, basis, free, index)
         self.scale, self.factor = scale, factor
 
     @classmethod
     def of(cls, matrix: np.ndarray, basis: np.ndarray | None, free: np.ndarray,
-           floor: float) -> _CholeskySolver | None:
+           index: np.ndarray | None, floor: float) -> _CholeskySolver | None:
         """The solver of ``matrix``, or None if it is not definite."""
         scale = float(np.abs(matrix).sum(axis=1).max(initial=0.0))
         factor = _cholesky(matrix, floor * scale)
-        return None if factor is None else cls(matrix, basis, free, scale, factor)
+        return None if factor is None else cls(matrix, basis, free, index, scale, factor)
 
     def _solve(self, rhs):
         return self._out(dpotrs(self.factor, self._into(rhs))[0])
@@ -537,8 +574,8 @@ class _EigenSolver(_DenseSolver, DampedSolver, ModeSolver):
 
     definite = False
 
-    def __init__(self, matrix, basis, free, absolute):
-        super().__init__(matrix, basis, free)
+    def __init__(self, matrix, basis, free, index, absolute):
+        super().__init__(matrix, basis, free, index)
         self.absolute = absolute
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
 

@@ -179,3 +179,42 @@ def test_a_step_that_moves_nothing_costs_no_call_on_arrays_either(seed, monkeypa
     (steps, calls, quiet), (also, watched_calls, watched) = runs
     assert steps == also and calls == watched_calls < steps + 1
     np.testing.assert_array_equal(quiet, watched)
+
+
+@pytest.mark.parametrize('seed', [3, 4])
+def test_one_exact_model_follows_constraints_changed_between_runs_on_arrays(seed):
+    """One exact model (it keeps its constraints' basis and free components)
+    relaxes the same Atoms on arrays three times: then after its FixAtoms is
+    changed in place, then after new constraints are set. The held
+    coordinates never move and each run is, bit for bit, a fresh model's on
+    a copy (on arrays and in ASE's loop)."""
+    from ase_maud.stiffness import ExactModel
+    rng = np.random.default_rng(seed)
+    atoms = build('all_pairs', 12, seed=seed)
+    fix = FixAtoms([0, 1])
+    atoms.set_constraint(fix)
+    kept = ExactModel()
+    for change in range(3):
+        if change == 1:
+            fix.index = np.sort(rng.choice(len(atoms), 3, replace=False))
+        elif change == 2:
+            atoms.set_constraint([FixAtoms([5]), FixCartesian(2, [True, False, True])])
+        atoms.rattle(0.2, seed=seed + change)
+        start = atoms.positions.copy()
+        ends = []
+        for watched in (False, True):
+            run = atoms.copy()
+            run.calc = atoms.calc
+            with Maud(run, logfile=None, model=ExactModel()) as opt:
+                if watched:
+                    opt.attach(lambda: None)
+                opt.run(fmax=1e-6, steps=300)
+            ends.append(run.positions)
+        with Maud(atoms, logfile=None, model=kept) as opt:   # the same Atoms and model
+            opt.run(fmax=1e-6, steps=300)
+        assert atoms.positions.tobytes() == ends[0].tobytes() == ends[1].tobytes()
+        for c in atoms.constraints:
+            held = np.zeros((len(atoms), 3), dtype=bool)
+            held[c.index] = True if isinstance(c, FixAtoms) else c.mask
+            assert (atoms.positions[held] == start[held]).all()
+        assert not (atoms.positions == start).all()

@@ -426,3 +426,68 @@ def test_cholesky_factor_is_that_of_the_matrix_plus_its_shift_times_identity(see
         expected = dpotrf(matrix + shift * np.eye(12), lower=False, clean=False)[0]
         assert _cholesky(matrix, shift).tobytes() == expected.tobytes()
     assert _cholesky(matrix - 1e3 * np.eye(12), 1.0) is None
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_exact_model_of_results_is_its_model_at_the_atoms(seed):
+    """The Hessian a loop hands over (:meth:`ExactModel.of_results`) gives
+    the model :meth:`ExactModel.at` asks the calculator for, bit for bit
+    (the Cholesky and the eigen paths, held coordinates or none), and results
+    without a Hessian are asked of the calculator."""
+    rng = np.random.default_rng(seed)
+    atoms = random_scene(seed, fixed=bool(seed % 2))
+    atoms.rattle(0.3, seed=seed)   # far from a minimum: the eigen path too
+    forces = atoms.get_forces()
+    for floor in (None, 1e-2):
+        handed, asked = ExactModel(floor=floor), ExactModel(floor=floor)
+        results = {'hessian': atoms.calc.get_hessian(atoms)}
+        got, want = handed.of_results(atoms, results), asked.at(atoms)
+        assert type(got) is type(want)
+        probe = rng.normal(size=forces.shape)
+        for f in (forces, probe):
+            assert got.solve(f).tobytes() == want.solve(f).tobytes()
+        assert handed.of_results(atoms, {}).solve(forces).tobytes() == \
+            want.solve(forces).tobytes()
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_exact_model_follows_constraints_changed_between_calls(seed):
+    """The exact model keeps its constraints' basis and free components, but
+    a change of the constraints (a new set, or a FixAtoms changed in place)
+    is followed: the held coordinates never move, and the moves are those of
+    a fresh model."""
+    atoms = near_minimum(random_scene(seed, fixed=False), seed)
+    rng = np.random.default_rng(seed)
+    model = ExactModel()
+    forces = atoms.get_forces()
+    model.at(atoms).solve(forces)   # no constraints: every component free
+    fix = FixAtoms(indices=rng.choice(len(atoms), 3, replace=False))
+    atoms.set_constraint(fix)
+    for change in range(3):
+        if change == 1:
+            fix.index = np.sort(rng.choice(len(atoms), 2, replace=False))
+        elif change == 2:
+            atoms.set_constraint([fix, FixCartesian(int(np.flatnonzero(
+                ~np.isin(np.arange(len(atoms)), fix.index))[0]), mask=[False, True, True])])
+        move = model.of_results(atoms, {'hessian': atoms.calc.get_hessian(atoms)}).solve(forces)
+        assert not move[~free_dofs(atoms, 3)].any()
+        assert move[free_dofs(atoms, 3)].any()
+        assert move.tobytes() == ExactModel().at(atoms).solve(forces).tobytes()
+    atoms.set_constraint()
+    assert model.at(atoms).solve(forces).tobytes() == \
+        ExactModel().at(atoms).solve(forces).tobytes()
+
+
+def test_exact_model_refuses_a_non_finite_hessian_asked_for_or_handed_over():
+    """A non-finite Hessian is refused whether the model asks the calculator
+    for it (``local``, what ``at`` builds on) or a loop hands it over
+    (``of_results``: a MaudCalculator subclass may hold one)."""
+    atoms = random_scene(5, fixed=False)
+    hessian = atoms.calc.get_hessian(atoms)
+    for bad in (np.nan, np.inf):
+        broken = hessian.copy()
+        broken[1, 2] = bad
+        with pytest.raises(np.linalg.LinAlgError, match='not finite'):
+            ExactModel().local(broken, atoms)
+        with pytest.raises(np.linalg.LinAlgError, match='not finite'):
+            ExactModel().of_results(atoms, {'hessian': broken})

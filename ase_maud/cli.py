@@ -704,9 +704,9 @@ def build_parser() -> argparse.ArgumentParser:
                         'one between them (ase_maud.transition.saddle_between)')
     second.add_argument('--mirror', action='store_true',
                         help='the second minimum is the mirror image of the net through '
-                        'the plane of its fixed points, relaxed (a dome and its '
-                        'snap-through; ase_maud.transition.reflection), relaxed only if '
-                        'the climbs and local activations find no saddle')
+                        'the plane of its fixed points (a dome and its snap-through; '
+                        'ase_maud.transition.reflection), relaxed only if the climbs and '
+                        'local activations find no saddle')
     spread = p.add_mutually_exclusive_group()
     spread.add_argument('--workers', type=_ruled('count', int), metavar='N',
                         help='run the climbs and descents on a dask LocalCluster of N '

@@ -100,7 +100,7 @@ SETTLE_RATIO, SETTLE_CYCLES, SETTLE_STEPS, SETTLE_GAIN = 0.1, 40, 20, 0.8
 #: (a dense Hessian and its eigen-decomposition a step) up to this many free
 #: coordinates, above it with the springs model after settling the
 #: surroundings (docs/bench/saddles.md: on chord rings of 300 and 500 points
-#: the springs model's release spent about 70 products a step; the dense
+#: the springs model's release spent about 50 products a step; the dense
 #: eigen-decomposition of 1500 coordinates takes about 1 CPU s).
 RELEASE_EXACT_MAX_DOFS = 1500
 #: An attempt whose region's saddle lies this close in direction (cosine of

@@ -20,14 +20,17 @@ minimum it makes, in order:
    held surroundings. The region then grows (twice, four times the radius,
    while it has at most :data:`~ase_maud.stiffness.EXACT_MAX_DOFS` free
    coordinates), each time climbed again from where the last left off along
-   its negative mode. The rest of the scene is then relaxed with the region
+   its negative mode. The whole scene is then released from there along
+   that mode (``Maud(target='saddle', mode=...)``) and converged on a
+   verified index-1 saddle: with the exact model (eigenvector following on
+   the whole scene's dense Hessian, one force-call equivalent a step) while
+   the scene has at most :data:`RELEASE_EXACT_MAX_DOFS` free coordinates.
+   Above that, the rest of the scene is first relaxed with the region
    held, and the region climbed again, in turn, while that converges: to a
    saddle of the whole scene (verified: ``classify``), or else, where it
-   stops converging, the whole scene is released
-   (``Maud(target='saddle', mode=...)``, minimum-mode following on the
-   springs model above 150 free coordinates, its first lowest modes started
-   from the region's negative mode) and converged on a verified index-1
-   saddle.
+   stops converging, released with the springs model (minimum-mode
+   following, its lowest modes from LOBPCG on Hessian-vector products,
+   started from the region's negative mode).
 
 With an energy ``window`` these two make a round, and the search goes on
 in rounds (the next ``modes`` modes, ``local`` more points) while a round
@@ -93,6 +96,13 @@ REGION_STEPS = 60
 #: in turn (at most this many times, each run at most this many steps),
 #: while each turn cuts the largest force by this factor at least.
 SETTLE_RATIO, SETTLE_CYCLES, SETTLE_STEPS, SETTLE_GAIN = 0.1, 40, 20, 0.8
+#: The whole scene is released from a region's saddle with the exact model
+#: (a dense Hessian and its eigen-decomposition a step) up to this many free
+#: coordinates, above it with the springs model after settling the
+#: surroundings (docs/bench/saddles.md: on chord rings of 300 and 500 points
+#: the springs model's release spent about 50 products a step; the dense
+#: eigen-decomposition of 1500 coordinates takes about 1 CPU s).
+RELEASE_EXACT_MAX_DOFS = 1500
 #: An attempt whose region's saddle lies this close in direction (cosine of
 #: the moves from the minimum) to a saddle found is rejected.
 SAME_DIRECTION = 0.9
@@ -385,7 +395,8 @@ def _activate(minimum: Atoms, centre: int, known: list[np.ndarray], fmax: float,
         mode, held = opt.found.modes[0], region
         if factor == 1.0 and _along(atoms.positions - x, known):
             return None, tally.end('known direction', atoms)
-    if mode is not None:
+    exact = free.sum() <= RELEASE_EXACT_MAX_DOFS
+    if mode is not None and not exact:
         saddle = _settle(atoms, tally, held, np.setdiff1d(np.flatnonzero(movable), held),
                          mode, fmax)
         if isinstance(saddle, str):
@@ -393,7 +404,8 @@ def _activate(minimum: Atoms, centre: int, known: list[np.ndarray], fmax: float,
         if saddle is not None:
             return atoms, tally.end('saddle', atoms)
         mode = tally.mode
-    opt = Maud(atoms, target='saddle', mode=mode, logfile=None)
+    opt = Maud(atoms, target='saddle', mode=mode, logfile=None,
+               model='exact' if exact else 'auto')
     why = tally.run(opt, atoms, fmax, steps)
     return (None if why else atoms), tally.end(why or 'saddle', atoms)
 

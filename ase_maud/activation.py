@@ -23,7 +23,7 @@ minimum it makes, in order:
    its negative mode. The whole scene is then released from there along
    that mode (``Maud(target='saddle', mode=...)``) and converged on a
    verified index-1 saddle: with the exact model (eigenvector following on
-   the whole scene's dense Hessian, one force-call equivalent a step) while
+   the whole scene's dense Hessian: one call and one Hessian a step) while
    the scene has at most :data:`RELEASE_EXACT_MAX_DOFS` free coordinates.
    Above that, the rest of the scene is first relaxed with the region
    held, and the region climbed again, in turn, while that converges: to a
@@ -99,9 +99,8 @@ SETTLE_RATIO, SETTLE_CYCLES, SETTLE_STEPS, SETTLE_GAIN = 0.1, 40, 20, 0.8
 #: The whole scene is released from a region's saddle with the exact model
 #: (a dense Hessian and its eigen-decomposition a step) up to this many free
 #: coordinates, above it with the springs model after settling the
-#: surroundings (docs/bench/saddles.md: on chord rings of 300 and 500 points
-#: the springs model's release spent about 50 products a step; the dense
-#: eigen-decomposition of 1500 coordinates takes about 1 CPU s).
+#: surroundings (the measurements that set it: docs/bench/saddles.md,
+#: "Released with the exact model").
 RELEASE_EXACT_MAX_DOFS = 1500
 #: An attempt whose region's saddle lies this close in direction (cosine of
 #: the moves from the minimum) to a saddle found is rejected.

@@ -489,10 +489,12 @@ class Saddle(Strategy):
         """Whether the local model (built by ``local()``) at a point where the
         forces vanish has exactly ``order`` negative curvatures (beyond
         :data:`ase_maud.analysis.RTOL` of the largest): the minimum a search
-        starts from is left, not reported."""
+        starts from is left, not reported. The eigensolver starts from the
+        modes followed, before the first step from the move given as ``mode``
+        (:meth:`~ase_maud.descent.ModeFollowing.guess`; cold if none)."""
         from .analysis import RTOL
         order = self.rule.order
-        guess = None if state.modes is None else state.modes[:order + 1]
+        guess = self.following.guess() if state.modes is None else state.modes[:order + 1]
         values = local().eigenpairs(order + 1, guess)[0]
         return int(np.sum(values < -RTOL * np.abs(values).max(initial=0.0))) == order
 

@@ -8,7 +8,10 @@ minimum it makes, in order:
 
 1. **Mode climbs**: ``Maud(target='saddle', mode=...)`` along each of the
    minimum's ``modes`` lowest Hessian modes, both ways (what the landscape
-   did before local activation).
+   did before local activation), each within :data:`CLIMB_SHARE` of the
+   budget (on a large scene a climb from a minimum rarely ends on a saddle
+   within a whole budget; bounded, it leaves the search's equivalents to
+   the local attempts after it).
 2. **Local activations** from ``local`` points drawn (seeded) among the
    free ones. The point and its neighbourhood (the free points within
    :data:`RADIUS` times the point's nearest-neighbour distance) are climbed
@@ -108,6 +111,9 @@ SAME_DIRECTION = 0.9
 #: Default budget of one attempt, force-call equivalents (calls, Hessians,
 #: Hessian-vector product vectors).
 BUDGET = 500
+#: A whole-scene climb's budget: this share of an attempt's (the measurements
+#: that set it: docs/bench/saddles.md, "Whole-scene climbs bounded").
+CLIMB_SHARE = 0.2
 
 
 @dataclass
@@ -211,7 +217,8 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     scene relaxed to ``fmax``; see the module docstring): climbs along its
     ``modes`` lowest modes both ways, then ``local`` activations at points
     drawn with ``seed``, each attempt to ``fmax`` within ``steps`` steps
-    and ``budget`` force-call equivalents (None: no bound but the steps); it
+    and ``budget`` force-call equivalents (a climb within :data:`CLIMB_SHARE`
+    of it; None: no bound but the steps); it
     stops once ``wanted`` distinct saddles are found (None: every attempt
     is made). Saddles are compared by
     :func:`~ase_maud.analysis.same_point` with ``energy_rtol`` and
@@ -284,7 +291,7 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     for turn in itertools.count():   # rounds: modes [turn modes, (turn + 1) modes), ...
         before = 0 if window is None else below()
         climbs = [(minimum, sign * point.modes[k], Attempt('mode', k, sign), fmax, steps,
-                   budget)
+                   None if budget is None else max(1, round(CLIMB_SHARE * budget)))
                   for k in range(turn * modes, min((turn + 1) * modes, len(point.modes)))
                   for sign in (1.0, -1.0)]
         for batch in _batches(climbs, client, enough):

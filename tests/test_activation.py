@@ -120,6 +120,20 @@ def test_a_search_that_finds_nothing_says_what_it_tried():
     assert search.cost == sum(a.cost for a in search.attempts) + search.work.total
 
 
+def test_the_climbs_take_a_share_of_the_budget():
+    """Each whole-scene climb stops once it has spent CLIMB_SHARE of the
+    budget (within one step: two equivalents with the exact model); the
+    local attempts after it get the whole budget."""
+    start = relaxed('chords', 24, 0)
+    budget = 60
+    share = activation.CLIMB_SHARE * budget
+    search = search_saddles(start, modes=1, local=2, budget=budget, seed=0)
+    climbs = [a for a in search.attempts if a.kind == 'mode']
+    assert len(climbs) == 2
+    assert all(a.outcome == 'budget' and share <= a.cost <= share + 2 for a in climbs)
+    assert any(a.kind == 'local' and a.cost > share + 2 for a in search.attempts)
+
+
 def test_saddles_found_are_distinct_and_every_attempt_is_counted():
     """Every attempt made (wanted=None): the saddles kept are pairwise
     distinct verified index-1 saddles, an attempt ending on one found before

@@ -8,10 +8,8 @@ minimum it makes, in order:
 
 1. **Mode climbs**: ``Maud(target='saddle', mode=...)`` along each of the
    minimum's ``modes`` lowest Hessian modes, both ways (what the landscape
-   did before local activation), each within :data:`CLIMB_SHARE` of the
-   budget (on a large scene a climb from a minimum rarely ends on a saddle
-   within a whole budget; bounded, it leaves the search's equivalents to
-   the local attempts after it).
+   did before local activation), first within :data:`CLIMB_SHARE` of the
+   budget each, continued with the rest after the local attempts.
 2. **Local activations** from ``local`` points drawn (seeded) among the
    free ones. The point and its neighbourhood (the free points within
    :data:`RADIUS` times the point's nearest-neighbour distance) are climbed
@@ -111,8 +109,8 @@ SAME_DIRECTION = 0.9
 #: Default budget of one attempt, force-call equivalents (calls, Hessians,
 #: Hessian-vector product vectors).
 BUDGET = 500
-#: A whole-scene climb's budget: this share of an attempt's (the measurements
-#: that set it: docs/bench/saddles.md, "Whole-scene climbs bounded").
+#: A mode climb's first part: this share of the budget (docs/bench/saddles.md,
+#: "Whole-scene climbs bounded").
 CLIMB_SHARE = 0.2
 
 
@@ -217,8 +215,7 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     scene relaxed to ``fmax``; see the module docstring): climbs along its
     ``modes`` lowest modes both ways, then ``local`` activations at points
     drawn with ``seed``, each attempt to ``fmax`` within ``steps`` steps
-    and ``budget`` force-call equivalents (a climb within :data:`CLIMB_SHARE`
-    of it; None: no bound but the steps); it
+    and ``budget`` force-call equivalents (None: no bound but the steps); it
     stops once ``wanted`` distinct saddles are found (None: every attempt
     is made). Saddles are compared by
     :func:`~ase_maud.analysis.same_point` with ``energy_rtol`` and
@@ -290,16 +287,22 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
 
     for turn in itertools.count():   # rounds: modes [turn modes, (turn + 1) modes), ...
         before = 0 if window is None else below()
+        share = None if budget is None else max(1, round(CLIMB_SHARE * budget))
         climbs = [(minimum, sign * point.modes[k], Attempt('mode', k, sign), fmax, steps,
-                   None if budget is None else max(1, round(CLIMB_SHARE * budget)))
+                   share, budget)
                   for k in range(turn * modes, min((turn + 1) * modes, len(point.modes)))
                   for sign in (1.0, -1.0)]
+        stopped = []   # the continuations of climbs stopped at their share
         for batch in _batches(climbs, client, enough):
-            merge(run_tasks(client, _climb, batch))
+            results = run_tasks(client, _climb, batch)
+            merge([(saddle, attempt) for saddle, attempt, _ in results])
+            stopped += [rest for _, _, rest in results if rest is not None]
         for batch in _batches(list(order[turn * local:(turn + 1) * local]), client, enough):
             known = [s.positions - minimum.positions for s in found.saddles]
             merge(run_tasks(client, _activate, [(minimum, int(c), known, fmax, steps, budget)
                                                 for c in batch]))
+        for batch in _batches(stopped, client, enough):
+            merge([(saddle, attempt) for saddle, attempt, _ in run_tasks(client, _climb, batch)])
         used_up = (turn + 1) * modes >= len(point.modes) and (turn + 1) * local >= len(free)
         if window is None or enough() or used_up or below() == before:
             break
@@ -365,14 +368,23 @@ class _Tally:
         return attempt
 
 
-def _climb(minimum: Atoms, direction: np.ndarray, attempt: Attempt, fmax: float,
-           steps: int, budget: int | None) -> tuple[Atoms | None, Attempt]:
-    """A whole-scene climb from ``minimum`` along ``direction``."""
-    atoms = fresh_copy(minimum)
+def _climb(start: Atoms, direction: np.ndarray, attempt: Attempt, fmax: float,
+           steps: int, budget: int | None, whole: int | None = None,
+           ) -> tuple[Atoms | None, Attempt, tuple | None]:
+    """A whole-scene climb from ``start`` along ``direction`` within
+    ``budget``: the saddle (else None), the attempt, and if it stopped on
+    ``budget`` short of ``whole``, its continuation's arguments (else None)."""
+    atoms = fresh_copy(start)
     tally = _Tally(attempt, budget)
-    why = tally.run(Maud(atoms, target='saddle', mode=direction, logfile=None),
-                    atoms, fmax, steps)
-    return (None if why else atoms), tally.end(why or 'saddle', atoms)
+    opt = Maud(atoms, target='saddle', mode=direction, logfile=None)
+    why = tally.run(opt, atoms, fmax, steps)
+    attempt = tally.end(why or 'saddle', atoms)
+    rest = None
+    if why == 'budget' and whole is not None and whole > attempt.cost:
+        along = direction if opt.state.modes is None else opt.state.modes[0].copy()
+        rest = (atoms, along, Attempt('mode', attempt.where, attempt.sign), fmax, steps,
+                whole - attempt.cost)
+    return (None if why else atoms), attempt, rest
 
 
 def _activate(minimum: Atoms, centre: int, known: list[np.ndarray], fmax: float,

@@ -120,18 +120,22 @@ def test_a_search_that_finds_nothing_says_what_it_tried():
     assert search.cost == sum(a.cost for a in search.attempts) + search.work.total
 
 
-def test_the_climbs_take_a_share_of_the_budget():
-    """Each whole-scene climb stops once it has spent CLIMB_SHARE of the
-    budget (within one step: two equivalents with the exact model); the
-    local attempts after it get the whole budget."""
+def test_the_climbs_take_a_share_of_the_budget_then_the_rest():
+    """Each climb stops at CLIMB_SHARE of the budget (within a step of the
+    exact model: 2), the local attempts take the whole, then each climb is
+    continued within the rest."""
     start = relaxed('chords', 24, 0)
     budget = 60
     share = activation.CLIMB_SHARE * budget
     search = search_saddles(start, modes=1, local=2, budget=budget, seed=0)
-    climbs = [a for a in search.attempts if a.kind == 'mode']
-    assert len(climbs) == 2
-    assert all(a.outcome == 'budget' and share <= a.cost <= share + 2 for a in climbs)
-    assert any(a.kind == 'local' and a.cost > share + 2 for a in search.attempts)
+    kinds = [a.kind for a in search.attempts]
+    assert kinds == ['mode', 'mode', 'local', 'local', 'mode', 'mode']
+    first, rest = search.attempts[:2], search.attempts[4:]
+    assert all(a.outcome == 'budget' and share <= a.cost <= share + 2 for a in first)
+    assert any(a.cost > share + 2 for a in search.attempts[2:4])
+    for before, after in zip(first, rest, strict=True):
+        assert (after.where, after.sign) == (before.where, before.sign)
+        assert before.cost + after.cost <= budget + 2
 
 
 def test_saddles_found_are_distinct_and_every_attempt_is_counted():

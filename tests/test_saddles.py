@@ -325,11 +325,9 @@ def test_springs_search_leaves_a_converged_minimum(seed):
 
 @pytest.mark.parametrize('seed', range(3))
 def test_first_index_check_starts_from_the_mode_given(seed):
-    """At a converged minimum the index test runs before the first move; with
-    a move given as ``mode`` its LOBPCG starts from that move (warm), not
-    from random vectors: at most half the Hessian-vector products of the
-    same check without it (measured 2026-12-04 on these chord rings of 40:
-    25 against 105-111; docs/bench/saddles.md, "Whole-scene climbs bounded")."""
+    """At a converged minimum the index test runs before any move; its LOBPCG
+    starts from the move given as ``mode``: at most half the products of a
+    cold start (measured 2026-12-04: 25 against 105-111)."""
     atoms = saddles.OWN_SCENES['chords'](40, seed)
     assert Maud(atoms, logfile=None).run(fmax=1e-9, steps=5000)
     lowest = classify(atoms).modes[0]

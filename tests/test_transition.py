@@ -229,15 +229,15 @@ def test_a_refined_saddle_that_is_not_the_bands_is_kept_apart_and_taken_by_a_sea
 
 
 def test_the_landscape_takes_the_path_where_its_climbs_found_nothing():
-    """Climbs cut off by a budget of 5 force-call equivalents find nothing:
-    the landscape's one saddle is the band's (the two climbs counted as
-    failed), verified, and it joins two minima (the band's highest saddle
-    need not join the band's two ends: here it lies between two minima of
-    the path)."""
+    """Climbs cut off by a budget of 5 force-call equivalents find nothing
+    (each in two parts: its share, then the rest): the landscape's one
+    saddle is the band's (the four parts counted as failed), verified, and
+    it joins two minima (the band's highest saddle need not join the band's
+    two ends: here it lies between two minima of the path)."""
     first, second = dome(6, 6)
     graph = landscape(first, modes=1, budget=5, partner=second)
-    assert [a.kind for a in graph.search.attempts] == ['mode', 'mode', 'path']
-    assert graph.failed == 2 and len(graph.saddles) == 1
+    assert [a.kind for a in graph.search.attempts] == ['mode'] * 4 + ['path']
+    assert graph.failed == 4 and len(graph.saddles) == 1
     assert len(set(graph.joins[0])) == 2
     assert classify(fresh_copy(graph.saddles[0])).index == 1
     forward, back = graph.barriers()[0]

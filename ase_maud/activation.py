@@ -34,10 +34,13 @@ minimum it makes, in order:
    started from the region's negative mode).
 
 With an energy ``window`` these two make a round, and the search goes on
-in rounds (the next ``modes`` modes, ``local`` more points) while a round
-finds a new saddle whose barrier above the minimum is below the window (and
-that passes a test given, ``connected``: the landscape's asks whether it
-joins the minimum): until new searches stop finding new saddles.
+in rounds (the next ``modes`` modes, ``local`` more points) until
+``empty_rounds`` rounds in a row find no new saddle whose barrier above the
+minimum is below the window (and that passes a test given, ``connected``:
+the landscape's asks whether it joins the minimum): until new searches stop
+finding new saddles. The saddles missed lie along higher modes or where
+only a local activation reaches, so a round that finds nothing is no sign
+that the next will not.
 
 3. **A path**, if none of these found a saddle and a second minimum of the
    scene is given (``partner``), or asked for as the minimum's mirror image
@@ -159,12 +162,15 @@ class Attempt:
 class SaddleSearch:
     """What :func:`search_saddles` found: the distinct verified index-1
     ``saddles`` (Atoms with their own calculators, in the order found), each
-    :class:`Attempt` in the order made, and the minimum's classification
-    (``work``: what it computed, beside the attempts')."""
+    :class:`Attempt` in the order made, the minimum's classification
+    (``work``: what it computed, beside the attempts') and the ``rounds``
+    made."""
 
     saddles: list[Atoms] = field(default_factory=list)
     attempts: list[Attempt] = field(default_factory=list)
     work: Work = field(default_factory=Work)
+    #: rounds of attempts made (one without a window)
+    rounds: int = 0
 
     @property
     def cost(self) -> int:
@@ -198,7 +204,8 @@ class SaddleSearch:
         estimate = self.coverage
         coverage = ('' if estimate is None else
                     f' (estimated {estimate:.0%} of those its attempts reach)')
-        lines = [f'{head}{coverage} in {len(self.attempts)} attempts, {self.cost} force-call '
+        lines = [f'{head}{coverage} in {len(self.attempts)} attempts ({self.rounds} '
+                 f"round{'s' if self.rounds != 1 else ''}), {self.cost} force-call "
                  f'equivalents ({self.work.total} for the minimum\'s modes), '
                  f'{self.cpu_s:.2f} CPU s:']
         return '\n'.join(lines + ['  ' + a.describe() for a in self.attempts])
@@ -209,7 +216,7 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
                    seed: int = 0, energy_rtol: float = 1e-8, distance_atol: float = 1e-4,
                    client: Any = None, point: StationaryPoint | None = None,
                    partner: Atoms | None = None, mirror: bool = False,
-                   window: float | None = None,
+                   window: float | None = None, empty_rounds: int = 1,
                    connected: Callable[[Atoms], bool] | None = None) -> SaddleSearch:
     """The :class:`SaddleSearch` from the minimum ``minimum`` (a MaudCalculator
     scene relaxed to ``fmax``; see the module docstring): climbs along its
@@ -235,17 +242,19 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     counts its calls; if it relaxes back to ``minimum`` there is no path).
     ``window``: a barrier (energy units, above the minimum): the
     search goes on in rounds like the first (the next ``modes`` modes both
-    ways, ``local`` more points) while a round finds a new saddle whose
-    barrier is below it, until the modes (those of ``point``) and the free
-    points are used up (None: the first round only); ``connected``: a test
+    ways, ``local`` more points) until ``empty_rounds`` rounds in a row find
+    no new saddle whose barrier is below it, or the modes (those of
+    ``point``) and the free points are used up (None: the first round
+    only); ``connected``: a test
     a new saddle must pass too, asked once a saddle (the landscape's: one
     side of it relaxes into ``minimum``; None: every saddle passes).
     Arguments are checked first (a ValueError names a bad one)."""
     checked = check_all(local=local, budget=budget, fmax=fmax, steps=steps, seed=seed,
-                        energy_rtol=energy_rtol, distance_atol=distance_atol, window=window)
+                        energy_rtol=energy_rtol, distance_atol=distance_atol, window=window,
+                        empty_rounds=empty_rounds)
     modes = check('modes', modes)
-    local, budget, fmax, steps, window = (checked[k] for k in ('local', 'budget', 'fmax', 'steps',
-                                                              'window'))
+    local, budget, fmax, steps, window, empty_rounds = (
+        checked[k] for k in ('local', 'budget', 'fmax', 'steps', 'window', 'empty_rounds'))
     if wanted is not None:
         wanted = check('wanted', wanted, 'count')
     if partner is not None:
@@ -285,6 +294,7 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
                                and (connected is None or connected(saddle))))
         return sum(judged)
 
+    empty = 0   # rounds in a row that found no new saddle that counts
     for turn in itertools.count():   # rounds: modes [turn modes, (turn + 1) modes), ...
         before = 0 if window is None else below()
         share = None if budget is None else max(1, round(CLIMB_SHARE * budget))
@@ -303,8 +313,10 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
                                                 for c in batch]))
         for batch in _batches(stopped, client, enough):
             merge([(saddle, attempt) for saddle, attempt, _ in run_tasks(client, _climb, batch)])
+        found.rounds = turn + 1
         used_up = (turn + 1) * modes >= len(point.modes) and (turn + 1) * local >= len(free)
-        if window is None or enough() or used_up or below() == before:
+        empty = 0 if window is None or below() > before else empty + 1
+        if window is None or enough() or used_up or empty >= empty_rounds:
             break
     if partner is not None and not found.saddles:
         merge([_path(minimum, partner, fmax, steps if mirror else None, distance_atol)])

@@ -133,6 +133,9 @@ RULES: dict[str, Rule] = {
     'budget': Rule('a whole number >= 1 (force-call equivalents of one attempt), '
                    'or None (no bound but the steps)', lambda v: v >= 1, whole=True,
                    none=True),
+    'empty_rounds': Rule('a whole number >= 1 (rounds in a row that find no new saddle '
+                         'below the window before the rounds stop)',
+                         lambda v: v >= 1, whole=True),
     'window': Rule('a positive number (a barrier above the minimum, energy units), inf '
                    '(every saddle), or None (no window: one round of attempts)',
                    lambda v: v > 0, none=True, infinite=True),

@@ -265,7 +265,7 @@ def saddles(args: argparse.Namespace) -> int:
         found = landscape(atoms, modes=args.modes, fmax=args.fmax, steps=args.steps,
                           client=client, local=args.local, budget=args.budget,
                           seed=args.seed, partner=partner, mirror=args.mirror,
-                          window=args.window)
+                          window=args.window, empty_rounds=args.empty_rounds)
     print(found.search.report())
     energies = [m.get_potential_energy() for m in found.minima]
     barriers = [s.get_potential_energy() for s in found.saddles]
@@ -675,7 +675,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help='lowest modes climbed, each both ways (default: %(default)s; 0: '
                    'none, the local activations and the path to --partner or --mirror '
                    'alone)')
-    p.add_argument('--local', type=_ruled('local', int), default=0,
+    p.add_argument('--local', type=_ruled('local', int), default=1,
                    help='local activations after the mode climbs, at points drawn with '
                    '--seed (default: %(default)s)')
     p.add_argument('--budget', type=_ruled('budget', int), default=None,
@@ -685,9 +685,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help='seed of the points activated (default: %(default)s)')
     p.add_argument('--window', type=_ruled('window'), default=None, metavar='BARRIER',
                    help='go on in rounds like the first (the next --modes modes, --local '
-                   'more points) while a round finds a new saddle whose barrier from the '
-                   'minimum is below BARRIER (energy units; inf: any) and that joins it '
-                   '(default: one round)')
+                   'more points) until --empty-rounds rounds in a row find no new saddle '
+                   'whose barrier from the minimum is below BARRIER (energy units; inf: '
+                   'any) and that joins it (default: one round)')
+    p.add_argument('--empty-rounds', type=_ruled('empty_rounds', int), default=6,
+                   metavar='ROUNDS', help='with --window, the rounds in a row that find '
+                   'no new saddle before the search stops (default: %(default)s)')
     p.add_argument('--fmax', type=_ruled('fmax'), default=1e-6,
                    help='fmax of every relaxation and climb (default: %(default)s)')
     p.add_argument('--steps', type=_ruled('steps', int), default=1000,

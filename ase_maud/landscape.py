@@ -4,7 +4,8 @@ the minima each saddle joins.
 :func:`landscape` searches for saddles from a minimum
 (:func:`ase_maud.activation.search_saddles`: climbs along each of its
 ``modes`` lowest Hessian modes, both ways, then ``local`` local
-activations, and a band of images to a second minimum if one is given and
+activations, in rounds while new ones find new saddles below an energy
+``window`` if one is given, and a band of images to a second minimum if one is given and
 nothing else found a saddle), relaxes from each index-1 saddle found to the minimum on
 either side of its unstable mode
 (:func:`ase_maud.analysis.displace_along_mode`), and returns a
@@ -96,9 +97,9 @@ class Landscape:
 
 def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 1000,
               energy_rtol: float = ENERGY_RTOL, distance_atol: float = DISTANCE_ATOL,
-              client: Any = None, local: int = 0, budget: int | None = None,
+              client: Any = None, local: int = 1, budget: int | None = None,
               seed: int = 0, partner: Atoms | None = None, mirror: bool = False,
-              window: float | None = None) -> Landscape:
+              window: float | None = None, empty_rounds: int = 6) -> Landscape:
     """The :class:`Landscape` around the minimum ``atoms`` (a MaudCalculator
     scene relaxed to ``fmax``; a ValueError if it is not a minimum): the
     saddles of :func:`~ase_maud.activation.search_saddles` (climbs along its
@@ -117,10 +118,10 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
     relaxed only if needed (:func:`~ase_maud.activation.search_saddles`).
     ``window``: a barrier
     above the minimum (energy units): the search goes on in rounds like the
-    first (the next ``modes`` modes, ``local`` more points) while a round
-    finds a new saddle below it that joins the minimum (each new saddle
-    below it is then descended from at once, in this process; None: one
-    round). Each
+    first (the next ``modes`` modes, ``local`` more points) until
+    ``empty_rounds`` rounds in a row find no new saddle below it that joins
+    the minimum (each new saddle below it is then descended from at once,
+    in this process; None: one round). Each
     argument is checked first (:data:`~ase_maud.checks.RULES`): a ValueError
     names a bad one."""
     checked = check_all(modes=modes, fmax=fmax, steps=steps, energy_rtol=energy_rtol,
@@ -153,6 +154,7 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
                                   fmax=fmax, steps=steps, seed=seed, energy_rtol=energy_rtol,
                                   distance_atol=distance_atol, client=client, point=point,
                                   partner=partner, mirror=mirror, window=window,
+                                  empty_rounds=empty_rounds,
                                   connected=None if window is None else joins_start)
     distinct = found.search.saddles   # the saddles found, each once
     found.failed += sum(a.outcome not in _NOT_FAILED for a in found.search.attempts)

@@ -235,7 +235,7 @@ def test_the_landscape_takes_the_path_where_its_climbs_found_nothing():
     it joins two minima (the band's highest saddle need not join the band's
     two ends: here it lies between two minima of the path)."""
     first, second = dome(6, 6)
-    graph = landscape(first, modes=1, budget=5, partner=second)
+    graph = landscape(first, modes=1, local=0, budget=5, partner=second)
     assert [a.kind for a in graph.search.attempts] == ['mode'] * 4 + ['path']
     assert graph.failed == 4 and len(graph.saddles) == 1
     assert len(set(graph.joins[0])) == 2

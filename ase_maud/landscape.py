@@ -15,8 +15,9 @@ energies agree to ``energy_rtol`` (relative) and their sorted pair distances
 to ``distance_atol`` (length units): that is blind to rigid motion and to
 relabelling of the points (and takes mirror images as one). An attempt or
 descent that fails (a :class:`~ase_maud.monitor.MaudError`, no convergence
-in ``steps``, its budget spent) is counted in :attr:`Landscape.failed`, never
-silently dropped; :attr:`Landscape.search` tells what each attempt did, and
+in ``steps``, its budget spent; not a local activation whose region has no
+saddle) is counted in :attr:`Landscape.failed`, never silently dropped;
+:attr:`Landscape.search` tells what each attempt did, and
 :attr:`Landscape.cost` what the whole map computed (the search's attempts,
 the start's and the saddles' Hessians, the descents) in force-call
 equivalents.
@@ -176,8 +177,11 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
 
 
 #: Outcomes of a saddle search's attempts that are not failures: a saddle,
-#: or one found before (:class:`~ase_maud.activation.Attempt`).
-_NOT_FAILED = ('saddle', 'known saddle', 'known direction')
+#: one found before, or a local activation whose region has no saddle its
+#: climb reaches (an answer about the region, in the search's report; with
+#: ``local=1`` by default, most nets give one)
+#: (:class:`~ase_maud.activation.Attempt`).
+_NOT_FAILED = ('saddle', 'known saddle', 'known direction', 'no local saddle')
 #: A descent that converges on a saddle is pushed off it along its unstable
 #: mode and relaxed again at most this many times (:func:`_descend`).
 PUSHES = 2

@@ -173,14 +173,30 @@ def test_search_arguments_are_checked():
 
 def test_the_landscape_takes_local_attempts():
     """``landscape(local=...)``: the mode climbs, then the local attempts,
-    all in its search report; a failed attempt counts as failed."""
+    all in its search report; a failed attempt counts as failed (a region
+    with no local saddle does not)."""
     start = relaxed('chords', 18, 0)
     found = landscape(start, modes=1, local=2, budget=300)
     assert len(found.search.attempts) == 4
-    failures = sum(a.outcome not in ('saddle', 'known saddle', 'known direction')
+    failures = sum(a.outcome not in ('saddle', 'known saddle', 'known direction',
+                                     'no local saddle')
                    for a in found.search.attempts)
     assert found.failed >= failures
     assert len(found.saddles) <= len(found.search.saddles)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_region_with_no_local_saddle_is_an_answer_not_a_failure(seed):
+    """On a small net with its corners fixed, local activations whose
+    region has no saddle are listed in the report as such and are not
+    counted in ``failed``: a map whose climbs and descents all succeed has
+    none (so ``ase-maud saddles`` exits 0)."""
+    found = landscape(relaxed('corners', 6, seed), modes=1, local=3, seed=seed)
+    outcomes = [a.outcome for a in found.search.attempts]
+    assert 'no local saddle' in outcomes and found.saddles
+    assert found.failed == 0
+    assert outcomes.count('no local saddle') == sum(
+        'no local saddle' in line for line in found.search.report().splitlines())
 
 
 def test_a_saddle_search_on_a_filter_follows_a_move_of_its_atoms():

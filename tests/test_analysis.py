@@ -9,8 +9,9 @@ from ase.constraints import FixAtoms, FixCartesian, FixedPlane
 from ase.optimize import BFGS
 from scipy.optimize import brentq
 
-from ase_maud import physics
+from ase_maud import analysis, physics
 from ase_maud.analysis import (
+    Work,
     classify,
     displace_along_mode,
     free_mask,
@@ -283,6 +284,29 @@ def test_iterative_matches_dense_at_a_saddle(random_points):
                                atol=dense.tolerance)
     with pytest.raises(ValueError, match='larger k'):
         classify(atoms, method='iterative', k=dense.index - 2)
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_inertia_counts_as_dense_does(random_points, dim, seed, monkeypatch):
+    """The counts of a minimum (two points fixed for seed 2: fewer rigid
+    modes) and, in 2D, of a saddle of high index (the ring buckling out of
+    its plane), from ``L D L^T`` alone; ``'index'`` takes it above the dense
+    size."""
+    flat = relaxed(chorded_ring(random_points, 40, seed, dim))
+    if seed == 2:
+        flat.set_constraint(FixAtoms([0, 7]))
+    buckled = scene(flat.positions, flat.calc.springs, dim=3)
+    monkeypatch.setattr(analysis, 'DENSE_MAX_DOFS', 10)
+    for atoms in (flat, buckled):
+        dense = classify(atoms, method='dense')
+        counted = classify(atoms, method='index', work=(work := Work()))
+        assert counted.method == 'inertia' and counted.eigenvalues.size == 0
+        assert work == Work(hessians=1)
+        for name in ('verdict', 'index', 'n_zero', 'n_modes', 'n_rigid', 'n_fixed'):
+            assert getattr(counted, name) == getattr(dense, name)
+        assert counted.tolerance == pytest.approx(dense.tolerance, rel=0.05)
+    assert dim == 3 or dense.index > 5   # a plane ring buckles; a 3D one is the minimum
 
 
 def test_not_stationary_is_flagged(random_points):

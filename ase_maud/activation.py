@@ -464,7 +464,7 @@ def _settle(atoms: Atoms, tally: _Tally, held: np.ndarray, rest: np.ndarray,
         settled = np.linalg.norm(atoms.get_forces(), axis=1).max()
         if settled < fmax:
             work = Work()
-            point = classify(atoms, 'index', ftol=fmax, work=work)
+            point = classify(atoms, ftol=fmax, work=work)
             tally.attempt.hvp_vectors += work.hvp_vectors
             tally.attempt.hessians += work.hessians
             return atoms if point.index == 1 and not point.n_zero else None

@@ -8,13 +8,11 @@ verdict. Three paths give the same counts:
 - ``dense``: every eigenvalue, from :meth:`MaudCalculator.get_hessian` and
   ``numpy.linalg.eigh``; for up to :data:`DENSE_MAX_DOFS` free degrees of
   freedom.
-- ``inertia``: the counts alone (no eigenvalue or mode), for up to
-  :data:`INERTIA_MAX_DOFS`: one dense Hessian, shifted by minus and plus the
-  zero tolerance and factorised as ``L D L^T``; by Sylvester's law of
-  inertia the negative eigenvalues of ``D`` count those of ``H`` below and
-  above the shift, exactly (a factorisation, about a third of ``eigh``'s
-  CPU). ``method='index'`` takes the cheapest path that gives the index:
-  dense, inertia, iterative by size.
+- ``lowest``: the lowest ``k`` eigenvalues of the same dense Hessian (LAPACK's
+  ``syevr`` asked for those only), for up to :data:`LOWEST_MAX_DOFS`: one
+  Hessian where ``iterative`` takes hundreds of products (the soft modes of
+  a large minimum hold LOBPCG to its iteration limit), and about half the
+  CPU of ``eigh``.
 - ``iterative``: the lowest ``k`` eigenvalues by LOBPCG on Hessian-vector
   products (:meth:`ase_maud.potential.MaudPotential.hvp`), O(N) memory,
   O(N**2) time per product, a block of vectors per pass over the pairs. The
@@ -64,11 +62,12 @@ from .topology import mean_spring_length
 
 #: Eigenvalues with ``|lambda| <= RTOL * max|lambda|`` count as zero.
 RTOL = 1e-8
-#: ``method='auto'`` is dense up to this many free degrees of freedom.
+#: ``method='auto'`` takes every eigenvalue up to this many free degrees of
+#: freedom ...
 DENSE_MAX_DOFS = 2000
-#: ``method='index'`` counts by inertia up to this many free degrees of
-#: freedom (a dense Hessian and two copies: 160 MB each at 4500).
-INERTIA_MAX_DOFS = 4500
+#: ... and takes the lowest eigenvalues of the dense Hessian up to this many
+#: (160 MB a copy at 4500), LOBPCG above.
+LOWEST_MAX_DOFS = 4500
 #: Default force tolerance for "stationary", in units of ``Q a``.
 FTOL = 1e-6
 
@@ -99,8 +98,8 @@ class StationaryPoint:
 
     ``eigenvalues`` (ascending, units of ``Q``) and ``modes`` (unit vectors,
     shape (len(eigenvalues), N, 3), zero on fixed degrees of freedom) cover
-    every mode (``method='dense'``), the lowest ``k`` (``'iterative'``) or
-    none (``'inertia'``);
+    every mode (``method='dense'``) or the lowest ``k`` (``'lowest'``,
+    ``'iterative'``);
     the counts always cover all ``n_modes`` free, non-rigid modes.
     ``verdict`` is 'minimum', 'saddle' (of order ``index``), 'maximum' or
     'degenerate' (some non-rigid eigenvalue within ``tolerance`` of zero).
@@ -201,12 +200,11 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
 
     Parameters
     ----------
-    method : 'auto', 'dense', 'iterative', 'inertia' or 'index'
-        ``auto`` is dense up to :data:`DENSE_MAX_DOFS` free degrees of freedom;
-        ``index`` (the counts alone are sure above that) is inertia from there
-        up to :data:`INERTIA_MAX_DOFS`.
+    method : 'auto', 'dense', 'lowest' or 'iterative'
+        ``auto`` is dense up to :data:`DENSE_MAX_DOFS` free degrees of freedom,
+        lowest up to :data:`LOWEST_MAX_DOFS`, iterative above.
     k : int
-        Eigenvalues the iterative path computes (the lowest). If all are
+        Eigenvalues the lowest and iterative paths compute (the lowest). If all are
         negative the index is not known and a ValueError asks for a larger k.
     rtol : float
         Zero tolerance relative to the largest ``|lambda|``.
@@ -223,29 +221,26 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
     free = free_mask(atoms, dim)
     rigid = rigid_body_modes(positions, free, dim)
     n_modes = int(free.sum()) - rigid.shape[1]
-    if method in ('auto', 'index'):
+    if method == 'auto':
         method = ('dense' if free.sum() <= DENSE_MAX_DOFS else
-                  'inertia' if method == 'index' and free.sum() <= INERTIA_MAX_DOFS
-                  else 'iterative')
+                  'lowest' if free.sum() <= LOWEST_MAX_DOFS else 'iterative')
     if method == 'dense':
         values, vectors = _dense_spectrum(atoms, free, rigid)
         scale = np.abs(values).max(initial=0.0)
     elif method == 'iterative':
         values, vectors, scale = _lowest_spectrum(atoms, free, rigid, k,
                                                   rtol, work)
-    elif method == 'inertia':
-        n_negative, n_zero, scale = _inertia(atoms, free, rigid, rtol)
-        values, vectors = np.zeros(0), np.zeros((n_modes + rigid.shape[1], 0))
+    elif method == 'lowest':
+        values, vectors, scale = _lowest_of_dense(atoms, free, rigid, k)
     else:
-        raise ValueError(f"method must be 'auto', 'dense', 'iterative', 'inertia' "
-                         f"or 'index', got {method!r}")
+        raise ValueError(f"method must be 'auto', 'dense', 'lowest' or 'iterative', "
+                         f'got {method!r}')
     if work is not None and method != 'iterative':
         work.hessians += 1
     tolerance = rtol * scale
-    if method != 'inertia':
-        n_negative = int(np.sum(values < -tolerance))
-        n_zero = int(np.sum(np.abs(values) <= tolerance))
-    if 0 < len(values) < n_modes and values[-1] <= tolerance:
+    n_negative = int(np.sum(values < -tolerance))
+    n_zero = int(np.sum(np.abs(values) <= tolerance))
+    if len(values) < n_modes and values[-1] <= tolerance:
         raise ValueError(f'the lowest {len(values)} eigenvalues are all <= '
                          f'{tolerance:.3g}: the index is at least '
                          f'{n_negative}; ask for a larger k')
@@ -286,26 +281,23 @@ def _dense_spectrum(atoms, free, rigid):
     return values, basis @ vectors
 
 
-def _inertia(atoms, free, rigid, rtol):
-    """The eigenvalues of ``H`` on the free dofs orthogonal to ``rigid``
-    below ``-tolerance`` and within it of zero (counts), and max|lambda|
-    (to a few %, Lanczos on the dense Hessian); ``tolerance`` is ``rtol``
-    times that. The rigid modes are lifted above every eigenvalue."""
+def _lowest_of_dense(atoms, free, rigid, k):
+    """The lowest ``k`` eigenpairs of ``H`` on the free dofs orthogonal to
+    ``rigid``, and max|lambda| (to 1 %, Lanczos on the dense Hessian): ``P H
+    P`` (``P`` the projector off the rigid modes) with the rigid modes lifted
+    above every eigenvalue."""
     flat = free.ravel()
     hessian = atoms.calc.get_hessian(atoms)[np.ix_(flat, flat)]
-    side = hessian @ rigid   # P H P, P the projector off the rigid modes
+    side = hessian @ rigid
     hessian -= side @ rigid.T + rigid @ side.T - rigid @ (rigid.T @ side) @ rigid.T
     v0 = np.random.default_rng(0).standard_normal(len(hessian))
     scale = abs(eigsh(hessian, 1, which='LM', tol=0.01, v0=v0,
                       return_eigenvectors=False)[0])
     hessian += 2 * scale * rigid @ rigid.T
-    below = []
-    for shift in (rtol * scale, -rtol * scale):
-        d = scipy.linalg.ldl(hessian + shift * np.eye(len(hessian)),
-                             check_finite=False)[1]
-        below.append(int(np.sum(scipy.linalg.eigvalsh_tridiagonal(
-            np.diag(d).copy(), np.diag(d, 1).copy()) < 0)))
-    return below[0], below[1] - below[0], scale
+    k = min(k, len(hessian) - rigid.shape[1])
+    values, vectors = scipy.linalg.eigh(hessian, subset_by_index=[0, k - 1],
+                                        overwrite_a=True, check_finite=False)
+    return values, vectors, scale
 
 
 def _lowest_spectrum(atoms, free, rigid, k, rtol, work=None):

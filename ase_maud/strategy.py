@@ -501,15 +501,14 @@ class Saddle(Strategy):
     def verify(self, atoms: Atoms, ftol: float, step: int,
                work: Any = None) -> tuple[Any, WrongIndexError | None]:
         """The converged point of ``atoms`` classified from the analytic
-        Hessian (:func:`ase_maud.analysis.classify`, ``method='index'``: the
-        counts alone above its dense size; forces below ``ftol``,
+        Hessian (:func:`ase_maud.analysis.classify`, forces below ``ftol``,
         its products counted in ``work`` if given, unless the model's
         Hessian is the calculator's, counted already), and a WrongIndexError
         (else None) if its index is not ``order`` or a zero curvature leaves
         it unknown (``step``: where it converged)."""
         from .analysis import classify
         work = None if self.model.complete_modes else work
-        point, order = classify(atoms, 'index', ftol=ftol, work=work), self.rule.order
+        point, order = classify(atoms, ftol=ftol, work=work), self.rule.order
         if point.index == order and not point.n_zero:
             return point, None
         zero = f' and {point.n_zero} zero curvatures' if point.n_zero else ''

@@ -288,11 +288,11 @@ def test_iterative_matches_dense_at_a_saddle(random_points):
 
 @pytest.mark.parametrize('dim', [2, 3])
 @pytest.mark.parametrize('seed', [0, 1, 2])
-def test_inertia_counts_as_dense_does(random_points, dim, seed, monkeypatch):
-    """The counts of a minimum (two points fixed for seed 2: fewer rigid
-    modes) and, in 2D, of a saddle of high index (the ring buckling out of
-    its plane), from ``L D L^T`` alone; ``'index'`` takes it above the dense
-    size."""
+def test_lowest_of_the_dense_hessian_matches_dense(random_points, dim, seed, monkeypatch):
+    """A minimum (two points fixed for seed 2: fewer rigid modes) and, in 2D,
+    a saddle of high index (the ring buckling out of its plane): the lowest
+    eigenvalues and counts of the dense path, for one Hessian; ``'auto'``
+    takes this path above the dense size."""
     flat = relaxed(chorded_ring(random_points, 40, seed, dim))
     if seed == 2:
         flat.set_constraint(FixAtoms([0, 7]))
@@ -300,12 +300,15 @@ def test_inertia_counts_as_dense_does(random_points, dim, seed, monkeypatch):
     monkeypatch.setattr(analysis, 'DENSE_MAX_DOFS', 10)
     for atoms in (flat, buckled):
         dense = classify(atoms, method='dense')
-        counted = classify(atoms, method='index', work=(work := Work()))
-        assert counted.method == 'inertia' and counted.eigenvalues.size == 0
-        assert work == Work(hessians=1)
+        lowest = classify(atoms, k=dense.index + 4, work=(work := Work()))
+        assert lowest.method == 'lowest' and work == Work(hessians=1)
         for name in ('verdict', 'index', 'n_zero', 'n_modes', 'n_rigid', 'n_fixed'):
-            assert getattr(counted, name) == getattr(dense, name)
-        assert counted.tolerance == pytest.approx(dense.tolerance, rel=0.05)
+            assert getattr(lowest, name) == getattr(dense, name)
+        np.testing.assert_allclose(lowest.eigenvalues, dense.eigenvalues[:dense.index + 4],
+                                   atol=dense.tolerance)
+        overlap = np.abs(np.einsum('kij,kij->k', lowest.modes, dense.modes[:dense.index + 4]))
+        assert overlap[0] == pytest.approx(1.0, abs=1e-6)
+        assert lowest.tolerance == pytest.approx(dense.tolerance, rel=0.05)
     assert dim == 3 or dense.index > 5   # a plane ring buckles; a 3D one is the minimum
 
 

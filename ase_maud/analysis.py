@@ -3,11 +3,16 @@
 :func:`classify` returns a :class:`StationaryPoint`: the eigenvalues of ``H``
 (units of ``Q``) on the degrees of freedom that are free to move, with the
 rigid-body modes removed, the count of negative, zero and positive ones, and a
-verdict. Two paths give the same answer:
+verdict. Three paths give the same counts:
 
 - ``dense``: every eigenvalue, from :meth:`MaudCalculator.get_hessian` and
   ``numpy.linalg.eigh``; for up to :data:`DENSE_MAX_DOFS` free degrees of
   freedom.
+- ``lowest``: the lowest ``k`` eigenvalues of the same dense Hessian (LAPACK's
+  ``syevr`` asked for those only), for up to :data:`LOWEST_MAX_DOFS`: one
+  Hessian where ``iterative`` takes hundreds of products (the soft modes of
+  a large minimum hold LOBPCG to its iteration limit), and about half the
+  CPU of ``eigh``.
 - ``iterative``: the lowest ``k`` eigenvalues by LOBPCG on Hessian-vector
   products (:meth:`ase_maud.potential.MaudPotential.hvp`), O(N) memory,
   O(N**2) time per product, a block of vectors per pass over the pairs. The
@@ -57,8 +62,12 @@ from .topology import mean_spring_length
 
 #: Eigenvalues with ``|lambda| <= RTOL * max|lambda|`` count as zero.
 RTOL = 1e-8
-#: ``method='auto'`` is dense up to this many free degrees of freedom.
+#: ``method='auto'`` takes every eigenvalue up to this many free degrees of
+#: freedom ...
 DENSE_MAX_DOFS = 2000
+#: ... and takes the lowest eigenvalues of the dense Hessian up to this many
+#: (160 MB a copy at 4500), LOBPCG above.
+LOWEST_MAX_DOFS = 4500
 #: Default force tolerance for "stationary", in units of ``Q a``.
 FTOL = 1e-6
 
@@ -89,7 +98,8 @@ class StationaryPoint:
 
     ``eigenvalues`` (ascending, units of ``Q``) and ``modes`` (unit vectors,
     shape (len(eigenvalues), N, 3), zero on fixed degrees of freedom) cover
-    every mode (``method='dense'``) or the lowest ``k`` (``'iterative'``);
+    every mode (``method='dense'``) or the lowest ``k`` (``'lowest'``,
+    ``'iterative'``);
     the counts always cover all ``n_modes`` free, non-rigid modes.
     ``verdict`` is 'minimum', 'saddle' (of order ``index``), 'maximum' or
     'degenerate' (some non-rigid eigenvalue within ``tolerance`` of zero).
@@ -190,10 +200,11 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
 
     Parameters
     ----------
-    method : 'auto', 'dense' or 'iterative'
-        ``auto`` is dense up to :data:`DENSE_MAX_DOFS` free degrees of freedom.
+    method : 'auto', 'dense', 'lowest' or 'iterative'
+        ``auto`` is dense up to :data:`DENSE_MAX_DOFS` free degrees of freedom,
+        lowest up to :data:`LOWEST_MAX_DOFS`, iterative above.
     k : int
-        Eigenvalues the iterative path computes (the lowest). If all are
+        Eigenvalues the lowest and iterative paths compute (the lowest). If all are
         negative the index is not known and a ValueError asks for a larger k.
     rtol : float
         Zero tolerance relative to the largest ``|lambda|``.
@@ -211,18 +222,21 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
     rigid = rigid_body_modes(positions, free, dim)
     n_modes = int(free.sum()) - rigid.shape[1]
     if method == 'auto':
-        method = 'dense' if free.sum() <= DENSE_MAX_DOFS else 'iterative'
+        method = ('dense' if free.sum() <= DENSE_MAX_DOFS else
+                  'lowest' if free.sum() <= LOWEST_MAX_DOFS else 'iterative')
     if method == 'dense':
         values, vectors = _dense_spectrum(atoms, free, rigid)
         scale = np.abs(values).max(initial=0.0)
-        if work is not None:
-            work.hessians += 1
     elif method == 'iterative':
         values, vectors, scale = _lowest_spectrum(atoms, free, rigid, k,
                                                   rtol, work)
+    elif method == 'lowest':
+        values, vectors, scale = _lowest_of_dense(atoms, free, rigid, k)
     else:
-        raise ValueError(f"method must be 'auto', 'dense' or 'iterative', "
+        raise ValueError(f"method must be 'auto', 'dense', 'lowest' or 'iterative', "
                          f'got {method!r}')
+    if work is not None and method != 'iterative':
+        work.hessians += 1
     tolerance = rtol * scale
     n_negative = int(np.sum(values < -tolerance))
     n_zero = int(np.sum(np.abs(values) <= tolerance))
@@ -265,6 +279,25 @@ def _dense_spectrum(atoms, free, rigid):
         basis = np.eye(len(hessian))
     values, vectors = np.linalg.eigh(basis.T @ hessian @ basis)
     return values, basis @ vectors
+
+
+def _lowest_of_dense(atoms, free, rigid, k):
+    """The lowest ``k`` eigenpairs of ``H`` on the free dofs orthogonal to
+    ``rigid``, and max|lambda| (to 1 %, Lanczos on the dense Hessian): ``P H
+    P`` (``P`` the projector off the rigid modes) with the rigid modes lifted
+    above every eigenvalue."""
+    flat = free.ravel()
+    hessian = atoms.calc.get_hessian(atoms)[np.ix_(flat, flat)]
+    side = hessian @ rigid
+    hessian -= side @ rigid.T + rigid @ side.T - rigid @ (rigid.T @ side) @ rigid.T
+    v0 = np.random.default_rng(0).standard_normal(len(hessian))
+    scale = abs(eigsh(hessian, 1, which='LM', tol=0.01, v0=v0,
+                      return_eigenvectors=False)[0])
+    hessian += 2 * scale * rigid @ rigid.T
+    k = min(k, len(hessian) - rigid.shape[1])
+    values, vectors = scipy.linalg.eigh(hessian, subset_by_index=[0, k - 1],
+                                        overwrite_a=True, check_finite=False)
+    return values, vectors, scale
 
 
 def _lowest_spectrum(atoms, free, rigid, k, rtol, work=None):

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from ase.filters import Filter
 
-from ase_maud import Maud, activation
+from ase_maud import Maud, activation, analysis
 from ase_maud.activation import Attempt, SaddleSearch, search_saddles
-from ase_maud.analysis import classify
+from ase_maud.analysis import Work, classify
 from ase_maud.bench.runner import fresh_copy
 from ase_maud.landscape import landscape, same_point
 from ase_maud.stiffness import EXACT_MAX_DOFS
@@ -104,6 +104,20 @@ def test_local_activation_on_the_springs_model(monkeypatch):
                                           wanted=1, budget=1000, seed=seed))
                   for seed in (10, 11, 12, 13))
     assert reached >= 2
+
+
+def test_a_large_minimum_s_modes_and_saddles_cost_a_hessian_each(monkeypatch):
+    """Above the dense size (lowered here) a minimum's modes and every
+    saddle's index come from the lowest eigenpairs of one dense Hessian
+    (``classify``'s 'lowest' path), not from LOBPCG's hundreds of products
+    (measured on tree:1000: 1840 products for the minimum's modes, about
+    1900 for a saddle's verification; docs/bench/saddles.md)."""
+    monkeypatch.setattr(analysis, 'DENSE_MAX_DOFS', 10)
+    search = search_saddles(relaxed('chords', 30, 40), modes=1, local=6, wanted=1,
+                            budget=500, seed=40)
+    assert search.work == Work(hessians=1)
+    assert verified(search)
+    assert all(a.hvp_vectors == 0 for a in search.attempts if a.kind == 'local')
 
 
 def test_a_search_that_finds_nothing_says_what_it_tried():

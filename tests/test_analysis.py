@@ -9,8 +9,9 @@ from ase.constraints import FixAtoms, FixCartesian, FixedPlane
 from ase.optimize import BFGS
 from scipy.optimize import brentq
 
-from ase_maud import physics
+from ase_maud import analysis, physics
 from ase_maud.analysis import (
+    Work,
     classify,
     displace_along_mode,
     free_mask,
@@ -283,6 +284,32 @@ def test_iterative_matches_dense_at_a_saddle(random_points):
                                atol=dense.tolerance)
     with pytest.raises(ValueError, match='larger k'):
         classify(atoms, method='iterative', k=dense.index - 2)
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_lowest_of_the_dense_hessian_matches_dense(random_points, dim, seed, monkeypatch):
+    """A minimum (two points fixed for seed 2: fewer rigid modes) and, in 2D,
+    a saddle of high index (the ring buckling out of its plane): the lowest
+    eigenvalues and counts of the dense path, for one Hessian; ``'auto'``
+    takes this path above the dense size."""
+    flat = relaxed(chorded_ring(random_points, 40, seed, dim))
+    if seed == 2:
+        flat.set_constraint(FixAtoms([0, 7]))
+    buckled = scene(flat.positions, flat.calc.springs, dim=3)
+    monkeypatch.setattr(analysis, 'DENSE_MAX_DOFS', 10)
+    for atoms in (flat, buckled):
+        dense = classify(atoms, method='dense')
+        lowest = classify(atoms, k=dense.index + 4, work=(work := Work()))
+        assert lowest.method == 'lowest' and work == Work(hessians=1)
+        for name in ('verdict', 'index', 'n_zero', 'n_modes', 'n_rigid', 'n_fixed'):
+            assert getattr(lowest, name) == getattr(dense, name)
+        np.testing.assert_allclose(lowest.eigenvalues, dense.eigenvalues[:dense.index + 4],
+                                   atol=dense.tolerance)
+        overlap = np.abs(np.einsum('kij,kij->k', lowest.modes, dense.modes[:dense.index + 4]))
+        assert overlap[0] == pytest.approx(1.0, abs=1e-6)
+        assert lowest.tolerance == pytest.approx(dense.tolerance, rel=0.05)
+    assert dim == 3 or dense.index > 5   # a plane ring buckles; a 3D one is the minimum
 
 
 def test_not_stationary_is_flagged(random_points):

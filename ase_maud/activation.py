@@ -104,8 +104,7 @@ SETTLE_RATIO, SETTLE_CYCLES, SETTLE_STEPS, SETTLE_GAIN = 0.1, 40, 20, 0.8
 #: (a dense Hessian and its eigen-decomposition a step) up to this many free
 #: coordinates, above it with the springs model after settling the
 #: surroundings (the measurements that set it: docs/bench/saddles.md,
-#: "Released with the exact model" and "Released with the exact model up to
-#: 3000 free coordinates": a few equivalents a step, seconds of CPU a step).
+#: "Released with the exact model" and "Above 1500 free coordinates").
 RELEASE_EXACT_MAX_DOFS = 3000
 #: An attempt whose region's saddle lies this close in direction (cosine of
 #: the moves from the minimum) to a saddle found is rejected.

@@ -11,8 +11,9 @@ verdict. Three paths give the same counts:
 - ``lowest``: the lowest ``k`` eigenvalues of the same dense Hessian (LAPACK's
   ``syevr`` asked for those only), for up to :data:`LOWEST_MAX_DOFS`: one
   Hessian where ``iterative`` takes hundreds of products (the soft modes of
-  a large minimum hold LOBPCG to its iteration limit), and about half the
-  CPU of ``eigh``.
+  a large minimum hold LOBPCG to its iteration limit), and less than ``eigh``
+  of every eigenvalue (docs/bench/saddles.md, "Above 1500 free
+  coordinates").
 - ``iterative``: the lowest ``k`` eigenvalues by LOBPCG on Hessian-vector
   products (:meth:`ase_maud.potential.MaudPotential.hvp`), O(N) memory,
   O(N**2) time per product, a block of vectors per pass over the pairs. The

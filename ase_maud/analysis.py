@@ -270,10 +270,15 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
         method=method)
 
 
+def _free_hessian(atoms, free):
+    """The dense Hessian on the free dofs (``free``: mask (N, dim))."""
+    flat = free.ravel()
+    return atoms.calc.get_hessian(atoms)[np.ix_(flat, flat)]
+
+
 def _dense_spectrum(atoms, free, rigid):
     """All eigenpairs of ``H`` on the free dofs orthogonal to ``rigid``."""
-    flat = free.ravel()
-    hessian = atoms.calc.get_hessian(atoms)[np.ix_(flat, flat)]
+    hessian = _free_hessian(atoms, free)
     if rigid.size:
         basis = scipy.linalg.null_space(rigid.T)
     else:
@@ -287,8 +292,7 @@ def _lowest_of_dense(atoms, free, rigid, k):
     ``rigid``, and max|lambda| (to 1 %, Lanczos on the dense Hessian): ``P H
     P`` (``P`` the projector off the rigid modes) with the rigid modes lifted
     above every eigenvalue."""
-    flat = free.ravel()
-    hessian = atoms.calc.get_hessian(atoms)[np.ix_(flat, flat)]
+    hessian = _free_hessian(atoms, free)
     side = hessian @ rigid
     hessian -= side @ rigid.T + rigid @ side.T - rigid @ (rigid.T @ side) @ rigid.T
     v0 = np.random.default_rng(0).standard_normal(len(hessian))

@@ -4,10 +4,10 @@ the minima each saddle joins.
 :func:`landscape` searches for saddles from a minimum
 (:func:`ase_maud.activation.search_saddles`: climbs along each of its
 ``modes`` lowest Hessian modes, both ways, then ``local`` local
-activations, in rounds while new ones find new saddles below an energy
-``window`` if one is given, and a band of images to a second minimum if one is given and
-nothing else found a saddle), relaxes from each index-1 saddle found to the minimum on
-either side of its unstable mode
+activations, in rounds until ``empty_rounds`` in a row find no new saddle
+below an energy ``window`` if one is given, and a band of images to a second
+minimum if one is given and nothing else found a saddle), relaxes from each
+index-1 saddle found to the minimum on either side of its unstable mode
 (:func:`ase_maud.analysis.displace_along_mode`), and returns a
 :class:`Landscape`: the distinct minima and saddles and which minima each
 saddle joins. Two configurations are the same (:func:`same_point`) when their

@@ -18,7 +18,8 @@ minimum it makes, in order:
    following on the region's exact Hessian, the trust length a fraction of
    the neighbour distance per step), until that curvature has turned
    negative and the region's forces vanish: a saddle of the region in its
-   held surroundings. The region then grows (twice, four times the radius,
+   held surroundings (within :data:`REGION_STEPS` steps, else the region
+   has none). The region then grows (twice, four times the radius,
    while it has at most :data:`~ase_maud.stiffness.EXACT_MAX_DOFS` free
    coordinates), each time climbed again from where the last left off along
    its negative mode. The whole scene is then released from there along
@@ -93,8 +94,12 @@ RADIUS = 2.0
 #: The region grows by these factors of :data:`RADIUS` (while the exact
 #: model takes it) before the whole scene is released.
 GROWTH = (2.0, 4.0)
-#: Steps of a region's climb (each a call and a Hessian of the region).
-REGION_STEPS = 60
+#: Steps of a region's first climb, from the minimum (each a call and a
+#: Hessian of the region): one that has not converged by then has no local
+#: saddle (docs/bench/saddles.md, "A region's first climb bounded").
+REGION_STEPS = 40
+#: Steps of a grown region's climb, from the saddle of the region before.
+GROWN_STEPS = 60
 #: The surroundings of a region's saddle are relaxed with the region held (to
 #: this fraction of the largest force before), and the region climbed again,
 #: in turn (at most this many times, each run at most this many steps),
@@ -419,7 +424,7 @@ def _activate(minimum: Atoms, centre: int, known: list[np.ndarray], fmax: float,
         opt = Maud(Filter(atoms, indices=region), target='saddle', logfile=None,
                    mode=None if mode is None else mode[region])
         tally.attempt.region = int(region.size)
-        why = tally.run(opt, atoms, fmax, REGION_STEPS)
+        why = tally.run(opt, atoms, fmax, REGION_STEPS if mode is None else GROWN_STEPS)
         if why:
             return None, tally.end('no local saddle' if why == 'steps' else why, atoms)
         mode, held = opt.found.modes[0], region

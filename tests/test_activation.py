@@ -213,6 +213,19 @@ def test_a_region_with_no_local_saddle_is_an_answer_not_a_failure(seed):
         'no local saddle' in line for line in found.search.report().splitlines())
 
 
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_region_s_first_climb_stops_at_its_step_bound(seed, monkeypatch):
+    """A local attempt whose region has no saddle (a small net with its
+    corners fixed) ends after ``REGION_STEPS`` steps of its first climb,
+    each a call and a Hessian of the region, and says so."""
+    monkeypatch.setattr(activation, 'REGION_STEPS', 6)
+    search = search_saddles(relaxed('corners', 6, seed), modes=0, local=3, seed=seed)
+    ended = [a for a in search.attempts if a.outcome == 'no local saddle']
+    assert ended
+    for attempt in ended:   # the first evaluation, then one a step
+        assert attempt.calls <= 6 + 1 and attempt.hessians <= 6 + 1
+
+
 def test_a_saddle_search_on_a_filter_follows_a_move_of_its_atoms():
     """``mode=`` of a search on ``Filter(atoms, indices)`` is a move of the
     filter's atoms (was checked against the whole scene's and refused)."""

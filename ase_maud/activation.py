@@ -94,12 +94,10 @@ RADIUS = 2.0
 #: The region grows by these factors of :data:`RADIUS` (while the exact
 #: model takes it) before the whole scene is released.
 GROWTH = (2.0, 4.0)
-#: Steps of a region's first climb, from the minimum (each a call and a
-#: Hessian of the region): one that has not converged by then has no local
-#: saddle (docs/bench/saddles.md, "A region's first climb bounded").
-REGION_STEPS = 40
-#: Steps of a grown region's climb, from the saddle of the region before.
-GROWN_STEPS = 60
+#: Steps of a region's climb (each a call and a Hessian of the region): one
+#: that has not converged by then has no local saddle (a tighter bound, tried:
+#: docs/bench/saddles.md, "A region's first climb bounded, tried").
+REGION_STEPS = 60
 #: The surroundings of a region's saddle are relaxed with the region held (to
 #: this fraction of the largest force before), and the region climbed again,
 #: in turn (at most this many times, each run at most this many steps),
@@ -424,7 +422,7 @@ def _activate(minimum: Atoms, centre: int, known: list[np.ndarray], fmax: float,
         opt = Maud(Filter(atoms, indices=region), target='saddle', logfile=None,
                    mode=None if mode is None else mode[region])
         tally.attempt.region = int(region.size)
-        why = tally.run(opt, atoms, fmax, REGION_STEPS if mode is None else GROWN_STEPS)
+        why = tally.run(opt, atoms, fmax, REGION_STEPS)
         if why:
             return None, tally.end('no local saddle' if why == 'steps' else why, atoms)
         mode, held = opt.found.modes[0], region

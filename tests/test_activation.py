@@ -214,9 +214,9 @@ def test_a_region_with_no_local_saddle_is_an_answer_not_a_failure(seed):
 
 
 @pytest.mark.parametrize('seed', [0, 1])
-def test_a_region_s_first_climb_stops_at_its_step_bound(seed, monkeypatch):
+def test_a_region_s_climb_stops_at_its_step_bound(seed, monkeypatch):
     """A local attempt whose region has no saddle (a small net with its
-    corners fixed) ends after ``REGION_STEPS`` steps of its first climb,
+    corners fixed) ends after ``REGION_STEPS`` steps of its climb,
     each a call and a Hessian of the region, and says so."""
     monkeypatch.setattr(activation, 'REGION_STEPS', 6)
     search = search_saddles(relaxed('corners', 6, seed), modes=0, local=3, seed=seed)

@@ -26,7 +26,8 @@ minimum it makes, in order:
    that mode (``Maud(target='saddle', mode=...)``) and converged on a
    verified index-1 saddle: with the exact model (eigenvector following on
    the whole scene's dense Hessian: one call and one Hessian a step) while
-   the scene has at most :data:`RELEASE_EXACT_MAX_DOFS` free coordinates.
+   the scene has at most :data:`RELEASE_EXACT_MAX_DOFS` free coordinates
+   (above :data:`RELEASE_CAP_DOFS`, at most :data:`RELEASE_CAP_STEPS` steps).
    Above that, the rest of the scene is first relaxed with the region
    held, and the region climbed again, in turn, while that converges: to a
    saddle of the whole scene (verified: ``classify``), or else, where it
@@ -109,6 +110,11 @@ SETTLE_RATIO, SETTLE_CYCLES, SETTLE_STEPS, SETTLE_GAIN = 0.1, 40, 20, 0.8
 #: surroundings (the measurements that set it: docs/bench/saddles.md,
 #: "Released with the exact model" and "Above 1500 free coordinates").
 RELEASE_EXACT_MAX_DOFS = 3000
+#: Above this many free coordinates the exact release stops (outcome 'exact
+#: release steps') after this many steps: a step costs seconds there, so one
+#: that wanders would take hundreds within the budget (docs/bench/saddles.md,
+#: "The exact release capped").
+RELEASE_CAP_DOFS, RELEASE_CAP_STEPS = 1500, 60
 #: An attempt whose region's saddle lies this close in direction (cosine of
 #: the moves from the minimum) to a saddle found is rejected.
 SAME_DIRECTION = 0.9
@@ -127,10 +133,11 @@ class Attempt:
     -1; 'local': an activation around point ``where``; 'path': a band to
     the second minimum given, :func:`~ase_maud.transition.saddle_between`), how it ended
     (``outcome``: 'saddle', 'known saddle', 'known direction', 'budget', 'no
-    local saddle', 'steps', or the error that stopped it), the points of its
-    last region (``region``, local ones), what it computed (``calls``,
-    ``hvp_vectors``, ``hessians``) and its CPU seconds, and the energy it
-    ended at (a saddle's, or where it stopped)."""
+    local saddle', 'steps', 'exact release steps' (:data:`RELEASE_CAP_STEPS`),
+    or the error that stopped it), the points of its last region
+    (``region``, local ones), what it computed (``calls``, ``hvp_vectors``,
+    ``hessians``) and its CPU seconds, and the energy it ended at (a
+    saddle's, or where it stopped)."""
 
     kind: str
     where: int
@@ -439,7 +446,10 @@ def _activate(minimum: Atoms, centre: int, known: list[np.ndarray], fmax: float,
         mode = tally.mode
     opt = Maud(atoms, target='saddle', mode=mode, logfile=None,
                model='exact' if exact else 'auto')
-    why = tally.run(opt, atoms, fmax, steps)
+    cap = min(steps, RELEASE_CAP_STEPS) if exact and free.sum() > RELEASE_CAP_DOFS else steps
+    why = tally.run(opt, atoms, fmax, cap)
+    if why == 'steps' and cap < steps:
+        why = 'exact release steps'
     return (None if why else atoms), tally.end(why or 'saddle', atoms)
 
 

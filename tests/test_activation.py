@@ -106,6 +106,21 @@ def test_local_activation_on_the_springs_model(monkeypatch):
     assert reached >= 2
 
 
+def test_an_exact_release_stops_at_its_step_cap_and_the_search_goes_on(monkeypatch):
+    """A chord ring of 30 points (60 free coordinates): above RELEASE_CAP_DOFS
+    (lowered here) its exact release stops at RELEASE_CAP_STEPS (one here),
+    each attempt says so and the search goes on; at the bound it does not."""
+    start = relaxed('chords', 30, 40)
+    monkeypatch.setattr(activation, 'RELEASE_CAP_STEPS', 1)
+    monkeypatch.setattr(activation, 'RELEASE_CAP_DOFS', 59)
+    search = search_saddles(start, modes=0, local=3, wanted=1, budget=500, seed=40)
+    assert [a.outcome for a in search.attempts] == ['exact release steps'] * 3
+    assert not search.saddles
+    assert search.report().count('exact release steps') == 3
+    monkeypatch.setattr(activation, 'RELEASE_CAP_DOFS', 60)
+    assert verified(search_saddles(start, modes=0, local=3, wanted=1, budget=500, seed=40))
+
+
 def test_a_large_minimum_s_modes_and_saddles_cost_a_hessian_each(monkeypatch):
     """Above the dense size (lowered here) a minimum's modes and every
     saddle's index come from the lowest eigenpairs of one dense Hessian

@@ -58,7 +58,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
 
 from . import physics
-from .dofs import free_dofs, rigid_body_modes
+from .dofs import free_dofs, project_off, rigid_body_modes
 from .topology import mean_spring_length
 
 #: Eigenvalues with ``|lambda| <= RTOL * max|lambda|`` count as zero.
@@ -293,8 +293,7 @@ def _lowest_of_dense(atoms, free, rigid, k):
     P`` (``P`` the projector off the rigid modes) with the rigid modes lifted
     above every eigenvalue."""
     hessian = _free_hessian(atoms, free)
-    side = hessian @ rigid
-    hessian -= side @ rigid.T + rigid @ side.T - rigid @ (rigid.T @ side) @ rigid.T
+    project_off(hessian, rigid)
     v0 = np.random.default_rng(0).standard_normal(len(hessian))
     scale = abs(eigsh(hessian, 1, which='LM', tol=0.01, v0=v0,
                       return_eigenvectors=False)[0])

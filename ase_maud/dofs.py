@@ -1,6 +1,6 @@
 """Which moves a scene has: the degrees of freedom its constraints leave
-free, the rigid-body motions among them, and orthonormal bases of the allowed
-and the internal moves.
+free, the rigid-body motions among them, orthonormal bases of the allowed
+moves and of the rigid motions they allow, and the projection off those.
 
 The one home of constraint geometry: the stiffness models, the step's
 strategies and the analysis of stationary points all take it from here.
@@ -79,19 +79,25 @@ def allowed_basis(atoms: Atoms, dim: int) -> np.ndarray:
     return basis
 
 
-def internal_basis(positions: np.ndarray, dim: int,
-                   basis: np.ndarray | None) -> np.ndarray:
-    """Orthonormal columns (dim N, m) spanning the moves ``basis`` allows
-    (:func:`allowed_basis`; None: every move) that are orthogonal to the
-    rigid-body motions it allows (:func:`rigid_body_modes`: the translations
-    and rotations of a free scene, none once three non-collinear points are
-    held): the internal moves, on which the Hessian has no zero modes of
-    symmetry."""
+def allowed_rigid_modes(positions: np.ndarray, dim: int,
+                        basis: np.ndarray | None) -> np.ndarray:
+    """Orthonormal columns (dim N, r) spanning the rigid-body motions
+    (:func:`rigid_body_modes`: translations and rotations) that ``basis``
+    allows (:func:`allowed_basis`; None: every move): all of them for a free
+    scene, none once three non-collinear points are held. The moves of
+    ``basis`` orthogonal to them are the internal moves, on which the
+    Hessian has no zero modes of symmetry."""
     rigid = rigid_body_modes(positions, np.ones((len(positions), dim), bool), dim)
     if basis is None:
-        return scipy.linalg.null_space(rigid.T)
+        return rigid
     outside = rigid - basis @ (basis.T @ rigid)
-    kept = rigid @ scipy.linalg.null_space(outside, rcond=1e-8)
-    if kept.shape[1] == 0:
-        return basis
-    return basis @ scipy.linalg.null_space(scipy.linalg.orth(basis.T @ kept).T)
+    return rigid @ scipy.linalg.null_space(outside, rcond=1e-8)
+
+
+def project_off(matrix: np.ndarray, modes: np.ndarray) -> np.ndarray:
+    """``P matrix P`` in place, ``P = I - R R^T`` the projector off the
+    orthonormal columns ``R`` = ``modes`` (n, r): O(n**2 r), where a basis
+    of their complement costs products of n**3."""
+    side = matrix @ modes
+    matrix -= side @ modes.T + modes @ side.T - modes @ (modes.T @ side) @ modes.T
+    return matrix

@@ -40,7 +40,7 @@ exact one), so no direction is uphill. ``target='stationary'`` keeps the signs
 (saddles and maxima are then fixed points of the step). ``target='saddle'``
 gives the Hessian's eigenpairs on the internal moves (rigid-body motions
 projected out), signed and unfloored, for the step rule's eigenvector
-following: all of them (the exact model, :func:`internal_basis`), or the
+following: all of them (the exact model, :meth:`ExactModel._internal`), or the
 lowest few from Hessian-vector products (the springs model). Degrees of freedom
 held by :class:`~ase.constraints.FixAtoms` and
 :class:`~ase.constraints.FixCartesian` are removed from ``K`` and never move;
@@ -70,7 +70,7 @@ from scipy.sparse.linalg import LinearOperator, cg, splu
 from . import physics
 from .analysis import Work
 from .checks import all_finite, check
-from .dofs import allowed_basis, free_dofs, internal_basis, rigid_body_modes
+from .dofs import allowed_basis, allowed_rigid_modes, free_dofs, project_off, rigid_body_modes
 from .neighbours import NearestDistances
 from .topology import spring_components
 
@@ -458,21 +458,36 @@ class ExactModel(StiffnessModel):
         if not all_finite(hessian):
             raise np.linalg.LinAlgError('the Hessian is not finite')
         dim = hessian.shape[0] // len(atoms)
-        basis = self.basis(atoms, dim)
-        if self.target == 'saddle':
-            internal = internal_basis(atoms.positions, dim, basis)
-            return _EigenSolver(internal.T @ hessian @ internal, internal,
-                                np.ones((len(atoms), dim), dtype=bool), None, np.asarray)
+        allowed = basis = self.basis(atoms, dim)
         free, index = self._free, self._free_index
         if self._held is not None:   # whole coordinates: a selection
             kept = self._kept_index
             matrix, basis = hessian.take(kept, axis=0).take(kept, axis=1), None
         else:
             matrix = hessian if basis is None else basis.T @ hessian @ basis
+        if self.target == 'saddle':
+            return self._internal(matrix.copy() if matrix is hessian else matrix,
+                                  allowed_rigid_modes(atoms.positions, dim, allowed), basis)
         if self.target == 'minimum':
             return (_CholeskySolver.of(matrix, basis, free, index, self.floor)
                     or _EigenSolver(matrix, basis, free, index, self._absolute))
         return _EigenSolver(matrix, basis, free, index, self._absolute)
+
+    def _internal(self, matrix: np.ndarray, rigid: np.ndarray,
+                  basis: np.ndarray | None) -> _EigenSolver:
+        """The saddle's solver of ``matrix`` (the Hessian on the allowed
+        moves, changed in place) on the internal moves: projected off the
+        allowed ``rigid`` motions (dim N, r) and those lifted above every
+        eigenvalue (twice a bound on the largest), so the eigen-decomposition
+        leaves them out as its top ``r`` pairs."""
+        rigid = rigid.take(self._kept_index, axis=0) if self._held is not None else (
+            rigid if basis is None else basis.T @ rigid)
+        rigid = scipy.linalg.orth(rigid) if rigid.size else rigid
+        lift = 2.0 * np.abs(matrix).sum(axis=1).max(initial=0.0) + 1.0
+        project_off(matrix, rigid)
+        matrix += lift * rigid @ rigid.T
+        return _EigenSolver(matrix, basis, self._free, self._free_index, np.asarray,
+                            lifted=rigid.shape[1])
 
     def basis(self, atoms: Atoms, dim: int) -> np.ndarray | None:
         """:func:`allowed_basis`, kept while the constraints are the same;
@@ -570,13 +585,15 @@ class _EigenSolver(_DenseSolver, DampedSolver, ModeSolver):
     ``absolute`` (signed and floored for ``'stationary'``; as they are for
     ``'saddle'``, whose :meth:`eigenpairs` are every one); also the damped
     ``(K + mu I)^-1`` of trust-region steps (each eigenvalue moved ``mu``
-    away from zero). The decomposition is made when first needed."""
+    away from zero). The decomposition is made when first needed; its top
+    ``lifted`` pairs (rigid motions lifted out of the way:
+    :meth:`ExactModel._internal`) are left out."""
 
     definite = False
 
-    def __init__(self, matrix, basis, free, index, absolute):
+    def __init__(self, matrix, basis, free, index, absolute, lifted: int = 0):
         super().__init__(matrix, basis, free, index)
-        self.absolute = absolute
+        self.absolute, self.lifted = absolute, lifted
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
 
     def _decomposed(self) -> tuple[np.ndarray, np.ndarray]:
@@ -587,7 +604,8 @@ class _EigenSolver(_DenseSolver, DampedSolver, ModeSolver):
             if info:
                 raise np.linalg.LinAlgError(f'the eigen-decomposition did not converge '
                                             f'(LAPACK syevd info {info})')
-            self._pairs = self.absolute(values), vectors
+            kept = len(values) - self.lifted
+            self._pairs = self.absolute(values[:kept]), vectors[:, :kept]
         return self._pairs
 
     @property

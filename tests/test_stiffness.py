@@ -10,6 +10,7 @@ from ase.optimize import BFGS
 from ase.optimize.precon import PreconFIRE, PreconLBFGS
 
 from ase_maud import Maud, MaudCalculator
+from ase_maud.dofs import allowed_rigid_modes, project_off
 from ase_maud.models import choose_model
 from ase_maud.precon import MaudPrecon
 from ase_maud.scenes import SCENES, build
@@ -21,7 +22,6 @@ from ase_maud.stiffness import (
     SecantModel,
     allowed_basis,
     free_dofs,
-    internal_basis,
     rigid_body_modes,
 )
 
@@ -298,27 +298,35 @@ def test_precon_drives_ase_optimizers_under_fixatoms(optimizer, seed):
 @pytest.mark.parametrize('scene, held, rigid', [
     ('all_pairs', [], 6), ('all_pairs', [0], 3), ('all_pairs', [0, 1, 2], 0),
     ('all_pairs2d', [], 3), ('all_pairs2d', [0], 1), ('ring', [], 3)])
-def test_internal_basis_leaves_out_the_rigid_motions_the_constraints_allow(
+def test_the_saddle_model_leaves_out_the_rigid_motions_the_constraints_allow(
         seed, scene, held, rigid):
-    """Orthonormal, inside the allowed moves, orthogonal to every translation
-    and rotation that stays allowed: the allowed moves less ``rigid`` of them."""
+    """``rigid`` orthonormal rigid motions inside the allowed moves; the saddle
+    model's eigenpairs are the Hessian's on the allowed moves orthogonal to
+    them (its projection off them, lifted out of the way, as the analysis's):
+    classify's spectrum, and eigenvectors of the projected Hessian."""
     from ase_maud.analysis import classify
     atoms = build(scene, 7, seed=seed)
     if held:
         atoms.set_constraint(FixAtoms(held))
     dim = atoms.calc.parameters['dim']
     allowed = allowed_basis(atoms, dim) if held else np.eye(dim * len(atoms))
-    basis = internal_basis(atoms.positions, dim, allowed if held else None)
-    assert basis.shape[1] == allowed.shape[1] - rigid
-    np.testing.assert_allclose(basis.T @ basis, np.eye(basis.shape[1]), atol=1e-12)
-    np.testing.assert_allclose(allowed @ (allowed.T @ basis), basis, atol=1e-12)
-    # the saddle model's spectrum is classify's (rigid modes removed there too)
+    motions = allowed_rigid_modes(atoms.positions, dim, allowed if held else None)
+    assert motions.shape[1] == rigid
+    np.testing.assert_allclose(motions.T @ motions, np.eye(rigid), atol=1e-12)
+    np.testing.assert_allclose(allowed @ (allowed.T @ motions), motions, atol=1e-12)
     values, modes = ExactModel('saddle').at(atoms).eigenpairs(0, None)
+    assert len(values) == allowed.shape[1] - rigid
     np.testing.assert_allclose(values, classify(atoms, ftol=np.inf).eigenvalues, rtol=1e-9,
                                atol=1e-9 * np.abs(values).max())
+    flat = modes[:, :, :dim].reshape(len(values), -1).T
+    np.testing.assert_allclose(flat.T @ flat, np.eye(len(values)), atol=1e-9)
+    np.testing.assert_allclose(motions.T @ flat, 0.0, atol=1e-9)
+    np.testing.assert_allclose(allowed @ (allowed.T @ flat), flat, atol=1e-9)
     hessian = atoms.calc.get_hessian(atoms)
-    flat = modes[:, :, :dim].reshape(len(values), -1)
-    np.testing.assert_allclose(basis.T @ hessian @ flat.T, basis.T @ flat.T * values,
+    projected = allowed.T @ hessian @ allowed
+    inside = allowed.T @ motions
+    project_off(projected, inside)
+    np.testing.assert_allclose(projected @ (allowed.T @ flat), allowed.T @ flat * values,
                                atol=1e-9 * np.abs(values).max())
 
 

@@ -67,8 +67,8 @@ RTOL = 1e-8
 #: freedom ...
 DENSE_MAX_DOFS = 2000
 #: ... and takes the lowest eigenvalues of the dense Hessian up to this many
-#: (160 MB a copy at 4500), LOBPCG above.
-LOWEST_MAX_DOFS = 4500
+#: (a free 3D scene of 2000 points; 290 MB a copy), LOBPCG above.
+LOWEST_MAX_DOFS = 6000
 #: Default force tolerance for "stationary", in units of ``Q a``.
 FTOL = 1e-6
 

@@ -159,6 +159,9 @@ def main(argv: list[str] | None = None) -> int:
                   f"{row['calls']:5d} calls {row['hvp_vectors']:6d} HVP vectors "
                   f"{row['hessians']:4d} Hessians {row['cost']:6d} in all {row['cpu_s']:7.2f} s "
                   f"{row['attempts']} attempts: {row['outcomes']}", flush=True)
+    if not rows:
+        print('no start was a minimum: nothing written', file=sys.stderr)
+        return 1
     args.out.mkdir(parents=True, exist_ok=True)
     with open(args.out / 'activation.csv', 'w', newline='') as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))

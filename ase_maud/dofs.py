@@ -96,8 +96,10 @@ def allowed_rigid_modes(positions: np.ndarray, dim: int,
 
 def project_off(matrix: np.ndarray, modes: np.ndarray) -> np.ndarray:
     """``P matrix P`` in place, ``P = I - R R^T`` the projector off the
-    orthonormal columns ``R`` = ``modes`` (n, r): O(n**2 r), where a basis
-    of their complement costs products of n**3."""
+    orthonormal columns ``R`` = ``modes`` (n, r) of a symmetric ``matrix``
+    ``M``: ``M - S R^T - R (S - R C)^T`` with ``S = M R``, ``C = R^T S``, one
+    rank-2r product, O(n**2 r) and one n x n temporary, where a basis of
+    their complement costs products of n**3."""
     side = matrix @ modes
-    matrix -= side @ modes.T + modes @ side.T - modes @ (modes.T @ side) @ modes.T
+    matrix -= np.hstack([side, modes]) @ np.hstack([modes, side - modes @ (modes.T @ side)]).T
     return matrix

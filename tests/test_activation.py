@@ -269,3 +269,21 @@ def test_coverage_is_good_turing_over_the_attempts_that_reached_a_saddle(seed):
     assert search.coverage == pytest.approx(1 - singles / hits.sum())
     assert f'estimated {search.coverage:.0%}' in search.report()
     assert SaddleSearch(attempts=[Attempt('mode', 0, outcome='budget')]).coverage is None
+
+
+def test_the_benchmark_says_so_when_no_start_is_a_minimum(tmp_path, capsys):
+    """tools/activation.py leaves out a start that relaxes to no minimum; where
+    every start is left out it writes nothing and exits 1, saying why."""
+    tool = runpy.run_path(str(Path(__file__).parent.parent / 'tools' / 'activation.py'))
+    main = tool['main']
+
+    def no_minimum(scene, size, seed):
+        raise ValueError(f'{scene} {size} seed {seed} relaxed to a saddle, not a minimum')
+
+    main.__globals__['minimum'] = no_minimum
+    out = tmp_path / 'out'
+    assert main(['--starts', 'ring:5', '--seeds', '0', '1', '--out', str(out)]) == 1
+    assert not out.exists()
+    captured = capsys.readouterr()
+    assert captured.out.count('left out: ring 5 seed') == 2
+    assert 'no start was a minimum' in captured.err

@@ -478,8 +478,9 @@ class ExactModel(StiffnessModel):
         """The saddle's solver of ``matrix`` (the Hessian on the allowed
         moves, changed in place) on the internal moves: projected off the
         allowed ``rigid`` motions (dim N, r) and those lifted above every
-        eigenvalue (twice a bound on the largest), so the eigen-decomposition
-        leaves them out as its top ``r`` pairs."""
+        eigenvalue (twice the largest row sum, a bound on the largest, plus
+        one for a zero matrix), so the eigen-decomposition leaves them out as
+        its top ``r`` pairs."""
         rigid = rigid.take(self._kept_index, axis=0) if self._held is not None else (
             rigid if basis is None else basis.T @ rigid)
         rigid = scipy.linalg.orth(rigid) if rigid.size else rigid

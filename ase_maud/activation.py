@@ -15,8 +15,10 @@ minimum it makes, in order:
    :data:`RADIUS` times the point's nearest-neighbour distance) are climbed
    along their lowest curvature with the rest of the scene held
    (``Maud(Filter(atoms, indices=region), target='saddle')``: eigenvector
-   following on the region's exact Hessian, the trust length a fraction of
-   the neighbour distance per step), until that curvature has turned
+   following on the Hessian's block on the region, computed alone
+   (:meth:`~ase_maud.calculator.MaudCalculator.get_hessian_block`), the
+   trust length a fraction of the neighbour distance per step), until that
+   curvature has turned
    negative and the region's forces vanish: a saddle of the region in its
    held surroundings (within :data:`REGION_STEPS` steps, else the region
    has none). The region then grows (twice, four times the radius,

@@ -58,6 +58,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
 
 from . import physics
+from .calculator import MaudCalculator
 from .dofs import free_dofs, project_off, rigid_body_modes
 from .topology import mean_spring_length
 
@@ -69,6 +70,10 @@ DENSE_MAX_DOFS = 2000
 #: ... and takes the lowest eigenvalues of the dense Hessian up to this many
 #: (a free 3D scene of 2000 points; 290 MB a copy), LOBPCG above.
 LOWEST_MAX_DOFS = 6000
+#: A MaudCalculator's Hessian is asked for on the atoms with a free
+#: coordinate alone where more than this fraction of the atoms are held
+#: (its pairs n N against the whole's N**2 / 2): :func:`hessian_rows`.
+BLOCK_MIN_HELD = 0.5
 #: Default force tolerance for "stationary", in units of ``Q a``.
 FTOL = 1e-6
 
@@ -270,10 +275,27 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
         method=method)
 
 
+def hessian_rows(atoms: Atoms, free: np.ndarray) -> np.ndarray | None:
+    """The atoms with a free coordinate (``free``: mask (N, dim)) where a
+    MaudCalculator gives the Hessian's block on them
+    (:meth:`~ase_maud.calculator.MaudCalculator.get_hessian_block`) cheaper
+    than the whole: the other atoms are more than :data:`BLOCK_MIN_HELD`
+    of them (a Filter's region, a net with most points fixed); else None
+    (also for a subclass, whose ``calculate`` may give another Hessian)."""
+    rows = np.flatnonzero(free.any(axis=1))
+    return (rows if type(atoms.calc) is MaudCalculator
+            and len(rows) < (1.0 - BLOCK_MIN_HELD) * len(atoms) else None)
+
+
 def _free_hessian(atoms, free):
-    """The dense Hessian on the free dofs (``free``: mask (N, dim))."""
-    flat = free.ravel()
-    return atoms.calc.get_hessian(atoms)[np.ix_(flat, flat)]
+    """The dense Hessian on the free dofs (``free``: mask (N, dim)): the
+    calculator's whole Hessian there, or its block (:func:`hessian_rows`)."""
+    rows = hessian_rows(atoms, free)
+    if rows is None:
+        flat = free.ravel()
+        return atoms.calc.get_hessian(atoms)[np.ix_(flat, flat)]
+    kept = np.flatnonzero(free[rows].ravel())
+    return atoms.calc.get_hessian_block(atoms, rows)[np.ix_(kept, kept)]
 
 
 def _dense_spectrum(atoms, free, rigid):

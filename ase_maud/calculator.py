@@ -415,6 +415,31 @@ class MaudCalculator(Calculator):
             self.check_hessian_size(len(atoms))
         return self.get_property('hessian', atoms)
 
+    def get_hessian_block(self, atoms: Atoms, indices: ArrayLike) -> np.ndarray:
+        """The rows and columns of :meth:`get_hessian` on the coordinates of
+        the atoms ``indices`` (n distinct indices), shape (dim n, dim n),
+        units of ``Q``, at ``atoms``' positions: computed anew in O(n N)
+        time and O(n**2) memory without the whole Hessian (whatever N), and
+        not kept in :attr:`results`. A ValueError names a bad index."""
+        index = np.asarray(indices)
+        natoms = len(atoms)
+        if index.ndim != 1 or not (index.size == 0 or np.issubdtype(index.dtype, np.integer)):
+            raise ValueError(f'indices must be a 1-D sequence of atom indices, got {indices!r}')
+        if index.size and (index.min() < 0 or index.max() >= natoms):
+            bad = index[(index < 0) | (index >= natoms)][0]
+            raise ValueError(f'indices: atom {bad} is not one of the {natoms} atoms')
+        if np.unique(index).size != index.size:
+            raise ValueError('indices: an atom is given twice')
+        self.potential.check_size(natoms)
+        positions = self.check_atoms(atoms)
+        block = self.potential.hessian_block(positions, index)
+        if not all_finite(block):
+            if self.potential.repulsive:
+                raise_on_closest(self.potential.reduced(positions), self.potential.a)
+            raise ValueError(f'the Hessian overflows float64 at Q = {self.potential.Q!r}: '
+                             'choose units nearer the scene')
+        return block
+
     def check_hessian_size(self, natoms: int, what: str = 'get_hessian',
                            ) -> None:
         """Raise ValueError, naming the O(N)-memory alternatives, if a dense

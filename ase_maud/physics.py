@@ -73,6 +73,31 @@ def _per_pair(Q: float | np.ndarray, d: np.ndarray) -> np.ndarray:
     return np.broadcast_to(np.asarray(Q, dtype=float), d.shape[:-1])
 
 
+def repulsion_hessian_block(x: np.ndarray, index: np.ndarray, dim: int,
+                            chunk_pairs: int = 1_000_000) -> np.ndarray:
+    """The unit repulsion's Hessian on the coordinates of the points
+    ``index`` (n,) of ``x`` (N, 3), shape (dim n, dim n), coordinates point
+    by point in ``index``'s order: ``-B_ij`` between two of them, the nodal
+    block ``K_ii = sum_j B_ij`` over every other point of ``x`` on the
+    diagonal (:func:`repulsion_block`). O(n N) time, O(n**2 + chunk_pairs)
+    memory: the whole Hessian's rows and columns there without forming it.
+    Coincident points give non-finite entries, never an error."""
+    index = np.asarray(index, dtype=np.intp)
+    n = len(index)
+    hessian = np.zeros((n, dim, n, dim))
+    rows_a_chunk = max(1, chunk_pairs // max(len(x), 1))
+    for start in range(0, n, rows_a_chunk):
+        rows = np.arange(start, min(start + rows_a_chunk, n))
+        d = x[index[rows], None, :dim] - x[None, :, :dim]   # (r, N, dim)
+        d[np.arange(len(rows)), index[rows]] = np.inf   # no pair with itself
+        with np.errstate(divide='ignore', over='ignore', invalid='ignore'):
+            blocks = repulsion_block(d)   # inf at itself: zeroed
+        blocks[np.arange(len(rows)), index[rows]] = 0.0
+        hessian[rows] = -blocks[:, index].transpose(0, 2, 1, 3)
+        hessian[rows, :, rows, :] = blocks.sum(axis=1)
+    return hessian.reshape(dim * n, dim * n)
+
+
 def spring_energy(d: np.ndarray, Q: float | np.ndarray) -> np.ndarray:
     """Spring energy ``Q L**2 / 2`` of each pair vector, shape
     ``d.shape[:-1]``; ``Q`` a number or one per pair (each spring's ``Q q``)."""

@@ -205,6 +205,20 @@ class MaudPotential:
                 if self.repulsive else np.zeros((n, n)))   # a = 0: the springs alone
         return self.whole_hessian(unit)
 
+    def hessian_block(self, positions: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """The rows and columns of :meth:`hessian` on the coordinates of the
+        points ``index`` (n,), shape (dim n, dim n), units of ``Q``, without
+        the whole: the repulsion's part in O(n N)
+        (:func:`.physics.repulsion_hessian_block`), the springs' a slice of
+        their constant Hessian."""
+        index = np.asarray(index, dtype=np.intp)
+        coords = (self.dim * index[:, None] + np.arange(self.dim)).ravel()
+        block = self.spring_hessian(len(positions))[coords][:, coords].toarray()
+        if self.repulsive:
+            block += self.Q * physics.repulsion_hessian_block(
+                self.reduced(positions), index, self.dim)
+        return block
+
     def whole_hessian(self, repulsion: np.ndarray) -> np.ndarray:
         """The dense Hessian from the unit repulsion's (dim N, dim N): ``Q``
         times it, plus the springs' (whose entries are kept in a flat index

@@ -68,7 +68,8 @@ from scipy.linalg.lapack import dpotrf, dpotrs, dsyevd
 from scipy.sparse.linalg import LinearOperator, cg, splu
 
 from . import physics
-from .analysis import Work
+from .analysis import Work, hessian_rows
+from .calculator import MaudCalculator
 from .checks import all_finite, check
 from .dofs import allowed_basis, allowed_rigid_modes, free_dofs, project_off, rigid_body_modes
 from .neighbours import NearestDistances
@@ -438,8 +439,24 @@ class ExactModel(StiffnessModel):
         self._free = np.ones((0, 3), dtype=bool)   # the solvers' free mask
         self._free_index = _free_index(self._free)   # ... and its components
 
+    def needs(self, atoms: Atoms) -> str | None:
+        return None if self._rows(atoms) is not None else self.prop
+
     def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
-        return self.local(atoms.calc.get_property('hessian', atoms), atoms)
+        rows = self._rows(atoms)
+        if rows is None:
+            return self.local(atoms.calc.get_property('hessian', atoms), atoms)
+        self.work.hessians += 1
+        return self.local(atoms.calc.get_hessian_block(atoms, rows), atoms, rows)
+
+    def _rows(self, atoms: Atoms) -> np.ndarray | None:
+        """The atoms whose block of the Hessian the model asks for instead
+        of the whole (:func:`~ase_maud.analysis.hessian_rows`: where the
+        constraints hold every coordinate of most atoms), or None."""
+        if type(atoms.calc) is not MaudCalculator:   # as hessian_rows
+            return None
+        self.basis(atoms, atoms.calc.dim)
+        return None if self._held is None else hessian_rows(atoms, ~self._held)
 
     def of_results(self, atoms: Atoms, results: dict[str, Any],
                    learnt: dict[str, Any] | None = None) -> Solver:
@@ -451,17 +468,20 @@ class ExactModel(StiffnessModel):
         hessian = results.get('hessian')
         return self.at(atoms, learnt) if hessian is None else self.local(hessian, atoms)
 
-    def local(self, hessian: np.ndarray, atoms: Atoms) -> Solver:
-        """The model of the dense ``hessian`` (dim N, dim N) at ``atoms``'
-        positions (its constraints say which moves are allowed); a
-        LinAlgError if it is not finite."""
+    def local(self, hessian: np.ndarray, atoms: Atoms, rows: np.ndarray | None = None,
+              ) -> Solver:
+        """The model of the dense ``hessian`` (dim N, dim N), or its block on
+        the atoms ``rows`` (dim n, dim n: every coordinate the constraints
+        leave free is theirs), at ``atoms``' positions (its constraints say
+        which moves are allowed); a LinAlgError if it is not finite."""
         if not all_finite(hessian):
             raise np.linalg.LinAlgError('the Hessian is not finite')
-        dim = hessian.shape[0] // len(atoms)
+        dim = hessian.shape[0] // (len(atoms) if rows is None else len(rows))
         allowed = basis = self.basis(atoms, dim)
         free, index = self._free, self._free_index
         if self._held is not None:   # whole coordinates: a selection
-            kept = self._kept_index
+            kept = (self._kept_index if rows is None
+                    else np.flatnonzero(~self._held[rows].ravel()))
             matrix, basis = hessian.take(kept, axis=0).take(kept, axis=1), None
         else:
             matrix = hessian if basis is None else basis.T @ hessian @ basis

@@ -502,12 +502,13 @@ class Saddle(Strategy):
                work: Any = None) -> tuple[Any, WrongIndexError | None]:
         """The converged point of ``atoms`` classified from the analytic
         Hessian (:func:`ase_maud.analysis.classify`, forces below ``ftol``,
-        its products counted in ``work`` if given, unless the model's
-        Hessian is the calculator's, counted already), and a WrongIndexError
+        its products or Hessian counted in ``work`` if given, unless the
+        model had the calculator compute the Hessian with the forces, counted
+        already), and a WrongIndexError
         (else None) if its index is not ``order`` or a zero curvature leaves
         it unknown (``step``: where it converged)."""
         from .analysis import classify
-        work = None if self.model.complete_modes else work
+        work = None if self.model.needs(atoms) == 'hessian' else work
         point, order = classify(atoms, ftol=ftol, work=work), self.rule.order
         if point.index == order and not point.n_zero:
             return point, None

@@ -145,6 +145,45 @@ def test_loads_and_force_densities_are_derivatives(scene, shape, dim, seed):
 
 @pytest.mark.parametrize('seed', [0, 1, 2])
 @pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('shape', ['tree', 'all_pairs'])
+def test_a_hessian_block_is_the_whole_hessians_rows_there(scene, shape, dim, seed):
+    """``get_hessian_block`` on a random subset of the atoms, in random
+    order, with random loads and force densities: the whole Hessian's rows
+    and columns there, and central differences of the forces."""
+    atoms = loaded(scene, shape, 9, dim, seed)
+    rng = np.random.default_rng(seed)
+    index = rng.permutation(9)[:rng.integers(1, 6)]
+    coords = (dim * index[:, None] + np.arange(dim)).ravel()
+    atoms.get_forces()
+    block = atoms.calc.get_hessian_block(atoms, index)
+    assert set(atoms.calc.results) == {'energy', 'free_energy', 'forces'}   # none kept
+    np.testing.assert_allclose(block, atoms.calc.get_hessian(atoms)[np.ix_(coords, coords)],
+                               rtol=0, atol=1e-12 * np.abs(block).max())
+    assert rel_err(block, fd_hessian(atoms, dim)[np.ix_(coords, coords)]) < FD_RTOL
+
+
+@pytest.mark.parametrize('indices, message', [
+    ([0, 9], r'indices: atom 9 is not one of the 9 atoms'),
+    ([-1], r'indices: atom -1 is not one of the 9 atoms'),
+    ([2, 2], r'indices: an atom is given twice'),
+    ([[0, 1]], r'indices must be a 1-D sequence of atom indices'),
+    ([0.5], r'indices must be a 1-D sequence of atom indices'),
+])
+def test_a_bad_hessian_block_is_named(scene, indices, message):
+    atoms = scene('tree', n=9)
+    with pytest.raises(ValueError, match=message):
+        atoms.calc.get_hessian_block(atoms, indices)
+
+
+def test_a_hessian_block_names_coincident_atoms(scene):
+    atoms = scene('tree', n=9)
+    atoms.positions[7] = atoms.positions[2]
+    with pytest.raises(ValueError, match=r'atoms 2 and 7 are at the same position'):
+        atoms.calc.get_hessian_block(atoms, [3, 2])
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+@pytest.mark.parametrize('dim', [2, 3])
 def test_loads_and_force_densities_by_formula(scene, dim, seed):
     """Against the formulas written out here: a spring ``Q q L**2 / 2``, a
     load ``-F . r`` (its force ``F``), on top of the repulsion alone; loads

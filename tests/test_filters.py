@@ -10,7 +10,7 @@ from ase.constraints import FixAtoms, FixBondLength, FixBondLengths, Hookean
 from ase.filters import Filter, FrechetCellFilter, StrainFilter, UnitCellFilter
 from ase.optimize import BFGS
 
-from ase_maud import Maud
+from ase_maud import Maud, analysis
 from ase_maud.scenes import build
 
 MODELS = ['auto', 'exact', 'springs', 'nodal', 'global', 'secant', 'near']
@@ -64,6 +64,44 @@ def test_a_filter_steps_as_fixing_the_atoms_it_leaves_out(seed):
         for _ in zip(one.irun(fmax=1e-7), other.irun(fmax=1e-7), strict=True):
             np.testing.assert_allclose(atoms.positions, fixed.positions, rtol=0, atol=1e-12)
     assert one.nsteps == other.nsteps
+
+
+@pytest.mark.parametrize('target', ['minimum', 'saddle'])
+@pytest.mark.parametrize('seed', [4, 5])
+def test_a_small_filter_steps_on_the_hessians_block(target, seed, monkeypatch):
+    """A Filter of fewer than half the points (a local activation's region):
+    the exact model asks the calculator for the Hessian's block on them
+    (one Hessian counted a block), never for the whole, and steps as it
+    does on the whole Hessian's rows (the block held off)."""
+    atoms, _ = subset_scene(seed)
+    region = np.random.default_rng(seed).choice(len(atoms), len(atoms) // 3, replace=False)
+    asked, blocks = [], []
+    calc_class = type(atoms.calc)
+    calculate, block = calc_class.calculate, calc_class.get_hessian_block
+
+    def calculate_asked(self, a=None, properties=('energy',), changes=()):
+        asked.append(set(properties))
+        return calculate(self, a, properties, changes)
+
+    def block_counted(self, a, index):
+        blocks.append(len(index))
+        return block(self, a, index)
+
+    monkeypatch.setattr(calc_class, 'calculate', calculate_asked)
+    monkeypatch.setattr(calc_class, 'get_hessian_block', block_counted)
+    whole = atoms.copy()
+    whole.calc = type(atoms.calc)(**atoms.calc.parameters)
+    steps = []
+    with Maud(Filter(atoms, indices=region), logfile=None, target=target) as one:
+        for _ in one.irun(fmax=1e-8, steps=25):
+            steps.append(atoms.positions.copy())
+    assert set(blocks) == {len(region)} and not any('hessian' in props for props in asked)
+    assert one.work.hessians == len(blocks)
+    monkeypatch.setattr(analysis, 'BLOCK_MIN_HELD', 1.0)
+    with Maud(Filter(whole, indices=region), logfile=None, target=target) as other:
+        for k, _ in enumerate(other.irun(fmax=1e-8, steps=25)):
+            np.testing.assert_allclose(whole.positions, steps[k], rtol=0, atol=1e-9)
+    assert other.nsteps == one.nsteps and any('hessian' in props for props in asked)
 
 
 def relaxed_in_a_cell_filter(cell_filter, seed):

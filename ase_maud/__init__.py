@@ -6,88 +6,71 @@
   whole scene (or the specification's nodal blocks), an ASE optimizer.
 - :class:`MaudPrecon`: the sparse whole-scene stiffness as an ASE ``Precon``.
 
-Numba compiles the kernels on their first call and caches the machine code
-(``cache=True``). The cache goes to ``NUMBA_CACHE_DIR`` if the user set it,
-else to :func:`numba_cache_dir`, never next to the installed package: a cache
-left in ``site-packages`` outlives ``pip uninstall`` as a bare directory that
-Python then imports as an empty namespace package, shadowing a later editable
-install. It is set here, before anything imports numba.
+- :func:`search_saddles`, :func:`landscape`: saddles and the minima they join.
+- :func:`read_net`, :func:`write_net`, :func:`form_result`: nets from files,
+  relaxed, and their member forces and reactions; :mod:`scenes`: built-in scenes.
+
+The subpackages are layers, each importing only those below it: ``physics``
+(the pair law), ``backends`` (its sums), ``calculator``, ``analysis``,
+``optimize``, ``saddles``, ``form``, ``io``, ``files``, ``scenes``, ``bench`` and
+``cli`` (``docs/architecture.md``). Numba's cache is set up here
+(:mod:`ase_maud.kernel_cache`).
 """
 
 from __future__ import annotations
 
 import importlib
-import os
 import sys
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ase_maud.kernel_cache import kernels_cached, numba_cache_dir, use_numba_cache_dir
+from ase_maud.old_paths import OldPathFinder
 
-def numba_cache_dir() -> Path:
-    """Per-user cache of the compiled kernels: ``$XDG_CACHE_HOME/ase_maud/numba``,
-    by default ``~/.cache/ase_maud/numba``."""
-    base = os.environ.get('XDG_CACHE_HOME') or Path.home() / '.cache'
-    return Path(base) / 'ase_maud' / 'numba'
-
-
-def _use_numba_cache_dir() -> None:
-    """Point numba's cache at :func:`numba_cache_dir` unless the user chose one.
-
-    numba reads ``NUMBA_CACHE_DIR`` when it is first imported; if that was
-    before ase_maud, its ``config.CACHE_DIR`` is set too (the kernels read it
-    when they are defined, below).
-    """
-    if not os.environ.get('NUMBA_CACHE_DIR'):
-        os.environ['NUMBA_CACHE_DIR'] = str(numba_cache_dir())
-    numba = sys.modules.get('numba')
-    if numba is not None and not numba.config.CACHE_DIR:
-        numba.config.CACHE_DIR = os.environ['NUMBA_CACHE_DIR']
-
-
-def kernels_cached() -> bool:
-    """Whether numba's cache holds machine code for a kernel of a loaded
-    ase_maud module (its index file, read without compiling): if not, the first
-    force call compiles them, 10-30 s. True if numba's cache internals moved."""
-    from numba.core.caching import FunctionCache
-    from numba.core.dispatcher import Dispatcher
-
-    caches = [value._cache for name, module in list(sys.modules.items())
-              if name.startswith('ase_maud.') for value in vars(module).values()
-              if isinstance(value, Dispatcher) and isinstance(value._cache, FunctionCache)]
-    try:
-        return any(cache._cache_file._load_index() for cache in caches)
-    except AttributeError:
-        return True
-
-
-_use_numba_cache_dir()
+# Before anything imports numba.
+use_numba_cache_dir()
 
 #: The public names and the module each lives in: imported on first use
 #: (PEP 562), so that ``ase-maud --help`` and ``import ase_maud`` import
 #: neither numba nor ASE.
-_LAZY = {'MaudCalculator': 'calculator', 'FileInUseError': 'lock',
-         'DivergenceError': 'monitor', 'MaudError': 'monitor',
-         'NoEquilibriumError': 'monitor', 'StagnationError': 'monitor',
-         'WrongIndexError': 'monitor', 'Maud': 'optimizer', 'MaudPotential': 'potential',
-         'MaudPrecon': 'precon'}
+_LAZY = {'MaudCalculator': 'calculator.maud_calculator',
+         'MaudPotential': 'calculator.potential',
+         'Maud': 'optimize.maud', 'MaudPrecon': 'optimize.precon',
+         'search_saddles': 'saddles.search', 'landscape': 'saddles.landscape',
+         'read_net': 'io.nets', 'write_net': 'io.nets', 'form_result': 'form.member_forces',
+         'classify': 'analysis.stationary',
+         **{error: 'errors' for error in (
+             'MaudError', 'DivergenceError', 'NoEquilibriumError', 'StagnationError',
+             'WrongIndexError', 'FileInUseError', 'RestartFileError')}}
 
 if TYPE_CHECKING:
-    from .calculator import MaudCalculator
-    from .lock import FileInUseError
-    from .monitor import (
+    from ase_maud.analysis.stationary import classify
+    from ase_maud.calculator.maud_calculator import MaudCalculator
+    from ase_maud.calculator.potential import MaudPotential
+    from ase_maud.errors import (
         DivergenceError,
+        FileInUseError,
         MaudError,
         NoEquilibriumError,
+        RestartFileError,
         StagnationError,
         WrongIndexError,
     )
-    from .optimizer import Maud
-    from .potential import MaudPotential
-    from .precon import MaudPrecon
+    from ase_maud.form.member_forces import form_result
+    from ase_maud.io.nets import read_net, write_net
+    from ase_maud.optimize.maud import Maud
+    from ase_maud.optimize.precon import MaudPrecon
+    from ase_maud.saddles.landscape import landscape
+    from ase_maud.saddles.search import search_saddles
+
+# The module paths of ase_maud 0.1 import for one more release, with a warning.
+sys.meta_path.append(OldPathFinder())
 
 
 def __getattr__(name: str) -> Any:
-    """The public class ``name``, imported from its module on first use."""
+    """The public name ``name``, imported from its module on first use; the
+    subpackage ``scenes`` likewise."""
+    if name == 'scenes':
+        return importlib.import_module('.scenes', __name__)
     if name not in _LAZY:
         raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
     value = getattr(importlib.import_module(f'.{_LAZY[name]}', __name__), name)
@@ -96,12 +79,12 @@ def __getattr__(name: str) -> Any:
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+    return sorted(set(globals()) | set(_LAZY) | {'scenes'})
 
 
-__all__ = ['MaudCalculator', 'Maud', 'MaudPotential', 'MaudPrecon', 'MaudError',
-           'DivergenceError', 'NoEquilibriumError', 'StagnationError', 'WrongIndexError',
-           'FileInUseError',
-           'kernels_cached',
-           'numba_cache_dir']
-__version__ = '0.1.0'
+__all__ = ['Maud', 'MaudCalculator', 'MaudPotential', 'MaudPrecon', 'classify', 'form_result',
+           'landscape', 'read_net', 'search_saddles', 'write_net', 'scenes',
+           'MaudError', 'DivergenceError', 'NoEquilibriumError', 'StagnationError',
+           'WrongIndexError', 'FileInUseError', 'RestartFileError',
+           'kernels_cached', 'numba_cache_dir']
+__version__ = '0.2.0'

@@ -2,6 +2,6 @@
 
 import sys
 
-from .cli import main
+from ase_maud.cli.command import main
 
 sys.exit(main())

@@ -123,11 +123,11 @@ RULES: dict[str, Rule] = {
                       lambda v: v >= 0, whole=True, none=True),
     'fmm_eps': Rule('a number in (0, 1), the requested relative precision',
                     lambda v: 0 < v < 1),
-    # the landscape (ase_maud.landscape)
+    # the landscape (ase_maud.saddles.landscape)
     'modes': Rule('a whole number >= 0 (the lowest modes climbed, each both ways, '
                   'before the local activations)', lambda v: v >= 0, whole=True),
     'distance_atol': Rule('a finite number >= 0 (length units)', lambda v: v >= 0),
-    # the saddle search (ase_maud.activation)
+    # the saddle search (ase_maud.saddles.search)
     'local': Rule('a whole number >= 0 (local activations after the mode climbs)',
                   lambda v: v >= 0, whole=True),
     'budget': Rule('a whole number >= 1 (force-call equivalents of one attempt), '
@@ -236,3 +236,17 @@ def check_writable(name: str, value: str | os.PathLike, directory: bool = False)
         raise ValueError(f'{text}: the directory {str(parent)!r} is not writable')
     return path
 
+
+
+def check_indices(indices: Any, natoms: int) -> np.ndarray:
+    """``indices`` as distinct atom indices (n,) among ``natoms``, or a
+    ValueError naming the bad one."""
+    index = np.asarray(indices)
+    if index.ndim != 1 or not (index.size == 0 or np.issubdtype(index.dtype, np.integer)):
+        raise ValueError(f'indices must be a 1-D sequence of atom indices, got {indices!r}')
+    if index.size and (index.min() < 0 or index.max() >= natoms):
+        bad = index[(index < 0) | (index >= natoms)][0]
+        raise ValueError(f'indices: atom {bad} is not one of the {natoms} atoms')
+    if np.unique(index).size != index.size:
+        raise ValueError('indices: an atom is given twice')
+    return index.astype(np.intp)

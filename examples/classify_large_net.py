@@ -14,8 +14,8 @@ import time
 import numba
 
 from ase_maud import Maud
-from ase_maud.analysis import classify
-from ase_maud.scenes import build
+from ase_maud.analysis.stationary import classify
+from ase_maud.scenes.catalogue import build
 
 
 def main():

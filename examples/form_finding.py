@@ -22,12 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ase_maud.forcedensity import solve_force_density
-from ase_maud.formats.obj import read_obj
-from ase_maud.io import read_net, write_net
-from ase_maud.pictures import save_picture
-from ase_maud.results import describe_result, form_result, write_forces_csv
-from ase_maud.topology import boundary_vertices, outer_rim
+from ase_maud.form.force_density import solve_force_density
+from ase_maud.form.member_forces import describe_result, form_result, write_forces_csv
+from ase_maud.form.pictures import save_picture
+from ase_maud.io.nets import read_net, write_net
+from ase_maud.io.obj import read_obj
+from ase_maud.physics.topology import boundary_vertices, outer_rim
 
 NET = Path(__file__).parent / 'nets' / 'canopy.obj'
 

@@ -26,8 +26,8 @@ import numpy as np
 from ase import Atoms
 
 from ase_maud import Maud, MaudCalculator
-from ase_maud.analysis import classify, displace_along_mode
-from ase_maud.scenes import build
+from ase_maud.analysis.stationary import classify, displace_along_mode
+from ase_maud.scenes.catalogue import build
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402

@@ -1,4 +1,4 @@
-"""Test doubles shared by the tests and tools/hostile_sweep.py."""
+"""Test doubles shared by the tests and dev/hostile_sweep.py."""
 
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
@@ -37,7 +37,7 @@ class NoisyEnergy(MaudCalculator):
     """A MaudCalculator (exact direct sum) whose energy carries seeded
     random noise, uniform in ``[-noise, noise] |E|``, which it declares
     (unless ``declare`` is False) as the relative error of its results
-    (``last_tolerance``, what :func:`ase_maud.accuracy.noise` reads); its
+    (``last_tolerance``, what :func:`ase_maud.calculator.accuracy.noise` reads); its
     forces are exact. Each call's exact energy is kept in ``exact``."""
 
     def __init__(self, noise: float, seed: int, declare: bool = True,

@@ -8,9 +8,9 @@ from ase.calculators.emt import EMT
 from ase.cluster import Icosahedron
 
 from ase_maud import Maud
-from ase_maud.accuracy import ACCURACY_FRACTION
-from ase_maud.dofs import free_dofs
-from ase_maud.scenes import build
+from ase_maud.calculator.accuracy import ACCURACY_FRACTION
+from ase_maud.physics.dofs import free_dofs
+from ase_maud.scenes.catalogue import build
 
 pytest.importorskip('fmm3dpy')
 

@@ -1,4 +1,4 @@
-"""The saddle search from a minimum (ase_maud.activation): local activation
+"""The saddle search from a minimum (ase_maud.saddles.search): local activation
 reaches verified index-1 saddles on symmetric scenes, every attempt is
 bounded and reported, and a search that finds nothing says what it tried."""
 
@@ -10,18 +10,23 @@ import pytest
 from ase.filters import Filter
 from scipy.spatial import cKDTree
 
-from ase_maud import Maud, activation, analysis
-from ase_maud.activation import Attempt, SaddleSearch, search_saddles
-from ase_maud.analysis import Work, classify
-from ase_maud.bench.runner import fresh_copy
-from ase_maud.calculator import MaudCalculator
-from ase_maud.landscape import landscape, same_point
-from ase_maud.stiffness import EXACT_MAX_DOFS
+from ase_maud import Maud
+from ase_maud.analysis import stationary as analysis
+from ase_maud.analysis.stationary import classify
+from ase_maud.calculator.maud_calculator import MaudCalculator
+from ase_maud.counting import Work, fresh_copy
+from ase_maud.optimize.models.exact import EXACT_MAX_DOFS
+from ase_maud.saddles import attempts
+from ase_maud.saddles import search as activation
+from ase_maud.saddles.attempts import Attempt
+from ase_maud.saddles.landscape import landscape, same_point
+from ase_maud.saddles.search import SaddleSearch, search_saddles
 
-#: The benchmark's own scenes (tools/saddles.py): ``chords`` (a ring with a
+#: The benchmark's own scenes (benchmarks/saddles_vs_sella.py): ``chords`` (a ring with a
 #: chord from each point to the one a third of the way round, 2D) and ``rim``
 #: (a free net with its whole rim fixed, buckled into a dome).
-SCENES = runpy.run_path(str(Path(__file__).parent.parent / 'tools' / 'saddles.py'))['OWN_SCENES']
+SCENES = runpy.run_path(str(Path(__file__).parent.parent / 'benchmarks'
+                          / 'saddles_vs_sella.py'))['OWN_SCENES']
 
 
 def relaxed(scene, size, seed):
@@ -44,7 +49,7 @@ def verified(search: SaddleSearch) -> bool:
 def test_local_activation_reaches_a_verified_saddle_on_a_chord_ring():
     """Local attempts only (no mode climb) on a chord ring of 30 points: a
     verified index-1 saddle from at least 5 of 6 seeded minima (measured:
-    tools/activation.py --modes 0 --local 6 --budget 500, chords:30 and
+    benchmarks/saddle_search.py --modes 0 --local 6 --budget 500, chords:30 and
     chords:36 seeds 10-19 10 of 10 each; 2026-12-03)."""
     reached = 0
     for seed in range(40, 46):
@@ -74,13 +79,13 @@ def test_local_activation_releases_a_large_ring_with_the_exact_model():
     RELEASE_EXACT_MAX_DOFS, so the whole scene is released with the exact
     model), 4 local attempts, a budget of 300 each: a verified saddle from
     at least 5 of 6 seeds (measured 2026-12-03: 6 of these 6, a median of
-    119 equivalents; tools/activation.py --starts chords:120 --seeds 10-19
+    119 equivalents; benchmarks/saddle_search.py --starts chords:120 --seeds 10-19
     --modes 0 --local 6 --budget 300: 10 of 10, 78-166 equivalents, each by
     its first attempt; 0 of 10 before, every attempt's budget spent settling
     the surroundings and releasing on the springs model;
     docs/bench/saddles.md)."""
     size = 120
-    assert EXACT_MAX_DOFS < 2 * size <= activation.RELEASE_EXACT_MAX_DOFS   # 2D, none fixed
+    assert EXACT_MAX_DOFS < 2 * size <= attempts.RELEASE_EXACT_MAX_DOFS   # 2D, none fixed
     reached = 0
     for seed in range(50, 56):
         search = search_saddles(relaxed('chords', size, seed), modes=0, local=4, wanted=1,
@@ -101,7 +106,7 @@ def test_local_activation_on_the_springs_model(monkeypatch):
     docs/bench/saddles.md)."""
     size = 80
     assert 2 * size > EXACT_MAX_DOFS   # 2D, nothing fixed
-    monkeypatch.setattr(activation, 'RELEASE_EXACT_MAX_DOFS', EXACT_MAX_DOFS)
+    monkeypatch.setattr(attempts, 'RELEASE_EXACT_MAX_DOFS', EXACT_MAX_DOFS)
     reached = sum(verified(search_saddles(relaxed('chords', size, seed), modes=0, local=6,
                                           wanted=1, budget=1000, seed=seed))
                   for seed in (10, 11, 12, 13))
@@ -113,13 +118,13 @@ def test_an_exact_release_stops_at_its_step_cap_and_the_search_goes_on(monkeypat
     (lowered here) its exact release stops at RELEASE_CAP_STEPS (one here),
     each attempt says so and the search goes on; at the bound it does not."""
     start = relaxed('chords', 30, 40)
-    monkeypatch.setattr(activation, 'RELEASE_CAP_STEPS', 1)
-    monkeypatch.setattr(activation, 'RELEASE_CAP_DOFS', 59)
+    monkeypatch.setattr(attempts, 'RELEASE_CAP_STEPS', 1)
+    monkeypatch.setattr(attempts, 'RELEASE_CAP_DOFS', 59)
     search = search_saddles(start, modes=0, local=3, wanted=1, budget=500, seed=40)
     assert [a.outcome for a in search.attempts] == ['exact release steps'] * 3
     assert not search.saddles
     assert search.report().count('exact release steps') == 3
-    monkeypatch.setattr(activation, 'RELEASE_CAP_DOFS', 60)
+    monkeypatch.setattr(attempts, 'RELEASE_CAP_DOFS', 60)
     assert verified(search_saddles(start, modes=0, local=3, wanted=1, budget=500, seed=40))
 
 
@@ -254,7 +259,7 @@ def test_a_region_s_climb_stops_at_its_step_bound(seed, monkeypatch):
     """A local attempt whose region has no saddle (a small net with its
     corners fixed) ends after ``REGION_STEPS`` steps of its climb,
     each a call and a Hessian of the region, and says so."""
-    monkeypatch.setattr(activation, 'REGION_STEPS', 6)
+    monkeypatch.setattr(attempts, 'REGION_STEPS', 6)
     search = search_saddles(relaxed('corners', 6, seed), modes=0, local=3, seed=seed)
     ended = [a for a in search.attempts if a.outcome == 'no local saddle']
     assert ended
@@ -293,9 +298,9 @@ def test_coverage_is_good_turing_over_the_attempts_that_reached_a_saddle(seed):
 
 
 def test_the_benchmark_says_so_when_no_start_is_a_minimum(tmp_path, capsys):
-    """tools/activation.py leaves out a start that relaxes to no minimum; where
+    """benchmarks/saddle_search.py leaves out a start that relaxes to no minimum; where
     every start is left out it writes nothing and exits 1, saying why."""
-    tool = runpy.run_path(str(Path(__file__).parent.parent / 'tools' / 'activation.py'))
+    tool = runpy.run_path(str(Path(__file__).parent.parent / 'benchmarks' / 'saddle_search.py'))
     main = tool['main']
 
     def no_minimum(scene, size, seed):

@@ -9,17 +9,18 @@ from ase.constraints import FixAtoms, FixCartesian, FixedPlane
 from ase.optimize import BFGS
 from scipy.optimize import brentq
 
-from ase_maud import analysis, physics
-from ase_maud.analysis import (
-    Work,
+from ase_maud.analysis import stationary as analysis
+from ase_maud.analysis.stationary import (
     classify,
     displace_along_mode,
     free_mask,
     near_field_stiffness,
     rigid_body_modes,
 )
-from ase_maud.calculator import MaudCalculator
-from ase_maud.potential import MaudPotential
+from ase_maud.calculator.maud_calculator import MaudCalculator
+from ase_maud.calculator.potential import MaudPotential
+from ase_maud.counting import Work
+from ase_maud.physics import pair_law as physics
 
 
 def scene(positions, springs, dim=3, a=1.0, Q=1.0):

@@ -15,12 +15,12 @@ from ase.io import write
 from ase.io.trajectory import Trajectory
 from test_io import write_quad_net
 
-import ase_maud.io
+import ase_maud.io.nets
 from ase_maud import MaudCalculator
-from ase_maud.cli import main
-from ase_maud.io import read_frames, read_net, write_net
-from ase_maud.landscape import landscape
-from ase_maud.scenes import build
+from ase_maud.cli.command import main
+from ase_maud.io.nets import read_frames, read_net, write_net
+from ase_maud.saddles.landscape import landscape
+from ase_maud.scenes.catalogue import build
 
 
 def one_line_error(capsys, argv, status=2):
@@ -139,7 +139,7 @@ def test_an_xyz_count_beyond_the_file_is_refused_before_ase_reads(tmp_path, monk
     def never(*args, **kwargs):
         raise AssertionError('ase.io.read reached')
 
-    monkeypatch.setattr(ase_maud.io.ase.io, 'read', never)
+    monkeypatch.setattr(ase_maud.io.nets.ase.io, 'read', never)
     with pytest.raises(ValueError, match=rf'big.xyz line {line}: declares \d+ atoms, '
                                          r'but the \d+ bytes after it hold at most \d+'):
         read_net(path)

@@ -1,4 +1,4 @@
-"""A run on arrays (ase_maud.arrays) makes the steps ASE's loop makes, bit for
+"""A run on arrays (ase_maud.optimize.array_loop) makes the steps ASE's loop makes, bit for
 bit; and a run leaves the calculator's settings as the user set them."""
 
 import io
@@ -8,8 +8,8 @@ import pytest
 from ase.constraints import FixAtoms, FixCartesian
 
 from ase_maud import Maud
-from ase_maud.bench.runner import CallRecorder
-from ase_maud.scenes import build
+from ase_maud.counting import CallRecorder
+from ase_maud.scenes.catalogue import build
 
 SCENES = [('all_pairs', 12), ('hanging_net', 5), ('tree', 20), ('all_pairs2d', 14),
           ('wheel', 12)]
@@ -97,7 +97,7 @@ def test_a_run_on_arrays_keeps_held_coordinates_and_stops_at_steps():
 @pytest.mark.parametrize('watched', [False, True])
 def test_a_run_leaves_the_calculators_tolerance_as_the_user_set_it(seed, watched):
     """The run asks the calculator for coarser sums far from the answer
-    (``ase_maud.accuracy.ask``); the user's ``tol`` is back when it ends, so a
+    (``ase_maud.calculator.accuracy.ask``); the user's ``tol`` is back when it ends, so a
     trajectory's or a later run's calculator parameters are the user's."""
     atoms = build('hanging_net', 30, seed=seed)   # the springs model
     atoms.calc.set(tol=1e-7)
@@ -136,8 +136,8 @@ def test_a_run_with_no_finite_step_says_so_once_in_its_log(seed, watched, monkey
     """A local model that fails (here: the exact model's factorisation) stops
     the run with one line in the log, on arrays and in ASE's loop alike (the
     error passes the optimizer's stop twice on its way out)."""
-    from ase_maud.monitor import MaudError
-    from ase_maud.stiffness import ExactModel
+    from ase_maud.errors import MaudError
+    from ase_maud.optimize.models.exact import ExactModel
 
     def failing(self, hessian, atoms):
         raise np.linalg.LinAlgError('no factor')
@@ -158,7 +158,7 @@ def test_a_step_that_moves_nothing_costs_no_call_on_arrays_either(seed, monkeypa
     """Every third step made a zero move (as a step cut to nothing would be):
     ASE's loop asks the calculator nothing there (the results held are of
     those positions), and neither does the run on arrays."""
-    from ase_maud.strategy import Minimise
+    from ase_maud.optimize.strategy import Minimise
 
     step = Minimise.step
 
@@ -188,7 +188,7 @@ def test_one_exact_model_follows_constraints_changed_between_runs_on_arrays(seed
     changed in place, then after new constraints are set. The held
     coordinates never move and each run is, bit for bit, a fresh model's on
     a copy (on arrays and in ASE's loop)."""
-    from ase_maud.stiffness import ExactModel
+    from ase_maud.optimize.models.exact import ExactModel
     rng = np.random.default_rng(seed)
     atoms = build('all_pairs', 12, seed=seed)
     fix = FixAtoms([0, 1])

@@ -18,7 +18,7 @@ from ase.optimize import BFGS, RestartError
 from ase.test.optimize.test_pure import BoothFunctionOptimizable
 
 from ase_maud import Maud
-from ase_maud.scenes import build
+from ase_maud.scenes.catalogue import build
 
 
 @pytest.mark.parametrize('seed', [0, 1])

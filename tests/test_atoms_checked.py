@@ -9,7 +9,7 @@ from ase.constraints import FixAtoms, FixCartesian
 from ase.io import read, write
 
 from ase_maud import Maud
-from ase_maud.scenes import build
+from ase_maud.scenes.catalogue import build
 
 
 @pytest.mark.parametrize('edit', ['del', 'pop'])

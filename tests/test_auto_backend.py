@@ -9,7 +9,7 @@ import pytest
 from ase import Atoms
 
 from ase_maud.backends import auto, fmm
-from ase_maud.calculator import MaudCalculator
+from ase_maud.calculator.maud_calculator import MaudCalculator
 
 pytest.importorskip('fmm3dpy')
 

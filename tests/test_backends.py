@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 from ase import Atoms
 
-from ase_maud import backends, physics
+from ase_maud import backends
 from ase_maud.backends import Backend, direct, reference, voigt_to_blocks
-from ase_maud.calculator import MaudCalculator
+from ase_maud.calculator.maud_calculator import MaudCalculator
+from ase_maud.physics import pair_law as physics
 
 RTOL = 1e-12
 #: ``fmm_eps`` for the element-wise comparison: below a few hundred points

@@ -8,8 +8,8 @@ import pytest
 from ase import Atoms
 
 from ase_maud import backends
-from ase_maud.calculator import MaudCalculator
-from ase_maud.springs import check_springs
+from ase_maud.calculator.maud_calculator import MaudCalculator
+from ase_maud.physics.spring_list import check_springs
 
 #: The exact backends (the fmm one is tested in test_fmm.py).
 BACKENDS = [name for name in backends.names() if backends.get(name).exact]
@@ -160,7 +160,7 @@ def test_no_atoms_is_named(backend):
     with pytest.raises(ValueError, match='no atoms'):
         atoms.get_potential_energy()
     from ase_maud import Maud
-    from ase_maud.analysis import classify
+    from ase_maud.analysis.stationary import classify
     with pytest.raises(ValueError, match='no atoms'):
         Maud(atoms, logfile=None).run(fmax=1e-3)
     with pytest.raises(ValueError, match='no atoms'):

@@ -12,19 +12,12 @@ from ase.constraints import FixAtoms
 
 from ase_maud.bench.optimizers import MAX_ATOMS, OPTIMIZERS
 from ase_maud.bench.report import markdown, overall, skipped, summarize
-from ase_maud.bench.runner import (
-    CPU_S,
-    ENERGY,
-    SAMPLE_FIELDS,
-    CallRecorder,
-    Run,
-    classify,
-    run_optimizer,
-)
+from ase_maud.bench.runner import CPU_S, ENERGY, SAMPLE_FIELDS, Run, run_optimizer, run_status
 from ase_maud.bench.suite import SAMPLE_COLUMNS, run_suite
-from ase_maud.calculator import MaudCalculator
-from ase_maud.cli import build_parser, main
-from ase_maud.scenes import LARGE, SUITES, build, scene_sizes
+from ase_maud.calculator.maud_calculator import MaudCalculator
+from ase_maud.cli.command import build_parser, main
+from ase_maud.counting import CallRecorder
+from ase_maud.scenes.catalogue import LARGE, SUITES, build, scene_sizes
 from ase_maud.threads import STARTUP_VARIABLES
 
 PLOTS = ('fmax_vs_calls', 'fmax_vs_time', 'energy_error_vs_calls',
@@ -136,14 +129,14 @@ def test_statuses(tmp_path, monkeypatch):
     samples, converged, error = run_optimizer(start, 'FIRE', 1e-6, 3)
     assert (len(samples), converged, error) == (4, False, '')
     e_ref = samples[-1, ENERGY]
-    assert classify(samples, converged, error, e_ref, 1e-6) == 'not_converged'
-    assert classify(samples, True, '', e_ref, 1e-6) == 'converged'
-    assert classify(samples, True, '', e_ref * (1 + 1e-5), 1e-6) == \
+    assert run_status(samples, converged, error, e_ref, 1e-6) == 'not_converged'
+    assert run_status(samples, True, '', e_ref, 1e-6) == 'converged'
+    assert run_status(samples, True, '', e_ref * (1 + 1e-5), 1e-6) == \
         'other_minimum'
     samples, converged, error = run_optimizer(start, 'broken', 1e-6, 3)
     assert (len(samples), converged) == (1, False)
     assert error == 'RuntimeError: broken on purpose'
-    assert classify(samples, converged, error, e_ref, 1e-6) == 'error'
+    assert run_status(samples, converged, error, e_ref, 1e-6) == 'error'
     runs, stopped = run_suite([('chain', 8, 2)], ['LBFGS', 'broken'],
                               tmp_path)
     assert not stopped
@@ -347,7 +340,7 @@ def test_backends_smoke(tmp_path, pinned):
 
 
 def test_basin_hopping_tool_same_hops_and_calls_to_best(tmp_path, capsys):
-    tool = runpy.run_path(str(Path(__file__).parent.parent / 'tools' / 'basin_hopping.py'))
+    tool = runpy.run_path(str(Path(__file__).parent.parent / 'benchmarks' / 'basin_hopping.py'))
     once, again = (tool['hop'](2, 6, 1, 'BFGS', 3, 1e-3, 0.5, 0.1, 2000, 1e-6)
                    for _ in range(2))
     for row in (once, again):   # CPU seconds are the one thing a seed does not fix
@@ -371,13 +364,13 @@ def test_basin_hopping_tool_same_hops_and_calls_to_best(tmp_path, capsys):
 
 
 def test_ase_systems_tool_counts_every_image_and_caps_hops():
-    """tools/ase_systems.py: L-BFGS-B relaxes a cell filter (its rows are
+    """benchmarks/ase_systems.py: L-BFGS-B relaxes a cell filter (its rows are
     positions) and has no column for a band; a band's calls are summed over
     its images; BasinHopping's local relaxations are capped at --steps."""
     from ase.optimize import BFGS
 
     from ase_maud import Maud
-    tool = runpy.run_path(str(Path(__file__).parent.parent / 'tools' / 'ase_systems.py'))
+    tool = runpy.run_path(str(Path(__file__).parent.parent / 'benchmarks' / 'ase_systems.py'))
     calls, _, energy, converged = tool['relax']('Au8 cell', 1, tool['scipy_lbfgsb'], 0.01, 200)
     assert converged is True and calls > 1 and energy < 0.0
     assert tool['relax']('Al/Au NEB', 1, tool['scipy_lbfgsb'], 0.05, 200) is None
@@ -389,12 +382,12 @@ def test_ase_systems_tool_counts_every_image_and_caps_hops():
 
 @pytest.mark.parametrize('seed', [int(s) for s in np.random.default_rng(32).integers(0, 10**4, 2)])
 def test_ase_systems_race_reaches_a_chain_own_lowest_at_its_own_calls(seed):
-    """tools/ase_systems.py --race: racing BFGS's own BasinHopping chain (the
+    """benchmarks/ase_systems.py --race: racing BFGS's own BasinHopping chain (the
     same seed, so the same moves) to its lowest energy reaches it within its
     calls, at the relaxation that first found it; an unreachable target stops
     once the calls are spent."""
     from ase.optimize import BFGS
-    tool = runpy.run_path(str(Path(__file__).parent.parent / 'tools' / 'ase_systems.py'))
+    tool = runpy.run_path(str(Path(__file__).parent.parent / 'benchmarks' / 'ase_systems.py'))
     calls, _, lowest = tool['basin']('LJ7', seed, BFGS, 3, 0.01, 2000)
     target = float(lowest.split()[0])
     reached, spent, cpu, hops, best = tool['race']('LJ7', seed, BFGS, calls, target, 0.01, 2000)

@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.distance import pdist, squareform
 
-from ase_maud.calculator import MaudCalculator
-from ase_maud.scenes import build
+from ase_maud.calculator.maud_calculator import MaudCalculator
+from ase_maud.scenes.catalogue import build
 
 SHAPES = ['chain', 'ring', 'star', 'tree', 'all_pairs']
 #: Central-difference step, in units of the point spacing (1 here). It leaves
@@ -507,7 +507,7 @@ def test_unbounded_components(random_points, dim, expected):
 def test_every_move_is_seen_at_any_scale(a):
     # ASE's default change detection (absolute 1e-15) misses moves of tiny
     # scenes; the calculator compares positions exactly.
-    from ase_maud.scenes import build
+    from ase_maud.scenes.catalogue import build
     atoms = build('ring', 8, seed=int(a > 1), a=a)
     before = atoms.get_forces().copy()
     atoms.positions[3, 0] += 1e-3 * a

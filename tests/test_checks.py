@@ -9,7 +9,7 @@ import pytest
 
 from ase_maud import Maud, MaudCalculator
 from ase_maud.checks import RULES, check
-from ase_maud.scenes import build
+from ase_maud.scenes.catalogue import build
 
 
 @pytest.mark.parametrize('name, good, bad', [
@@ -63,7 +63,7 @@ def test_an_unknown_calculator_parameter_is_named():
     (['relax', '--threads', '0'], 'count must be a whole number >= 1'),
 ])
 def test_command_line_values_follow_the_rules(argv, message, capsys):
-    from ase_maud.cli import build_parser
+    from ase_maud.cli.command import build_parser
     with pytest.raises(SystemExit):
         build_parser().parse_args(argv)
     assert message in capsys.readouterr().err

@@ -12,10 +12,11 @@ from ase.io import read
 from ase.optimize import BFGS
 from test_io import relaxed_in_python, rule_a, write_quad_net
 
-from ase_maud import cli
-from ase_maud.cli import main
-from ase_maud.io import read_net, write_net
-from ase_maud.scenes import SUITE, build, scene_sizes
+from ase_maud.cli import command, options
+from ase_maud.cli import saddles as saddles_cli
+from ase_maud.cli.command import main
+from ase_maud.io.nets import read_net, write_net
+from ase_maud.scenes.catalogue import SUITE, build, scene_sizes
 
 
 def test_no_command_prints_help(capsys):
@@ -36,7 +37,7 @@ def test_bench_help_documents_options(capsys):
 
 
 def test_threads_defaults():
-    parser = cli.build_parser()
+    parser = command.build_parser()
     assert parser.parse_args(['relax']).threads is None  # environment alone
     assert parser.parse_args(['bench']).threads == 1
     assert parser.parse_args(['backends', '--threads', '2']).threads == 2
@@ -81,7 +82,7 @@ def test_scene_selection():
         ('ring', 5), ('ring', 9), ('chain', 5), ('chain', 9)]
     assert scene_sizes(['chain', 'molecule'], None, [('ring', 16)]) == [
         ('chain', 30), ('molecule', 'C6H6')]
-    assert cli._size('12') == 12 and cli._size('CH4') == 'CH4'
+    assert options.size_option('12') == 12 and options.size_option('CH4') == 'CH4'
 
 
 # --- nets from files: relax, show, classify -----------------------------------
@@ -379,7 +380,7 @@ def test_saddles_prints_draws_and_writes_the_landscape(tmp_path, capsys, seed, w
     import json
 
     from ase_maud import Maud
-    from ase_maud.landscape import landscape
+    from ase_maud.saddles.landscape import landscape
 
     atoms = build('all_pairs2d', 9, seed=seed)
     write_net(tmp_path / 'c.traj', atoms)
@@ -432,9 +433,9 @@ def test_saddles_takes_the_path_to_a_second_minimum_given_or_mirrored(tmp_path, 
     from test_transition import DOMES
 
     from ase_maud import Maud
-    from ase_maud.analysis import classify
-    from ase_maud.bench.runner import fresh_copy
-    from ase_maud.transition import mirrored, saddle_between
+    from ase_maud.analysis.stationary import classify
+    from ase_maud.counting import fresh_copy
+    from ase_maud.saddles.between_minima import mirrored, saddle_between
 
     for seed in (1, 2):
         first = DOMES(5, seed)
@@ -467,17 +468,17 @@ def test_saddles_names_a_partner_that_is_not_the_nets(tmp_path):
             str(tmp_path / 'g.png')]
     with pytest.raises(ValueError, match="--partner .*other.traj' has 36 points, the net "
                        ".*has 25"):
-        cli.saddles(cli.build_parser().parse_args(
+        saddles_cli.saddles_command(command.build_parser().parse_args(
             [*base, '--partner', str(tmp_path / 'other.traj')]))
     with pytest.raises(ValueError, match="--partner .*none.traj': no such file"):
-        cli.check_outputs(cli.build_parser().parse_args(
+        options.check_outputs(command.build_parser().parse_args(
             [*base, '--partner', str(tmp_path / 'none.traj')]))
     assert not (tmp_path / 'g.png').exists()
 
 
 def test_saddles_checks_its_output_first(tmp_path):
     with pytest.raises(ValueError, match='--out .*does not exist'):
-        cli.check_outputs(cli.build_parser().parse_args(
+        options.check_outputs(command.build_parser().parse_args(
             ['saddles', 'x.traj', '--out', str(tmp_path / 'no' / 'g.png')]))
 
 

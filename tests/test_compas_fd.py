@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from ase_maud import Maud
-from ase_maud.io import read_net
+from ase_maud.io.nets import read_net
 
 compas = pytest.importorskip('compas')
 fd_numpy = pytest.importorskip('compas_fd.solvers').fd_numpy

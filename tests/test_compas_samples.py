@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from ase_maud.cli import main
-from ase_maud.io import read_compas, read_net, read_obj
-from ase_maud.topology import boundary_vertices, fixed_atoms, support_excursion
+from ase_maud.cli.command import main
+from ase_maud.io.nets import read_compas, read_net, read_obj
+from ase_maud.physics.topology import boundary_vertices, fixed_atoms, support_excursion
 
 compas = pytest.importorskip('compas')
 
@@ -97,7 +97,7 @@ def test_samples_relax_from_the_command_line(tmp_path, capsys, name):
     held = fixed_atoms(start)
     np.testing.assert_array_equal(relaxed.positions[held], start.positions[held])
     if path.suffix == '.json':   # everything but the coordinates as it was, and
-        # the results: supports, member forces and reactions (ase_maud.results)
+        # the results: supports, member forces and reactions (ase_maud.form.member_forces)
         document = json.loads(out.read_text())
         reactions = {key: [vertex.pop(name) for name in ('rx', 'ry', 'rz')]
                      for key, vertex in document['vertex'].items() if 'rx' in vertex}

@@ -19,11 +19,11 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ase_maud import DivergenceError, Maud, MaudCalculator, NoEquilibriumError
-from ase_maud.analysis import classify
-from ase_maud.cli import main
-from ase_maud.hardcases import heavy_net
-from ase_maud.scenes import chain
-from ase_maud.topology import minimum_proved, spring_components
+from ase_maud.analysis.stationary import classify
+from ase_maud.cli.command import main
+from ase_maud.physics.topology import minimum_proved, spring_components
+from ase_maud.scenes.builders import chain
+from ase_maud.scenes.hard_cases import heavy_net
 
 
 def loaded_net(seed, load, plane=None):

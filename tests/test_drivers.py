@@ -1,5 +1,5 @@
 """Maud under ASE's drivers and constraints: NEB (ASE's Au on Al(100)
-tutorial, tools/neb_tutorial.py), MinimaHopping, and FixedPlane / Hookean, each checked against an
+tutorial, dev/neb_tutorial.py), MinimaHopping, and FixedPlane / Hookean, each checked against an
 ASE optimiser from the same start."""
 
 import importlib.util
@@ -11,10 +11,10 @@ from ase.constraints import FixedPlane, Hookean
 from ase.optimize import BFGS, FIRE
 
 from ase_maud import Maud
-from ase_maud.scenes import build
+from ase_maud.scenes.catalogue import build
 
 _SPEC = importlib.util.spec_from_file_location(
-    'neb_tutorial', Path(__file__).parent.parent / 'tools' / 'neb_tutorial.py')
+    'neb_tutorial', Path(__file__).parent.parent / 'dev' / 'neb_tutorial.py')
 neb_tutorial = importlib.util.module_from_spec(_SPEC)
 _SPEC.loader.exec_module(neb_tutorial)
 

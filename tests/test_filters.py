@@ -10,8 +10,8 @@ from ase.constraints import FixAtoms, FixBondLength, FixBondLengths, Hookean
 from ase.filters import Filter, FrechetCellFilter, StrainFilter, UnitCellFilter
 from ase.optimize import BFGS
 
-from ase_maud import Maud, analysis
-from ase_maud.scenes import build
+from ase_maud import Maud, MaudCalculator
+from ase_maud.scenes.catalogue import build
 
 MODELS = ['auto', 'exact', 'springs', 'nodal', 'global', 'secant', 'near']
 
@@ -97,7 +97,7 @@ def test_a_small_filter_steps_on_the_hessians_block(target, seed, monkeypatch):
             steps.append(atoms.positions.copy())
     assert set(blocks) == {len(region)} and not any('hessian' in props for props in asked)
     assert one.work.hessians == len(blocks)
-    monkeypatch.setattr(analysis, 'BLOCK_MIN_HELD', 1.0)
+    monkeypatch.setattr(MaudCalculator, 'block_min_held', 1.0)
     with Maud(Filter(whole, indices=region), logfile=None, target=target) as other:
         for k, _ in enumerate(other.irun(fmax=1e-8, steps=25)):
             np.testing.assert_allclose(whole.positions, steps[k], rtol=0, atol=1e-9)

@@ -9,8 +9,8 @@ from ase import Atoms
 from ase_maud import Maud
 from ase_maud.backends import direct, fmm
 from ase_maud.bench.backends import measure_backends
-from ase_maud.calculator import MaudCalculator
-from ase_maud.scenes import build
+from ase_maud.calculator.maud_calculator import MaudCalculator
+from ase_maud.scenes.catalogue import build
 
 pytest.importorskip('fmm3dpy')
 

@@ -15,10 +15,13 @@ from ase_maud import (
     MaudError,
     NoEquilibriumError,
     StagnationError,
-    hardcases,
 )
-from ase_maud.dofs import free_dofs
-from ase_maud.hardcases import (
+from ase_maud.physics.dofs import free_dofs
+from ase_maud.physics.topology import fixed_atoms
+from ase_maud.scenes import hard_cases as hardcases
+from ase_maud.scenes.builders import all_pairs, net3d
+from ase_maud.scenes.catalogue import build
+from ase_maud.scenes.hard_cases import (
     CLOSE,
     HARD_CASES,
     ISLAND,
@@ -35,8 +38,6 @@ from ase_maud.hardcases import (
     tangled_hanging_net,
     tangled_net,
 )
-from ase_maud.scenes import all_pairs, build, net3d
-from ase_maud.topology import fixed_atoms
 
 
 def relax(atoms, fmax=1e-8, steps=5000, opt=Maud, **kwargs):

@@ -10,7 +10,7 @@ import pytest
 from ase.constraints import FixAtoms
 
 from ase_maud import Maud, MaudCalculator
-from ase_maud.io import (
+from ase_maud.io.nets import (
     A_PER_MEAN_SPRING,
     MERGE_TOLERANCE,
     edges_path,
@@ -379,7 +379,7 @@ def test_a_failed_write_leaves_the_old_file(tmp_path, kind, monkeypatch):
     def full_disk(*args, **kwargs):
         raise OSError(28, 'No space left on device')
 
-    monkeypatch.setattr('ase_maud.atomic.os.replace', full_disk)
+    monkeypatch.setattr('ase_maud.files.atomic_replace.os.replace', full_disk)
     with pytest.raises(OSError, match='No space left'):
         write_net(path, atoms, like=path if kind != 'xyz' else None)
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
@@ -404,8 +404,8 @@ def test_writing_over_a_file_keeps_its_permissions(tmp_path, kind, mode):
 def test_relaxed_fmax_is_the_one_the_run_was_given(tmp_path, seed, fmax):
     from ase.optimize import BFGS
 
-    from ase_maud.io import relaxed_fmax
-    from ase_maud.scenes import build
+    from ase_maud.io.nets import relaxed_fmax
+    from ase_maud.scenes.catalogue import build
     for name, optimizer in (('maud', Maud), ('bfgs', BFGS)):
         atoms = build('ring', 8, seed=seed)
         with optimizer(atoms, trajectory=str(tmp_path / f'{name}.traj'), logfile=None) as opt:

@@ -1,4 +1,4 @@
-"""The landscape around a minimum (ase_maud.landscape) against ASE's basin hopping."""
+"""The landscape around a minimum (ase_maud.saddles.landscape) against ASE's basin hopping."""
 
 import functools
 
@@ -7,11 +7,11 @@ import pytest
 from ase.optimize.basin import BasinHopping
 
 from ase_maud import Maud
-from ase_maud.analysis import classify
-from ase_maud.bench.runner import fresh_copy
-from ase_maud.landscape import landscape, same_point
-from ase_maud.scenes import build
-from ase_maud.stiffness import EXACT_MAX_DOFS
+from ase_maud.analysis.stationary import classify
+from ase_maud.counting import fresh_copy
+from ase_maud.optimize.models.exact import EXACT_MAX_DOFS
+from ase_maud.saddles.landscape import landscape, same_point
+from ase_maud.scenes.catalogue import build
 
 FMAX = 1e-6
 

@@ -9,14 +9,14 @@ from pathlib import Path
 import pytest
 
 from ase_maud import Maud
-from ase_maud.activation import search_saddles
-from ase_maud.analysis import classify
-from ase_maud.bench.runner import fresh_copy
-from ase_maud.landscape import landscape, same_point
-from ase_maud.scenes import build
+from ase_maud.analysis.stationary import classify
+from ase_maud.counting import fresh_copy
+from ase_maud.saddles.landscape import landscape, same_point
+from ase_maud.saddles.search import search_saddles
+from ase_maud.scenes.catalogue import build
 
 #: The benchmark's count of the saddles that join the start below a window.
-COUNTED = runpy.run_path(str(Path(__file__).parent.parent / 'tools'
+COUNTED = runpy.run_path(str(Path(__file__).parent.parent / 'benchmarks'
                              / 'landscape_completeness.py'))['counted']
 WINDOW = 1.0
 

@@ -1,4 +1,4 @@
-"""Meshes through meshio (ase_maud.formats.mesh): PLY, STL, OFF, VTK, VTU
+"""Meshes through meshio (ase_maud.io.mesh): PLY, STL, OFF, VTK, VTU
 read back as the net they were written from; --fix outer."""
 
 import meshio
@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from ase_maud.cli import main
-from ase_maud.io import read_net
-from ase_maud.topology import boundary_vertices, outer_rim
+from ase_maud.cli.command import main
+from ase_maud.io.nets import read_net
+from ase_maud.physics.topology import boundary_vertices, outer_rim
 
 SUFFIXES = ('.ply', '.stl', '.off', '.vtk', '.vtu')
 

@@ -1,5 +1,5 @@
 """The step strategies alone (Minimise, StepRule, MaudState), their
-directions (ase_maud.descent) and searches (ase_maud.search) on quadratics
+directions (ase_maud.optimize.directions) and searches (ase_maud.optimize.step_length) on quadratics
 with known answers and a matrix model, and the run monitor: no calculator,
 no ASE optimizer."""
 
@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from ase.io.jsonio import read_json, write_json
 
-from ase_maud.descent import (
+from ase_maud.errors import DivergenceError, StagnationError
+from ase_maud.optimize.directions import (
     MIN_PAIR_COSINE,
     NEWTON_RTOL,
     ModeFollowing,
@@ -18,10 +19,11 @@ from ase_maud.descent import (
     mode_steps,
     truncated_newton,
 )
-from ase_maud.models import MODELS
-from ase_maud.monitor import ENERGY_PROGRESS, DivergenceError, RunMonitor, StagnationError
-from ase_maud.neighbours import NearestDistances
-from ase_maud.search import (
+from ase_maud.optimize.models.base import DampedSolver, StiffnessModel
+from ase_maud.optimize.models.registry import MODELS
+from ase_maud.optimize.monitor import ENERGY_PROGRESS, RunMonitor
+from ase_maud.optimize.state import MaudState, Point
+from ase_maud.optimize.step_length import (
     DAMPING_TOLERANCE,
     damping,
     lengths,
@@ -30,8 +32,9 @@ from ase_maud.search import (
     reaches,
     trust_region,
 )
-from ase_maud.stiffness import DampedSolver, StiffnessModel
-from ase_maud.strategy import STEP_DEFAULTS, MaudState, Point, compose, step_rule
+from ase_maud.optimize.step_rules import STEP_DEFAULTS, step_rule
+from ase_maud.optimize.strategy import compose
+from ase_maud.physics.neighbours import NearestDistances
 
 
 class Quadratic:
@@ -736,8 +739,8 @@ def test_exact_models_solver_is_cholesky_where_definite_and_eigen_where_not():
     """The exact model's local model declares which: a definite Hessian gets
     the Cholesky solver (dogleg), an indefinite one the saddle-free eigen
     solver (damped), and both solve ``|K| d = f``."""
-    from ase_maud.scenes import build
-    from ase_maud.stiffness import ExactModel
+    from ase_maud.optimize.models.exact import ExactModel
+    from ase_maud.scenes.catalogue import build
     model = ExactModel()
     minimum = build('dimer')
     minimum.set_distance(0, 1, 1.0)   # the dimer's minimum, L = a

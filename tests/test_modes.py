@@ -5,14 +5,14 @@ import pytest
 from ase import Atoms, units
 from ase.constraints import FixAtoms
 
-from ase_maud.calculator import MaudCalculator
-from ase_maud.modes import (
+from ase_maud.analysis.modes import (
     finite_difference_force_constants,
     force_constants,
     gamma_modes,
     vibrations,
 )
-from ase_maud.scenes import build
+from ase_maud.calculator.maud_calculator import MaudCalculator
+from ase_maud.scenes.catalogue import build
 
 
 def scene(random_points, n, dim, seed):
@@ -97,7 +97,7 @@ def test_gamma_modes_hold_fixed_points(seed):
     """A relaxed hanging net (a minimum, by classify) has no imaginary mode at
     Gamma: its supports are held, the modes those of the free points."""
     from ase_maud import Maud
-    from ase_maud.analysis import classify
+    from ase_maud.analysis.stationary import classify
     atoms = build('hanging_net', 5, seed=seed)
     with Maud(atoms, logfile=None) as opt:
         assert opt.run(fmax=1e-9, steps=2000)

@@ -1,4 +1,4 @@
-"""The near-field model (``model='near'``, :mod:`ase_maud.nearfield`): its
+"""The near-field model (``model='near'``, :mod:`ase_maud.optimize.models.near`): its
 ``P`` against the dense Hessian's entries on small scenes, its products and
 its truncated CG against the dense ``P``, the pairs it keeps, and runs to
 L-BFGS-B's minimum, verified by the Hessian."""
@@ -8,14 +8,16 @@ import itertools
 import numpy as np
 import pytest
 
-from ase_maud import Maud, nearfield, physics
-from ase_maud.analysis import classify, same_point
+from ase_maud import Maud
+from ase_maud.analysis.stationary import classify, same_point
 from ase_maud.bench.optimizers import OPTIMIZERS
-from ase_maud.bench.runner import fresh_copy
-from ase_maud.dofs import free_dofs
-from ase_maud.models import MODELS, choose_model
-from ase_maud.nearfield import NearModel, near_pairs, sparse_springs
-from ase_maud.scenes import build
+from ase_maud.counting import fresh_copy
+from ase_maud.optimize.models import near as nearfield
+from ase_maud.optimize.models.near import NearModel, near_pairs, sparse_springs
+from ase_maud.optimize.models.registry import MODELS, choose_model
+from ase_maud.physics import pair_law as physics
+from ase_maud.physics.dofs import free_dofs
+from ase_maud.scenes.catalogue import build
 
 
 def jiggled(name, size, seed, by=0.1):

@@ -12,7 +12,7 @@ from ase.optimize.basin import BasinHopping
 
 from ase_maud import Maud, MaudCalculator
 from ase_maud.bench.ase_systems import au13, lj7, lj_cluster, lj_molecule, pt13
-from ase_maud.scenes import SUITE, build
+from ase_maud.scenes.catalogue import SUITE, build
 
 FMAX = 1e-6
 
@@ -62,7 +62,7 @@ def test_same_minimum_as_fire_and_bfgs(suite_start, model, method):
                       and any(agree)):
         return
     # Otherwise Maud must have found a lower minimum than both.
-    from ase_maud.analysis import classify
+    from ase_maud.analysis.stationary import classify
     assert maud.get_potential_energy() < min(energies) * (1 - 1e-8), (
         maud.get_potential_energy(), energies)
     assert classify(maud).verdict == 'minimum'
@@ -240,7 +240,7 @@ def test_todict_reports_the_method():
 @pytest.mark.parametrize('model', ['nodal', 'exact'])
 @pytest.mark.parametrize('seed', [11, 12])
 def test_stationary_result_is_an_index_one_saddle(seed, model):
-    from ase_maud.analysis import classify
+    from ase_maud.analysis.stationary import classify
     atoms = build('cage', 6, seed=seed)
     relax(atoms, Maud, fmax=1e-10, target='stationary', model=model)
     point = classify(atoms)

@@ -1,4 +1,4 @@
-"""One rule for every file a command touches (ase_maud.paths): an output
+"""One rule for every file a command touches (ase_maud.files.output_paths): an output
 that names an input or another output is refused before any work, with the
 input's bytes unchanged; a trajectory replaces the previous one only once it
 holds a frame."""
@@ -13,10 +13,10 @@ from ase.io import read
 from test_io import write_quad_net
 
 from ase_maud import Maud
-from ase_maud.cli import main
-from ase_maud.lock import FileInUseError
-from ase_maud.paths import StagedTrajectory, check_distinct, check_own_json, same_file
-from ase_maud.scenes import build
+from ase_maud.cli.command import main
+from ase_maud.errors import FileInUseError
+from ase_maud.files.output_paths import StagedTrajectory, check_distinct, check_own_json, same_file
+from ase_maud.scenes.catalogue import build
 
 
 def refused(capsys, argv, *kept):
@@ -241,6 +241,6 @@ def test_ctrl_c_in_another_command_is_one_line(capsys, monkeypatch, net):
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr('ase_maud.analysis.classify', interrupted)
+    monkeypatch.setattr('ase_maud.analysis.stationary.classify', interrupted)
     assert main(['classify', str(net), '--fix', 'boundary']) == 130
     assert capsys.readouterr().err == 'ase-maud: interrupted\n'

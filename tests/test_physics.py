@@ -5,8 +5,8 @@ import itertools
 import numpy as np
 import pytest
 
-from ase_maud import physics
-from ase_maud.potential import MaudPotential, _flat_entries
+from ase_maud.calculator.potential import MaudPotential, _flat_entries
+from ase_maud.physics import pair_law as physics
 
 #: Central-difference step and tolerance for pair vectors of length ~1.
 STEP = 1e-5

@@ -13,7 +13,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.quiver import Quiver
 
 from ase_maud import Maud, MaudCalculator
-from ase_maud.pictures import (
+from ase_maud.form.pictures import (
     ARROW,
     COLOURS,
     MAX_ARROWS,
@@ -26,7 +26,7 @@ from ase_maud.pictures import (
     save_picture,
     spring_values,
 )
-from ase_maud.scenes import build
+from ase_maud.scenes.catalogue import build
 
 matplotlib.use('Agg')
 

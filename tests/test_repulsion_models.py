@@ -1,4 +1,4 @@
-"""tools/repulsion_models.py's factorised near-field prototype (the springs'
+"""benchmarks/repulsion_models.py's factorised near-field prototype (the springs'
 Hessian plus the repulsion's near pair blocks, signed, factorised) against
 the dense Hessian and finite differences of the forces on small scenes, and
 runs of it to L-BFGS-B's minimum; the package's matrix-free model
@@ -11,15 +11,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ase_maud import Maud, physics
-from ase_maud.analysis import same_point
+from ase_maud import Maud
+from ase_maud.analysis.stationary import same_point
 from ase_maud.bench.optimizers import OPTIMIZERS
-from ase_maud.bench.runner import fresh_copy
-from ase_maud.dofs import free_dofs, rigid_body_modes
-from ase_maud.scenes import build
-from ase_maud.stiffness import SpringsModel
+from ase_maud.counting import fresh_copy
+from ase_maud.optimize.models.springs import SpringsModel
+from ase_maud.physics import pair_law as physics
+from ase_maud.physics.dofs import free_dofs, rigid_body_modes
+from ase_maud.scenes.catalogue import build
 
-TOOL = runpy.run_path(str(Path(__file__).parent.parent / 'tools' / 'repulsion_models.py'))
+TOOL = runpy.run_path(str(Path(__file__).parent.parent / 'benchmarks' / 'repulsion_models.py'))
 NearFieldModel = TOOL['NearFieldModel']
 
 

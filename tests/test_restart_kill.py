@@ -23,8 +23,8 @@ import pytest
 from ase.io import read
 
 from ase_maud import Maud
-from ase_maud.scenes import build
-from ase_maud.trajectory import last_frame
+from ase_maud.files.trajectory import last_frame
+from ase_maud.scenes.catalogue import build
 
 SCENE = ('hanging_net', 8)
 SEED = 3
@@ -34,7 +34,7 @@ PINNED = {name: '1' for name in ('NUMBA_NUM_THREADS', 'OMP_NUM_THREADS',
 
 CHILD = f"""
 from ase_maud import Maud
-from ase_maud.trajectory import last_frame
+from ase_maud.files.trajectory import last_frame
 from ase_maud.scenes import build
 Maud(build({SCENE[0]!r}, {SCENE[1]}, seed={SEED}), logfile=None).run(steps=2)  # warm
 import sys

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ase_maud import Maud
-from ase_maud.scenes import build
+from ase_maud.scenes.catalogue import build
 
 
 @pytest.mark.parametrize('seed', [0, 1, 2])

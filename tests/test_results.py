@@ -1,5 +1,5 @@
-"""Member forces, reactions and out-of-balance (ase_maud.results), the
-force-density solve (ase_maud.forcedensity) and ``a = 0``."""
+"""Member forces, reactions and out-of-balance (ase_maud.form.member_forces), the
+force-density solve (ase_maud.form.force_density) and ``a = 0``."""
 
 import csv
 import re
@@ -10,10 +10,10 @@ from ase import Atoms
 from ase.constraints import FixAtoms
 
 from ase_maud import Maud, MaudCalculator
-from ase_maud.cli import main
-from ase_maud.forcedensity import solve_force_density
-from ase_maud.io import read_net, write_net
-from ase_maud.results import form_result, write_forces_csv
+from ase_maud.cli.command import main
+from ase_maud.form.force_density import solve_force_density
+from ase_maud.form.member_forces import form_result, write_forces_csv
+from ase_maud.io.nets import read_net, write_net
 
 compas = pytest.importorskip('compas')
 fd_numpy = pytest.importorskip('compas_fd.solvers').fd_numpy
@@ -284,7 +284,7 @@ def test_a_net_hanging_below_its_supports_is_no_reason_to_warn(tmp_path, capsys)
     that is said."""
     from pathlib import Path
 
-    from ase_maud.topology import support_excursion
+    from ase_maud.physics.topology import support_excursion
 
     canopy = Path(__file__).parent.parent / 'examples' / 'nets' / 'canopy.obj'
     traj = str(tmp_path / 'r.traj')

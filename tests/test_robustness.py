@@ -30,9 +30,10 @@ from hypothesis import strategies as st
 
 from ase_maud import Maud, MaudCalculator, MaudError
 from ase_maud.checks import RULES
-from ase_maud.restart import RestartFile
-from ase_maud.scenes import SCENES, build, keep_on_plane
-from ase_maud.trajectory import last_frame
+from ase_maud.files.trajectory import last_frame
+from ase_maud.optimize.restart_file import RestartFile
+from ase_maud.scenes.builders import keep_on_plane
+from ase_maud.scenes.catalogue import SCENES, build
 
 EXAMPLES = int(os.environ.get('ASE_MAUD_EXAMPLES', 200))
 
@@ -280,7 +281,7 @@ def test_restart_file_is_replaced_whole(tmp_path, monkeypatch):
         replaced.append(destination)
         real_replace(source, destination)
 
-    monkeypatch.setattr('ase_maud.atomic.os.replace', checked_replace)
+    monkeypatch.setattr('ase_maud.files.atomic_replace.os.replace', checked_replace)
     with Maud(atoms, logfile=None, restart='maud.json') as opt:
         opt.attach(lambda: seen.append(sorted(os.listdir('.'))))
         opt.run(fmax=1e-6, steps=5)
@@ -418,7 +419,7 @@ def test_restart_files_reach_the_disk_on_the_schedule(tmp_path, monkeypatch, see
                                                       sync_seconds, flushes):
     # both files flushed at each write when SYNC_SECONDS has passed; never
     # within it, not even at the first step
-    from ase_maud import restart as restart_module
+    from ase_maud.optimize import restart_file as restart_module
     monkeypatch.setattr(restart_module, 'SYNC_SECONDS', sync_seconds)
     synced = []
     real_fsync = os.fsync
@@ -502,7 +503,7 @@ def test_temporary_files_of_killed_writers_are_removed(tmp_path, seed):
     # older than a minute and leaves a live writer's alone
     import time
 
-    from ase_maud import atomic
+    from ase_maud.files import atomic_replace as atomic
     restart = tmp_path / 'maud.json'
     with Maud(build('hanging_net', 5, seed=seed), logfile=None, restart=restart) as opt:
         opt.run(fmax=1e-9, steps=2)

@@ -15,8 +15,8 @@ from ase.io import read
 from ase.optimize import BFGS
 
 from ase_maud import FileInUseError, Maud
-from ase_maud.scenes import build
-from ase_maud.trajectory import intact, last_frame, repair
+from ase_maud.files.trajectory import intact, last_frame, repair
+from ase_maud.scenes.catalogue import build
 
 SCENE = ('hanging_net', 8)
 

@@ -1,5 +1,5 @@
 """Saddle searches with ``Maud(target='saddle')`` and ``Maud(target='stationary')``
-against Sella (tools/saddles.py)."""
+against Sella (benchmarks/saddles_vs_sella.py)."""
 
 import importlib.util
 import json
@@ -14,17 +14,17 @@ from ase.mep import NEB
 from ase.optimize.optimize import Optimizer
 
 from ase_maud import Maud, MaudError, WrongIndexError
-from ase_maud.analysis import classify, displace_along_mode
-from ase_maud.bench.runner import fresh_copy
-from ase_maud.restart import FORMAT, STATE_ROWS, RestartFile
-from ase_maud.scenes import build
-from ase_maud.stiffness import ExactModel
-from ase_maud.strategy import LOWEST_MODES
+from ase_maud.analysis.stationary import classify, displace_along_mode
+from ase_maud.counting import fresh_copy
+from ase_maud.optimize.models.exact import ExactModel
+from ase_maud.optimize.restart_file import FORMAT, STATE_ROWS, RestartFile
+from ase_maud.optimize.step_rules import LOWEST_MODES
+from ase_maud.scenes.catalogue import build
 
 pytest.importorskip('sella')
 
 _SPEC = importlib.util.spec_from_file_location(
-    'saddles', Path(__file__).parent.parent / 'tools' / 'saddles.py')
+    'saddles', Path(__file__).parent.parent / 'benchmarks' / 'saddles_vs_sella.py')
 saddles = importlib.util.module_from_spec(_SPEC)
 _SPEC.loader.exec_module(saddles)
 

@@ -11,9 +11,9 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial.distance import pdist
 
 from ase_maud import Maud
-from ase_maud.calculator import MaudCalculator
-from ase_maud.scenes import COLLECTIVE, LARGE, SCENES, SUITE, SUITES, build
-from ase_maud.topology import fixed_atoms
+from ase_maud.calculator.maud_calculator import MaudCalculator
+from ase_maud.physics.topology import fixed_atoms
+from ase_maud.scenes.catalogue import COLLECTIVE, LARGE, SCENES, SUITE, SUITES, build
 
 CASES = [(name, None) for name in SCENES] + SUITE
 UNITS = [(0, 1.0, 1.0), (3, 2.5, 0.3), (11, 0.04, 7.0)]  # seed, a, Q

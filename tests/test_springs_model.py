@@ -7,16 +7,16 @@ import pytest
 from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian
 
-import ase_maud.stiffness as stiffness
+import ase_maud.optimize.models.sparse as sparse
 from ase_maud import Maud, MaudCalculator
-from ase_maud.analysis import classify
-from ase_maud.descent import MIN_PAIR_COSINE
-from ase_maud.dofs import free_dofs
-from ase_maud.models import choose_model
-from ase_maud.potential import MaudPotential
-from ase_maud.scenes import build
-from ase_maud.stiffness import SpringsModel
-from ase_maud.strategy import Minimise
+from ase_maud.analysis.stationary import classify
+from ase_maud.calculator.potential import MaudPotential
+from ase_maud.optimize.directions import MIN_PAIR_COSINE
+from ase_maud.optimize.models.registry import choose_model
+from ase_maud.optimize.models.springs import SpringsModel
+from ase_maud.optimize.strategy import Minimise
+from ase_maud.physics.dofs import free_dofs
+from ase_maud.scenes.catalogue import build
 
 
 def net(seed, side=7, a=1.0, dim=3, partial=False, weighted=False):
@@ -86,7 +86,7 @@ def test_multigrid_and_factorisation_agree(monkeypatch):
     atoms = build('hanging_net', 30, seed=4)
     forces = atoms.get_forces()
     direct = SpringsModel().at(atoms).solve(forces)
-    monkeypatch.setattr(stiffness, 'AMG_MIN_DOFS', 10)
+    monkeypatch.setattr(sparse, 'AMG_MIN_DOFS', 10)
     multigrid = SpringsModel().at(atoms).solve(forces)
     np.testing.assert_allclose(multigrid, direct, rtol=0,
                                atol=1e-5 * np.abs(direct).max())

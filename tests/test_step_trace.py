@@ -1,4 +1,4 @@
-"""tools/step_trace.py: the traced run is the package's run, bit for bit,
+"""dev/step_trace.py: the traced run is the package's run, bit for bit,
 and its rows and summary count what the run did."""
 
 import runpy
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from ase_maud import Maud
-from ase_maud.bench.runner import fresh_copy
-from ase_maud.scenes import build
+from ase_maud.counting import fresh_copy
+from ase_maud.scenes.catalogue import build
 
-TOOL = runpy.run_path(str(Path(__file__).parent.parent / 'tools' / 'step_trace.py'))
+TOOL = runpy.run_path(str(Path(__file__).parent.parent / 'dev' / 'step_trace.py'))
 
 
 @pytest.mark.parametrize('spec', ['hanging_net:8:3', 'hub_net:6:5'])

@@ -10,20 +10,15 @@ from ase.optimize import BFGS
 from ase.optimize.precon import PreconFIRE, PreconLBFGS
 
 from ase_maud import Maud, MaudCalculator
-from ase_maud.dofs import allowed_rigid_modes, project_off
-from ase_maud.models import choose_model
-from ase_maud.precon import MaudPrecon
-from ase_maud.scenes import SCENES, build
-from ase_maud.stiffness import (
-    BFGSModel,
-    ExactModel,
-    GlobalModel,
-    NodalModel,
-    SecantModel,
-    allowed_basis,
-    free_dofs,
-    rigid_body_modes,
-)
+from ase_maud.optimize.models.base import free_dofs
+from ase_maud.optimize.models.exact import ExactModel
+from ase_maud.optimize.models.global_model import GlobalModel
+from ase_maud.optimize.models.nodal import NodalModel
+from ase_maud.optimize.models.registry import choose_model
+from ase_maud.optimize.models.secant import BFGSModel, SecantModel
+from ase_maud.optimize.precon import MaudPrecon
+from ase_maud.physics.dofs import allowed_basis, allowed_rigid_modes, project_off, rigid_body_modes
+from ase_maud.scenes.catalogue import SCENES, build
 
 
 def random_scene(seed, dim=3, n=None, a=1.0, fixed=True, weighted=False):
@@ -139,7 +134,7 @@ def test_dense_spring_graph_is_solved_matrix_free():
     atoms = build('all_pairs', 120, seed=1)
     model = GlobalModel()
     solver = model.at(atoms)
-    assert type(solver).__name__ == '_MatrixFreeSolver'
+    assert type(solver).__name__ == 'MatrixFreeSolver'
     forces = atoms.get_forces()
     move = solver.solve(forces)
     matrix, free, _ = model.assemble(atoms)
@@ -225,7 +220,7 @@ def test_default_maud_in_multi_basin_clusters(name):
     # and Maud must reach the lowest one at least as often as BFGS.
     from ase.optimize import FIRE
 
-    from ase_maud.analysis import classify
+    from ase_maud.analysis.stationary import classify
     found = {'Maud': [], 'BFGS': [], 'FIRE': []}
     for seed in range(8):
         for label, opt in (('Maud', Maud), ('BFGS', BFGS), ('FIRE', FIRE)):
@@ -304,7 +299,7 @@ def test_the_saddle_model_leaves_out_the_rigid_motions_the_constraints_allow(
     model's eigenpairs are the Hessian's on the allowed moves orthogonal to
     them (its projection off them, lifted out of the way, as the analysis's):
     classify's spectrum, and eigenvectors of the projected Hessian."""
-    from ase_maud.analysis import classify
+    from ase_maud.analysis.stationary import classify
     atoms = build(scene, 7, seed=seed)
     if held:
         atoms.set_constraint(FixAtoms(held))
@@ -346,9 +341,9 @@ def test_saddle_target_takes_the_exact_or_the_springs_model():
 def test_springs_saddle_model_gives_the_lowest_eigenpairs(seed, scene, size, held):
     """The lowest eigenpairs from Hessian-vector products (LOBPCG,
     preconditioned by the springs model) are the dense Hessian's lowest on
-    the internal moves (:func:`ase_maud.analysis.classify`), rigid-body
+    the internal moves (:func:`ase_maud.analysis.stationary.classify`), rigid-body
     motions left out."""
-    from ase_maud.analysis import classify
+    from ase_maud.analysis.stationary import classify
     atoms = build(scene, size, seed=seed)
     if held:
         atoms.set_constraint(FixAtoms(held))
@@ -424,7 +419,7 @@ def test_cholesky_factor_is_that_of_the_matrix_plus_its_shift_times_identity(see
     and None where that matrix is not definite."""
     from scipy.linalg.lapack import dpotrf
 
-    from ase_maud.stiffness import _cholesky
+    from ase_maud.optimize.models.exact import _cholesky
     rng = np.random.default_rng(seed)
     a = rng.standard_normal((12, 30))
     matrix = a @ a.T + 30.0 * np.eye(12)   # definite with any two entries zeroed

@@ -8,9 +8,9 @@ from ase.constraints import FixAtoms
 from test_io import quad_net, write_quad_net
 
 from ase_maud import Maud
-from ase_maud.cli import main
-from ase_maud.io import A_PER_MEAN_SPRING, mean_spring_length, read_net, write_net
-from ase_maud.topology import boundary_vertices, leaf_vertices, support_excursion
+from ase_maud.cli.command import main
+from ase_maud.io.nets import A_PER_MEAN_SPRING, mean_spring_length, read_net, write_net
+from ase_maud.physics.topology import boundary_vertices, leaf_vertices, support_excursion
 
 HAND_CHECKED = [
     ([[0, 1, 2], [0, 2, 3]], [0, 1, 2, 3]),                          # two triangles

@@ -1,4 +1,4 @@
-"""The saddle between two minima (ase_maud.transition): the snap-through
+"""The saddle between two minima (ase_maud.saddles.between_minima): the snap-through
 saddle of a small dome with its rim fixed, between it and its mirror image,
 verified index 1 from a fresh calculator and met by NEB's climbing image; Maud
 relaxing a band of images where FIRE does."""
@@ -13,15 +13,15 @@ from ase.mep import NEB
 from ase.optimize import FIRE
 
 from ase_maud import Maud
-from ase_maud.activation import search_saddles
-from ase_maud.analysis import classify, same_point
-from ase_maud.bench.runner import fresh_copy
-from ase_maud.landscape import landscape
-from ase_maud.monitor import MaudError
-from ase_maud.scenes import build
-from ase_maud.transition import mirrored, saddle_between
+from ase_maud.analysis.stationary import classify, same_point
+from ase_maud.counting import fresh_copy
+from ase_maud.errors import MaudError
+from ase_maud.saddles.between_minima import mirrored, saddle_between
+from ase_maud.saddles.landscape import landscape
+from ase_maud.saddles.search import search_saddles
+from ase_maud.scenes.catalogue import build
 
-DOMES = runpy.run_path(str(Path(__file__).parent.parent / 'tools' / 'saddles.py'))[
+DOMES = runpy.run_path(str(Path(__file__).parent.parent / 'benchmarks' / 'saddles_vs_sella.py'))[
     'OWN_SCENES']['rim']
 
 
@@ -129,7 +129,7 @@ def test_minima_of_different_scenes_are_refused():
 def test_a_partner_of_another_scene_is_refused_before_any_climb():
     """A saddle search or landscape given a partner of another scene says so
     before it climbs (no calculator call), naming what differs."""
-    from ase_maud.bench.runner import CallRecorder
+    from ase_maud.counting import CallRecorder
 
     first = DOMES(4, 1)
     assert Maud(first, logfile=None).run(fmax=1e-6, steps=2000)
@@ -178,7 +178,7 @@ def test_the_mirror_gives_a_verified_saddle_on_nets_above_the_exact_models_size(
     to the mirror image (the springs model's refinement) ends on a verified
     index-1 saddle from at least 3 of 4 seeds (measured 2026-12-03: 4 of 4
     each, 0.4-13 CPU s a search)."""
-    nets = runpy.run_path(str(Path(__file__).parent.parent / 'tools' / 'saddles.py'))[
+    nets = runpy.run_path(str(Path(__file__).parent.parent / 'benchmarks' / 'saddles_vs_sella.py'))[
         'OWN_SCENES'][scene]
     found = 0
     for seed in range(4):
@@ -215,7 +215,7 @@ def test_a_refined_saddle_that_is_not_the_bands_is_kept_apart_and_taken_by_a_sea
     highest image (``AGREE = 0``) no refinement is the band's: the transition
     has no saddle, but keeps each refinement's verified index-1 saddle in
     ``elsewhere``; a saddle search's path attempt takes the first of them."""
-    import ase_maud.transition as transition
+    import ase_maud.saddles.between_minima as transition
     monkeypatch.setattr(transition, 'AGREE', 0.0)
     first, second = dome(6, 5)
     found = saddle_between(first, second)

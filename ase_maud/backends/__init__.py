@@ -26,9 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import check
-from . import auto, direct, fmm, reference
-from .base import (
+from ase_maud.backends import auto, direct, fmm, reference
+from ase_maud.backends.base import (
     VOIGT_PAIRS,
     Backend,
     BeyondTolerance,
@@ -38,6 +37,7 @@ from .base import (
     evaluate_first,
     voigt_to_blocks,
 )
+from ase_maud.checks import check
 
 __all__ = ['Backend', 'BeyondTolerance', 'Choice', 'Result', 'VOIGT_PAIRS',
            'blocks_to_voigt', 'check_parameters', 'evaluate', 'get',

@@ -11,7 +11,7 @@ nodal blocks). Should the FMM refuse the scene (too many near pairs,
 :mod:`.fmm`), the direct sum is used.
 
 The crossovers are :data:`CROSSOVER`, measured with one thread for each
-backend by ``python tools/backend_crossover.py`` (docs/calculator.md has the
+backend by ``python benchmarks/backend_crossover.py`` (docs/calculator.md has the
 table, the date and the command), times the direct sum's threads over the
 FMM's (:func:`crossover_points`): the direct sum runs on
 ``numba.get_num_threads()`` threads, the FMM on :func:`.fmm.threads` (one
@@ -28,8 +28,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from . import direct, fmm
-from .base import Backend, Choice, Result, evaluate_first
+from ase_maud.backends import direct, fmm
+from ase_maud.backends.base import Backend, Choice, Result, evaluate_first
 
 #: Default ``tol``: forces to 1e-8 of the largest repulsive force, a hundred
 #: times below an ``fmax`` of 1e-6 of it, and still coarse enough for the FMM
@@ -38,7 +38,7 @@ DEFAULT_TOL = 1e-8
 
 #: Points from which the FMM (rows: its ``fmm_eps``) is faster than the numba
 #: direct sum, both on one thread, by (dim, with blocks), in CPU seconds, as
-#: ``python tools/backend_crossover.py`` measures them (docs/calculator.md
+#: ``python benchmarks/backend_crossover.py`` measures them (docs/calculator.md
 #: gives the table, its date and the command; a faster kernel moves them).
 #: Between two rows the crossover is interpolated in log-log; below the last
 #: row the FMM is never used.

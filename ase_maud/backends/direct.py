@@ -6,7 +6,7 @@ The unit repulsion of :mod:`ase_maud.physics` (energy ``1 / L``, force on
 scalar code for speed; the tests compare it element-wise with the physics.
 Memory is O(threads * N): nothing of size N x N is ever formed. Each unordered
 pair is visited once and both points get their share, in a blocked loop that
-the compiler vectorises (:func:`_make_numba_kernel`; ``tools/kernel_throughput.py``
+the compiler vectorises (:func:`_make_numba_kernel`; ``benchmarks/kernel_throughput.py``
 measures it against a plain loop over every ordered pair).
 
 Both kernels here, the sums and the Hessian-vector product
@@ -20,7 +20,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .base import Backend, Result
+from ase_maud.backends.base import Backend, Result
 
 
 @numba.njit(inline='always')

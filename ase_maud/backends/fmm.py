@@ -15,7 +15,7 @@ kernel is ``1/(4 pi r)`` and it drops each point's own term; with unit charges
 Accuracy. ``fmm_eps`` is FMM3D's requested relative precision. The backend
 promises a force error, relative to the largest force, of
 :data:`FORCE_ERROR_PER_EPS` ``* fmm_eps`` (:func:`force_tolerance`), the
-bound that ``python tools/backend_crossover.py --errors`` checks on random
+bound that ``python benchmarks/backend_crossover.py --errors`` checks on random
 scenes in 3D and on a plane, with near pairs and far clusters
 (docs/calculator.md gives the figures).
 
@@ -49,9 +49,9 @@ import os
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..physics import closest_pair
-from . import direct
-from .base import Backend, BeyondTolerance, Result
+from ase_maud.backends import direct
+from ase_maud.backends.base import Backend, BeyondTolerance, Result
+from ase_maud.physics.pair_law import closest_pair
 
 #: FMM3D's Laplace kernel is ``1 / (4 pi r)``; the repulsion's is ``1 / r``.
 FMM3D_SCALE = 4.0 * np.pi

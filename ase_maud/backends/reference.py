@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import physics
-from .base import Backend, Result, blocks_to_voigt
+from ase_maud.backends.base import Backend, Result, blocks_to_voigt
+from ase_maud.physics import pair_law as physics
 
 
 def evaluate(positions: np.ndarray, want_blocks: bool = False,

@@ -1,5 +1,5 @@
 """ASE's usual systems for a calculator with no stiffness (issue 32): the
-starts ``tools/ase_systems.py`` compares optimisers from, each made from a
+starts ``benchmarks/ase_systems.py`` compares optimisers from, each made from a
 seed.
 
 A :class:`Start` is what an optimiser relaxes (Atoms, a cell filter or a

@@ -22,9 +22,9 @@ import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import all_changes
 
-from .. import backends as registry
-from ..calculator import MaudCalculator
-from . import report
+from ase_maud import backends as registry
+from ase_maud.bench import report
+from ase_maud.calculator.maud_calculator import MaudCalculator
 
 #: What one call computes, and the result compared with the reference.
 PROPERTIES = {'forces': ['energy', 'forces'], 'stiffness': ['stiffness']}

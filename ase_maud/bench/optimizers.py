@@ -16,8 +16,8 @@ from ase.optimize.fire2 import FIRE2
 from ase.optimize.precon import Exp, PreconFIRE, PreconLBFGS
 from scipy.optimize import minimize
 
-from ..optimizer import Maud
-from ..precon import MaudPrecon
+from ase_maud.optimize.maud import Maud
+from ase_maud.optimize.precon import MaudPrecon
 
 #: Exp's cut-off radius in units of its r_NN (ASE's own default is 2).
 EXP_R_CUT = 2.0

@@ -26,11 +26,11 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.figure import Figure
 
-from ..backends import fmm
-from ..pictures import save_png
-from ..threads import THREAD_VARIABLES
-from .optimizers import ASE_BASELINES, SCIPY_BASELINE
-from .runner import CALLS, ENERGY, FMAX, TIME_S, Run
+from ase_maud.backends import fmm
+from ase_maud.bench.optimizers import ASE_BASELINES, SCIPY_BASELINE
+from ase_maud.bench.runner import CALLS, ENERGY, FMAX, TIME_S, Run
+from ase_maud.form.pictures import save_png
+from ase_maud.threads import THREAD_VARIABLES
 
 
 def write_csv(path, rows):

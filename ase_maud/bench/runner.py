@@ -28,54 +28,14 @@ from typing import Any
 
 import numpy as np
 from ase import Atoms
-from ase.calculators.calculator import Calculator
 
-from .optimizers import OPTIMIZERS
+from ase_maud.bench.optimizers import OPTIMIZERS
+from ase_maud.counting import CallRecorder, fresh_copy
 
 #: Fields of one sample, the columns of :attr:`Run.samples`.
 SAMPLE_FIELDS = ('calls', 'time_s', 'cpu_s', 'fmax', 'energy')
 #: Column of each field in :attr:`Run.samples`.
 CALLS, TIME_S, CPU_S, FMAX, ENERGY = range(len(SAMPLE_FIELDS))
-
-
-class CallRecorder:
-    """Context manager counting and sampling the calls of ``calc.calculate``.
-
-    It shadows the method on this calculator instance only and restores it
-    on exit. ``samples`` is the list of sample tuples so far.
-    """
-
-    def __init__(self, calc: Calculator):
-        self.calc = calc
-        self.samples: list[tuple[float, ...]] = []
-        self._overhead = np.zeros(2)           # wall, CPU seconds
-        self._t0 = self._clocks()
-
-    @staticmethod
-    def _clocks() -> np.ndarray:
-        """(wall, process CPU) seconds now."""
-        return np.array([time.perf_counter(), time.process_time()])
-
-    def __enter__(self):
-        self._calculate = self.calc.calculate
-        self.calc.calculate = self._calculate_and_sample
-        return self
-
-    def __exit__(self, *exc):
-        del self.calc.calculate
-
-    def _calculate_and_sample(self, *args, **kwargs):
-        self._calculate(*args, **kwargs)
-        now = self._clocks()
-        atoms, results = self.calc.atoms, self.calc.results
-        forces = results['forces'].copy()
-        for constraint in atoms.constraints:
-            constraint.adjust_forces(atoms, forces)
-        wall, cpu = now - self._t0 - self._overhead
-        self.samples.append((len(self.samples) + 1, wall, cpu,
-                             np.sqrt((forces**2).sum(axis=1).max()),
-                             results['energy']))
-        self._overhead += self._clocks() - now
 
 
 @dataclass
@@ -131,14 +91,6 @@ def calls_and_cpu(atoms: Atoms, optimizer: Any, fmax: float,
     return len(recorder.samples), time.process_time() - start, converged
 
 
-def fresh_copy(atoms: Atoms) -> Atoms:
-    """A copy of ``atoms`` (constraints included) with a new calculator of
-    the same class and parameters: the same start, no shared results."""
-    copy = atoms.copy()
-    copy.calc = type(atoms.calc)(**atoms.calc.parameters)
-    return copy
-
-
 def run_optimizer(start: Atoms, optimiser: str, fmax: float,
                   steps: int) -> tuple[np.ndarray, bool, str]:
     """Relax a fresh copy of ``start`` with ``OPTIMIZERS[optimiser]``.
@@ -160,7 +112,7 @@ def run_optimizer(start: Atoms, optimiser: str, fmax: float,
     return samples, converged, error
 
 
-def classify(samples: np.ndarray, converged: bool, error: str, e_ref: float,
+def run_status(samples: np.ndarray, converged: bool, error: str, e_ref: float,
              energy_rtol: float) -> str:
     """The status of a run (see :class:`Run`): a converged run is in the
     reference minimum if its last energy is within ``energy_rtol`` (relative)

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..scenes import build
-from .optimizers import too_large
-from .runner import ENERGY, SAMPLE_FIELDS, Run, classify, run_optimizer
+from ase_maud.bench.optimizers import too_large
+from ase_maud.bench.runner import ENERGY, SAMPLE_FIELDS, Run, run_optimizer, run_status
+from ase_maud.scenes.catalogue import build
 
 SAMPLE_COLUMNS = ('scene', 'size', 'seed', 'optimiser', *SAMPLE_FIELDS,
                   'energy_error', 'status')
@@ -85,7 +85,7 @@ def _write_start(key, finished, reference, energy_rtol, samples_csv,
                 **key, optimiser=reference, samples=samples,
                 status='reference', e_ref=e_ref, error=error)))
             continue
-        status = classify(samples, converged, error, e_ref, energy_rtol)
+        status = run_status(samples, converged, error, e_ref, energy_rtol)
         run = Run(**key, optimiser=name, samples=samples, status=status,
                   e_ref=e_ref, error=error)
         samples_csv.writerows(run.rows())
@@ -157,7 +157,7 @@ def benchmark(starts: list[tuple[str, object, int]], optimisers: list[str],
               argv: list[str] | None = None) -> bool:
     """:func:`run_suite`, then the summary (CSV, markdown, overall table, PNGs)
     in ``out``; prints the markdown. Returns whether it was interrupted."""
-    from . import report
+    from ase_maud.bench import report
     out.mkdir(parents=True, exist_ok=True)
     levels = sorted(levels, reverse=True)
     runs, interrupted = run_suite(

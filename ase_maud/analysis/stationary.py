@@ -1,0 +1,397 @@
+"""Classify a configuration of the Maud potential by its Hessian d2E/dr dr.
+
+:func:`classify` returns a :class:`StationaryPoint`: the eigenvalues of ``H``
+(units of ``Q``) on the degrees of freedom that are free to move, with the
+rigid-body modes removed, the count of negative, zero and positive ones, and a
+verdict. Three paths give the same counts:
+
+- ``dense``: every eigenvalue, from :meth:`MaudCalculator.get_hessian` and
+  ``numpy.linalg.eigh``; for up to :data:`DENSE_MAX_DOFS` free degrees of
+  freedom.
+- ``lowest``: the lowest ``k`` eigenvalues of the same dense Hessian (LAPACK's
+  ``syevr`` asked for those only), for up to :data:`LOWEST_MAX_DOFS`: one
+  Hessian where ``iterative`` takes hundreds of products (the soft modes of
+  a large minimum hold LOBPCG to its iteration limit), and less than ``eigh``
+  of every eigenvalue (docs/bench/saddles.md, "Above 1500 free
+  coordinates").
+- ``iterative``: the lowest ``k`` eigenvalues by LOBPCG on Hessian-vector
+  products (:meth:`ase_maud.calculator.potential.MaudPotential.hvp`), O(N) memory,
+  O(N**2) time per product, a block of vectors per pass over the pairs. The
+  preconditioner is :func:`near_field_stiffness`, a sparse positive model of
+  ``H`` (springs and close pairs), factorised once: the near field carries
+  the conditioning, so the number of products hardly grows with N.
+  ``eigsh`` with a shift-invert needs a factorisation of
+  ``H``, which is dense.
+
+Removed modes. Fixed degrees of freedom (:class:`~ase.constraints.FixAtoms`,
+:class:`~ase.constraints.FixCartesian`) are projected out by keeping only the
+rows and columns of the free ones. The rigid-body modes (translations and
+rotations, 3 + 3 in 3D, 2 + 1 in 2D) that move no fixed degree of freedom are
+projected out too: all of them for a free scene, fewer for a collinear one
+(a rotation about the line moves nothing), none once three non-collinear
+points are fixed.
+
+Tolerance. An eigenvalue counts as zero when ``|lambda| <= rtol * max|lambda|``
+(default ``rtol`` = :data:`RTOL` = 1e-8). Rounding in building ``H`` and in the
+eigensolver leaves errors near ``1e-16 * max|lambda| * sqrt(dim N)``, about
+1e-14 of the largest here; a configuration relaxed to a small ``fmax`` has
+eigenvalues of order ``fmax / L`` wrong. 1e-8 sits well above the first and
+still resolves modes a hundred million times softer than the stiffest.
+
+Maxima do not occur unless FixCartesian holds only some coordinates of a
+point: every nodal block has trace ``3 Q deg(m) >= 0`` in 3D (``1/L`` is
+harmonic) and more in 2D, and a maximum needs a negative trace.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+from ase import Atoms
+from ase.constraints import FixAtoms, FixCartesian
+from scipy.sparse.linalg import LinearOperator, eigsh, lobpcg, splu
+from scipy.spatial import cKDTree
+from scipy.spatial.distance import pdist
+
+from ase_maud.counting import Work
+from ase_maud.physics import pair_law as physics
+from ase_maud.physics.dofs import free_dofs, project_off, rigid_body_modes
+from ase_maud.physics.topology import mean_spring_length
+
+#: Eigenvalues with ``|lambda| <= RTOL * max|lambda|`` count as zero.
+RTOL = 1e-8
+#: ``method='auto'`` takes every eigenvalue up to this many free degrees of
+#: freedom ...
+DENSE_MAX_DOFS = 2000
+#: ... and takes the lowest eigenvalues of the dense Hessian up to this many
+#: (a free 3D scene of 2000 points; 290 MB a copy), LOBPCG above.
+LOWEST_MAX_DOFS = 6000
+#: Default force tolerance for "stationary", in units of ``Q a``.
+FTOL = 1e-6
+
+
+@dataclass(frozen=True)
+class StationaryPoint:
+    """What the Hessian says about a configuration.
+
+    ``eigenvalues`` (ascending, units of ``Q``) and ``modes`` (unit vectors,
+    shape (len(eigenvalues), N, 3), zero on fixed degrees of freedom) cover
+    every mode (``method='dense'``) or the lowest ``k`` (``'lowest'``,
+    ``'iterative'``);
+    the counts always cover all ``n_modes`` free, non-rigid modes.
+    ``verdict`` is 'minimum', 'saddle' (of order ``index``), 'maximum' or
+    'degenerate' (some non-rigid eigenvalue within ``tolerance`` of zero).
+    ``tolerance`` is ``rtol * max|lambda|``. ``stationary`` is
+    ``fmax <= ftol`` (force units, the ``ftol`` used); if it is False the
+    verdict describes the curvature at a point that is not stationary.
+    """
+
+    verdict: str
+    index: int
+    eigenvalues: np.ndarray
+    modes: np.ndarray
+    n_negative: int
+    n_zero: int
+    n_positive: int
+    n_rigid: int
+    n_fixed: int
+    tolerance: float
+    fmax: float
+    ftol: float
+    stationary: bool
+    method: str
+
+    @property
+    def n_modes(self) -> int:
+        """Free, non-rigid modes counted by the verdict."""
+        return self.n_negative + self.n_zero + self.n_positive
+
+
+def force_tolerance(potential, ftol: float | None = None,
+                    positions: np.ndarray | None = None) -> float:
+    """``ftol``, by default :data:`FTOL` ``* Q a`` of the
+    :class:`~ase_maud.calculator.potential.MaudPotential` ``potential`` (force units):
+    the largest ``|f|`` of a stationary point. At ``a = 0`` (no repulsion,
+    no length of its own) ``a`` is replaced by the mean spring length at
+    ``positions`` (N, 3), or 1 without them or without springs."""
+    if ftol is not None:
+        return ftol
+    if potential.repulsive:
+        return FTOL * potential.force_unit
+    if positions is None or not len(potential.springs):
+        return FTOL * potential.Q
+    return FTOL * potential.Q * mean_spring_length(positions, potential.springs)
+
+
+def free_mask(atoms: Atoms, dim: int) -> np.ndarray:
+    """Boolean (N, dim) mask of the free degrees of freedom.
+
+    Only :class:`FixAtoms` and :class:`FixCartesian` are understood; any other
+    constraint is a ValueError (its projection would not be a coordinate one).
+    """
+    for constraint in atoms.constraints:
+        if not isinstance(constraint, (FixAtoms, FixCartesian)):
+            raise ValueError(f'cannot classify with the constraint '
+                             f'{constraint!r}: only FixAtoms and FixCartesian')
+    return free_dofs(atoms, dim)
+
+
+def hessian_operator(atoms: Atoms, free: np.ndarray | None = None,
+                     rigid: np.ndarray | None = None,
+                     work: Work | None = None) -> LinearOperator:
+    """``H`` on the free degrees of freedom as a LinearOperator, never dense.
+
+    ``free`` (N, dim) and ``rigid`` (orthonormal columns) default to
+    :func:`free_mask` and :func:`rigid_body_modes`; the operator is
+    ``P H P`` with ``P`` the projector off the rigid modes, so they have
+    eigenvalue 0. A block of vectors is multiplied in one pass over the pairs;
+    each vector is counted in ``work`` (:attr:`Work.hvp_vectors`) if given.
+    """
+    calc = atoms.calc
+    potential = calc.potential
+    positions = calc.check_atoms(atoms)
+    free = free_mask(atoms, potential.dim) if free is None else free
+    if rigid is None:
+        rigid = rigid_body_modes(positions, free, potential.dim)
+    flat = free.ravel()
+
+    def project(x):
+        return x - rigid @ (rigid.T @ x)
+
+    def matmat(x):
+        if work is not None:
+            work.hvp_vectors += x.shape[1]
+        full = np.zeros((flat.size, x.shape[1]))
+        full[flat] = project(x)
+        hx = potential.hvp(positions, full.T.reshape(-1, *free.shape))
+        return project(hx.reshape(x.shape[1], -1).T[flat])
+
+    n = int(flat.sum())
+    return LinearOperator((n, n), matvec=lambda v: matmat(v.reshape(-1, 1)),
+                          matmat=matmat, dtype=float)
+
+
+def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
+             rtol: float = RTOL, ftol: float | None = None,
+             work: Work | None = None) -> StationaryPoint:
+    """Classify ``atoms`` (with a MaudCalculator) by its Hessian.
+
+    Parameters
+    ----------
+    method : 'auto', 'dense', 'lowest' or 'iterative'
+        ``auto`` is dense up to :data:`DENSE_MAX_DOFS` free degrees of freedom,
+        lowest up to :data:`LOWEST_MAX_DOFS`, iterative above.
+    k : int
+        Eigenvalues the lowest and iterative paths compute (the lowest). If all are
+        negative the index is not known and a ValueError asks for a larger k.
+    rtol : float
+        Zero tolerance relative to the largest ``|lambda|``.
+    ftol : float
+        Force (units of ``Q a``) above which the point is flagged and warned
+        about as not stationary; default :data:`FTOL` ``* Q a``.
+    work : Work
+        If given, counts the dense Hessian or the Hessian-vector products.
+    """
+    calc = atoms.calc
+    potential = calc.potential
+    dim = potential.dim
+    positions = calc.check_atoms(atoms)
+    free = free_mask(atoms, dim)
+    rigid = rigid_body_modes(positions, free, dim)
+    n_modes = int(free.sum()) - rigid.shape[1]
+    if method == 'auto':
+        method = ('dense' if free.sum() <= DENSE_MAX_DOFS else
+                  'lowest' if free.sum() <= LOWEST_MAX_DOFS else 'iterative')
+    if method == 'dense':
+        values, vectors = _dense_spectrum(atoms, free, rigid)
+        scale = np.abs(values).max(initial=0.0)
+    elif method == 'iterative':
+        values, vectors, scale = _lowest_spectrum(atoms, free, rigid, k,
+                                                  rtol, work)
+    elif method == 'lowest':
+        values, vectors, scale = _lowest_of_dense(atoms, free, rigid, k)
+    else:
+        raise ValueError(f"method must be 'auto', 'dense', 'lowest' or 'iterative', "
+                         f'got {method!r}')
+    if work is not None and method != 'iterative':
+        work.hessians += 1
+    tolerance = rtol * scale
+    n_negative = int(np.sum(values < -tolerance))
+    n_zero = int(np.sum(np.abs(values) <= tolerance))
+    if len(values) < n_modes and values[-1] <= tolerance:
+        raise ValueError(f'the lowest {len(values)} eigenvalues are all <= '
+                         f'{tolerance:.3g}: the index is at least '
+                         f'{n_negative}; ask for a larger k')
+    n_positive = n_modes - n_negative - n_zero
+    if n_zero:
+        verdict = 'degenerate'
+    elif n_negative == 0:
+        verdict = 'minimum'
+    elif n_positive == 0:
+        verdict = 'maximum'
+    else:
+        verdict = 'saddle'
+    modes = np.zeros((len(values), len(atoms), 3))
+    modes[:, :, :dim][:, free] = vectors.T
+    fmax = float(np.linalg.norm(atoms.get_forces(), axis=1).max(initial=0.0))
+    ftol = force_tolerance(potential, ftol, atoms.positions)
+    if fmax > ftol:
+        warnings.warn(f'not a stationary point: fmax = {fmax:.3g} > '
+                      f'{ftol:.3g}; the verdict {verdict!r} describes the '
+                      'curvature there only', stacklevel=2)
+    return StationaryPoint(
+        verdict=verdict, index=n_negative, eigenvalues=values, modes=modes,
+        n_negative=n_negative, n_zero=n_zero, n_positive=n_positive,
+        n_rigid=rigid.shape[1], n_fixed=int((~free).sum()),
+        tolerance=tolerance, fmax=fmax, ftol=ftol, stationary=fmax <= ftol,
+        method=method)
+
+
+def _free_hessian(atoms, free):
+    """The dense Hessian on the free dofs (``free``: mask (N, dim)): the
+    calculator's whole Hessian there, or its block
+    (:meth:`.MaudCalculator.hessian_rows`)."""
+    rows = atoms.calc.hessian_rows(atoms, free)
+    if rows is None:
+        flat = free.ravel()
+        return atoms.calc.get_hessian(atoms)[np.ix_(flat, flat)]
+    kept = np.flatnonzero(free[rows].ravel())
+    return atoms.calc.get_hessian_block(atoms, rows)[np.ix_(kept, kept)]
+
+
+def _dense_spectrum(atoms, free, rigid):
+    """All eigenpairs of ``H`` on the free dofs orthogonal to ``rigid``."""
+    hessian = _free_hessian(atoms, free)
+    if rigid.size:
+        basis = scipy.linalg.null_space(rigid.T)
+    else:
+        basis = np.eye(len(hessian))
+    values, vectors = np.linalg.eigh(basis.T @ hessian @ basis)
+    return values, basis @ vectors
+
+
+def _lowest_of_dense(atoms, free, rigid, k):
+    """The lowest ``k`` eigenpairs of ``H`` on the free dofs orthogonal to
+    ``rigid``, and max|lambda| (to 1 %, Lanczos on the dense Hessian): ``P H
+    P`` (``P`` the projector off the rigid modes) with the rigid modes lifted
+    above every eigenvalue."""
+    hessian = _free_hessian(atoms, free)
+    project_off(hessian, rigid)
+    v0 = np.random.default_rng(0).standard_normal(len(hessian))
+    scale = abs(eigsh(hessian, 1, which='LM', tol=0.01, v0=v0,
+                      return_eigenvectors=False)[0])
+    hessian += 2 * scale * rigid @ rigid.T
+    k = min(k, len(hessian) - rigid.shape[1])
+    values, vectors = scipy.linalg.eigh(hessian, subset_by_index=[0, k - 1],
+                                        overwrite_a=True, check_finite=False)
+    return values, vectors, scale
+
+
+def _lowest_spectrum(atoms, free, rigid, k, rtol, work=None):
+    """Lowest ``k`` eigenpairs by preconditioned LOBPCG, and max|lambda|.
+
+    Iterates stay orthogonal to the rigid modes (LOBPCG's ``Y``). LOBPCG
+    stops when every residual ``|H x - lambda x|`` is below a tenth of the
+    zero tolerance, so each eigenvalue is that close to a true one.
+    """
+    op = hessian_operator(atoms, free, rigid, work)
+    flat = free.ravel()
+    near = near_field_stiffness(atoms)[np.ix_(flat, flat)]
+    # definite (the translations are its null space), yet no blur of modes
+    # down to 1e-4 of the stiffest
+    shift = 1e-4 * abs(near).sum(axis=1).max()
+    lu = splu(sp.csc_matrix(near + shift * sp.identity(near.shape[0])))
+    precond = LinearOperator(near.shape, matvec=lu.solve, matmat=lu.solve,
+                             dtype=float)
+    x0 = np.random.default_rng(0).standard_normal((op.shape[0], k))
+    top = eigsh(op, 1, which='LA', tol=0.1, ncv=min(10, op.shape[0]),
+                v0=x0[:, 0], return_eigenvectors=False)[0]  # a 1% scale
+    with warnings.catch_warnings():
+        warnings.filterwarnings('error', 'Failed at iteration', UserWarning)
+        values, vectors = lobpcg(op, x0, M=precond,
+                                 Y=rigid if rigid.size else None,
+                                 tol=0.1 * rtol * abs(top), maxiter=500,
+                                 largest=False)
+    order = np.argsort(values)
+    values, vectors = values[order], vectors[:, order]
+    return values, vectors, max(abs(values[0]), abs(top))
+
+
+def near_field_stiffness(atoms: Atoms, cutoff: float = 1.5) -> sp.csr_matrix:
+    """Positive semi-definite sparse model of ``H``, shape (dim N, dim N).
+
+    The Hessian of the near field (every sprung pair and every pair closer
+    than ``cutoff`` times the median nearest-neighbour distance), with each
+    pair block ``B_ij`` replaced by its absolute value ``|B_ij|`` (same
+    eigenvectors, eigenvalues made positive): the repulsion's
+    ``-c / L**3`` across a pair flips sign, so the sum of pair terms
+    ``(e_i - e_j)(e_i - e_j)^T (x) |B_ij|`` is positive semi-definite by
+    construction, with the translations as its null space. It equals the near
+    field's Hessian wherever every pair block is already positive.
+    """
+    potential = atoms.calc.potential
+    dim = potential.dim
+    x = potential.reduced(atoms.positions)[:, :dim]   # units of a: Q times unit blocks
+    n = len(x)
+    tree = cKDTree(x)
+    spacing = np.median(tree.query(x, k=2)[0][:, 1])
+    close = tree.query_pairs(cutoff * spacing, output_type='ndarray')
+    springs = np.sort(potential.springs, axis=1)
+    pairs, where = np.unique(np.vstack([springs, np.sort(close, axis=1)]),
+                             axis=0, return_inverse=True)
+    i, j = pairs.T
+    d = x[i] - x[j]
+    blocks = physics.repulsion_block(d)
+    sprung = where[:len(springs)]
+    blocks[sprung] += physics.spring_block(d[sprung], potential.stiffnesses)
+    blocks *= potential.Q
+    values, vectors = np.linalg.eigh(blocks)
+    blocks = np.einsum('pak,pk,pbk->pab', vectors, np.abs(values), vectors)
+    return physics.pair_block_laplacian(i, j, blocks, n)
+
+
+def displace_along_mode(atoms: Atoms, point: StationaryPoint, mode: int = 0,
+                        step: float | None = None) -> tuple[Atoms, Atoms]:
+    """Two copies of ``atoms`` pushed both ways along an unstable mode.
+
+    ``mode`` counts the negative eigenvalues of ``point`` (a
+    :class:`StationaryPoint` of ``atoms``) from the most negative; ``step`` is
+    the largest displacement of any point (default ``0.1 a``). Each copy gets
+    a fresh calculator with the same parameters, ready to be relaxed into the
+    minimum on its side of the saddle.
+    """
+    if not 0 <= mode < point.n_negative:
+        raise ValueError(f'mode {mode} is not unstable: the point has '
+                         f'{point.n_negative} negative eigenvalues')
+    calc = atoms.calc
+    step = 0.1 * calc.potential.a if step is None else step
+    vector = point.modes[mode]
+    vector = step * vector / np.linalg.norm(vector, axis=1).max()
+    copies = []
+    for sign in (1, -1):
+        copy = atoms.copy()
+        copy.positions += sign * vector
+        copy.calc = type(calc)(**calc.parameters)
+        copies.append(copy)
+    return tuple(copies)
+
+
+#: Default tolerances of :func:`same_point`: energies relative, pair
+#: distances in length units (for scenes relaxed to fmax 1e-6 ``Q a``, whose
+#: energies agree to ~1e-12 and distances to ~1e-7 a).
+ENERGY_RTOL, DISTANCE_ATOL = 1e-8, 1e-4
+
+def same_point(a: Atoms, b: Atoms, energy_rtol: float = ENERGY_RTOL,
+               distance_atol: float = DISTANCE_ATOL) -> bool:
+    """Whether ``a`` and ``b`` are the same configuration up to rigid motion and
+    relabelling: energies within ``energy_rtol`` (relative) and sorted pair
+    distances within ``distance_atol`` (length units)."""
+    ea, eb = a.get_potential_energy(), b.get_potential_energy()
+    if abs(ea - eb) > energy_rtol * max(abs(ea), abs(eb)):
+        return False
+    return bool(np.abs(np.sort(pdist(a.positions)) - np.sort(pdist(b.positions))).max()
+                <= distance_atol)

@@ -1,0 +1,500 @@
+"""MaudCalculator: points that all repel, some tied by zero-length springs.
+
+Energy, each pair counted once (the specification's P double-counts: P = 2E)::
+
+    E = sum_{i<j} a**3 Q / L_ij  +  sum_{s=(i,j) in springs} Q q_s L_ij**2 / 2
+        - sum_i F_i . r_i
+
+with ``q_s`` each spring's force density multiplier (default 1) and ``F_i``
+constant nodal loads (default none).
+
+``a`` is a length and ``Q`` a force per length, in whatever units the user
+works in (ASE's eV and Angstrom if the scene is mixed with other ASE tools).
+Forces follow ASE's sign, ``f = -dE/dr``. The property ``stiffness`` holds the
+nodal blocks ``K_mm = d2E/dr_m2`` (N, dim, dim), the Hessian's diagonal blocks:
+the stiffness at point m with every other point held fixed.
+
+The potential itself, its reduced units (everything is computed at ``a = Q
+= 1`` for the scene measured in ``a`` and scaled back) and its exact spring
+Hessian are :attr:`MaudCalculator.potential`, a
+:class:`~ase_maud.calculator.potential.MaudPotential`; the sum over pairs is a backend's
+(:mod:`ase_maud.backends`). Where a result is not representable, a ValueError
+names the atoms (or ``a`` and ``Q``), never a NaN.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from ase import Atoms
+from ase.calculators.calculator import Calculator, all_changes
+from numpy.typing import ArrayLike
+
+from ase_maud import backends
+from ase_maud.calculator.potential import MaudPotential, diagonal_blocks, raise_on_closest
+from ase_maud.checks import all_finite, check
+from ase_maud.physics import pair_law as physics
+from ase_maud.physics import topology
+
+#: Relative tolerance on the spread of z for a ``dim=2`` scene.
+PLANE_TOLERANCE = 1e-10
+
+
+class MaudCalculator(Calculator):
+    """ASE calculator for the Maud potential.
+
+    Parameters
+    ----------
+    springs : array-like of shape (K, 2)
+        Atom index pairs tied by a spring. Each pair at most once (in either
+        order); a duplicate, a self-spring or an index out of range is a
+        ``ValueError`` that names the spring.
+    a : float
+        Length in the repulsion ``a**3 Q / L`` (default 1). ``0`` switches
+        the repulsion off: springs and loads alone, the force-density method
+        (:attr:`last_backend` ``'none'``).
+    Q : float
+        Spring constant, force per length (default 1).
+    q : array-like of shape (K,), optional
+        Each spring's force density multiplier of ``Q``, positive and finite,
+        in the order of ``springs``: spring ``s`` has energy ``Q q_s L**2 /
+        2`` and pulls with ``Q q_s L`` (the force density of compas_fd is
+        ``Q q_s``). Default None: every ``q_s = 1``. The springs' Hessian
+        stays constant, ``Q`` times the ``q``-weighted Laplacian.
+    loads : array-like of shape (N, 3), optional
+        Constant nodal loads ``F_i`` in force units (self-weight, say): the
+        energy gains ``-sum_i F_i . r_i``, the forces ``+F_i``; no Hessian or
+        nodal block changes. ``(N, 2)`` for ``dim=2`` (in-plane; a z
+        component must be 0). One row per atom, checked when the atoms are.
+        Default None: no loads.
+    dim : 2 or 3
+        ``2``: every point lies on one plane ``z = const`` (checked to a
+        relative :data:`PLANE_TOLERANCE`), forces have ``z = 0`` exactly and
+        the blocks are 2x2. ``3`` (default): 3x3 blocks.
+    backend : str
+        The repulsion kernel, a name in the registry :mod:`.backends`:
+        ``auto`` (default) picks per call the cheapest backend that meets
+        ``tol`` for this N, dim and property set: the exact ``numba`` direct
+        sum below a measured crossover, the FMM above it (with ``fmm_eps``
+        derived from ``tol``; the direct sum if fmm3dpy is not installed).
+        Explicit: ``numba`` (compiled direct sum, parallel over numba's
+        threads), ``numpy`` (the slow reference) or ``fmm`` (FMM3D at
+        ``fmm_eps``, O(N)).
+    **kwargs
+        The backends' parameters (each backend declares its own, with its
+        default, in :mod:`.backends`; each is checked whichever backend is
+        chosen): ``tol`` (``auto``: the force error allowed, relative to the
+        largest repulsive force ``max_i |f_i|`` of the repulsion alone; the
+        springs are always exact; default
+        :data:`~.backends.auto.DEFAULT_TOL`, 1e-8, far below what a
+        relaxation resolves yet coarse enough for the FMM on large scenes; 0
+        asks for the exact direct sum), ``crossover`` (``auto``: the number
+        of points from which the FMM is used whatever ``tol``; ``None``, the
+        default, uses the measured table
+        :data:`ase_maud.backends.auto.CROSSOVER`), ``fmm_eps`` (the explicit
+        ``fmm`` backend's requested relative precision, default 1e-6; its
+        forces are good to ``fmm_eps`` of the largest repulsive force);
+        and ASE's own calculator keywords.
+
+    Notes
+    -----
+    Accuracy per run. ``calc.set(tol=...)`` changes the accuracy for the
+    next calls (an optimiser lowers it as its forces approach ``fmax``:
+    ``tol = safety * fmax / calc.last_force_scale``). Results already held
+    stay if they meet the new ``tol`` (a looser one, or any ``tol`` after an
+    exact call); a tighter one discards them. After a call,
+    :attr:`last_backend` names the backend that computed the results held,
+    :attr:`last_tolerance` is their promised force error relative to
+    :attr:`last_force_scale` (0.0 for an exact backend), the largest
+    repulsive force (units of ``Q a``); all three are None before a call.
+
+    Threads. The numba direct sums run on ``numba.get_num_threads()``
+    threads: ``NUMBA_NUM_THREADS`` at start-up, or
+    ``numba.set_num_threads(n)`` (or :func:`ase_maud.threads.pin_threads`)
+    later. The FMM follows ``OMP_NUM_THREADS`` if fmm3dpy was built with
+    OpenMP; the PyPI wheel was not and runs on one thread. The ``auto``
+    crossovers count the FMM's threads as ``ASE_MAUD_FMM_THREADS`` declares
+    them (unset: one; :func:`ase_maud.backends.fmm.threads`).
+
+    Memory is O(N) on every path but ``hessian``. Only what is asked is
+    computed: ``energy``/``forces`` never build the blocks; ``stiffness``
+    computes all three in one pass; ``hessian`` (the dense (dim N, dim N)
+    matrix, small scenes only) comes with the energy and forces of its call.
+    """
+
+    implemented_properties = ['energy', 'free_energy', 'forces', 'stiffness',
+                              'hessian']
+    # springs default to a tuple: Calculator.todict compares each parameter
+    # with its default by ``!=``, which fails on an ndarray default. The
+    # potential's parameters, then the backends' (from their registry).
+    default_parameters = {'springs': (), 'a': 1.0, 'Q': 1.0, 'dim': 3, 'q': None,
+                          'loads': None, 'backend': 'auto',
+                          **backends.parameter_defaults()}
+    #: The parameters that make the potential (the rest choose how to sum it).
+    potential_parameters = ('springs', 'a', 'Q', 'dim', 'q', 'loads')
+    discard_results_on_any_change = True
+    nolabel = True
+
+    #: Largest number of atoms for which :meth:`get_hessian` builds the dense
+    #: (dim N)**2 matrix: 3000 atoms in 3D is an 81e6-entry, 648 MB array.
+    max_hessian_atoms = 3000
+    #: :meth:`hessian_rows` takes the Hessian's block on the atoms with a free
+    #: coordinate where more than this fraction of the atoms are held.
+    block_min_held = 0.5
+
+    #: Parameters that change the accuracy of the next calls, not the
+    #: potential: results that meet the new ``tol`` stay.
+    accuracy_parameters = frozenset({'tol', 'crossover'})
+
+    def __init__(self, springs: ArrayLike = (), a: float = 1.0,
+                 Q: float = 1.0, dim: int = 3, q: ArrayLike | None = None,
+                 loads: ArrayLike | None = None, backend: str = 'auto',
+                 **kwargs: Any) -> None:
+        self._lock = threading.RLock()
+        self.potential: MaudPotential = MaudPotential(np.zeros((0, 2), int))
+        self.last_backend: str | None = None
+        self.last_tolerance: float | None = None
+        self.last_force_scale: float | None = None
+        super().__init__(springs=springs, a=a, Q=Q, dim=dim, q=q, loads=loads,
+                         backend=backend, **kwargs)
+
+    def get_property(self, name: str, atoms: Atoms | None = None,
+                     allow_calculation: bool = True) -> Any:
+        """ASE's, one thread at a time: threads that share this calculator
+        (each with its own atoms) each get the results of their atoms, not
+        those another thread's call left."""
+        with self._lock:
+            return super().get_property(name, atoms, allow_calculation)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        del state['_lock']   # a lock is not copied or pickled: each copy has its own
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.RLock()
+
+    def set(self, **kwargs: Any) -> dict[str, Any]:
+        """Set parameters; invalid values raise ValueError and are not kept.
+
+        Any change discards the results, except a change of ``tol`` or
+        ``crossover`` alone that the results held already meet
+        (:attr:`last_tolerance` ``<=`` the new ``tol``). One thread at a
+        time, as :meth:`get_property`.
+        """
+        with self._lock:
+            return self._set(**kwargs)
+
+    def _set(self, **kwargs: Any) -> dict[str, Any]:
+        unknown = sorted(set(kwargs) - set(self.default_parameters))
+        if unknown:
+            raise ValueError(f'MaudCalculator takes no parameter {unknown[0]!r}; '
+                             f'its parameters are {", ".join(self.default_parameters)}')
+        merged = {**self.parameters, **kwargs}
+        if set(kwargs) & set(self.potential_parameters):
+            potential = MaudPotential(**{name: merged[name]
+                                         for name in self.potential_parameters})
+            backends.check_parameters(merged)
+            self.potential = potential
+            kwargs.update({name: getattr(potential, name) for name in kwargs
+                           if name in self.potential_parameters})
+        else:
+            backends.check_parameters(merged)
+        if (kwargs and set(kwargs) <= self.accuracy_parameters
+                and self.last_tolerance is not None
+                and self.last_tolerance <= kwargs.get(
+                    'tol', self.parameters['tol'])):
+            changed = {key: value for key, value in kwargs.items()
+                       if self.parameters.get(key) != value}
+            self.parameters.update(kwargs)
+            return changed
+        return super().set(**kwargs)
+
+    @property
+    def tolerance(self) -> float:
+        """``tol``: the force error allowed of the next calls
+        (:class:`ase_maud.calculator.accuracy.ToleranceAware`)."""
+        return self.parameters['tol']
+
+    def set_tolerance(self, tol: float) -> None:
+        """Set ``tol`` for the next calls (:class:`ase_maud.calculator.accuracy.ToleranceAware`):
+        :meth:`set` with ``tol`` alone, without its checks of the other
+        parameters when the results held already meet it."""
+        if self.last_tolerance is not None and self.last_tolerance <= tol:
+            self.parameters['tol'] = check('tol', tol)
+        else:
+            self.set(tol=tol)
+
+    def reset(self) -> None:
+        """Clear the results and what is known of their accuracy."""
+        super().reset()
+        self.last_backend = self.last_tolerance = None
+        self.last_force_scale = None
+
+    @property
+    def springs(self) -> np.ndarray:
+        """The (K, 2) int array of sprung pairs."""
+        return self.potential.springs
+
+    @property
+    def dim(self) -> int:
+        """2 (points on a plane z = const, 2x2 blocks) or 3."""
+        return self.potential.dim
+
+    @property
+    def length_scale(self) -> float:
+        """The length ``a`` of the repulsion ``a**3 Q / L`` (a dimer with
+        one spring rests at ``L = a``)."""
+        return self.potential.a
+
+    def check_state(self, atoms: Atoms, tol: float = 1e-15) -> list[str]:
+        """What changed since the last calculation, compared exactly.
+
+        ASE's default compares positions within an absolute ``tol``, which
+        misses every move of a scene whose ``a`` is below about 1e-10 and
+        costs several ``isclose`` calls per property request; the potential
+        depends only on the positions (and the number of points), so those,
+        the cell and pbc are compared exactly, whatever the scale.
+        """
+        old = self.atoms
+        if old is None or len(old) != len(atoms):
+            return list(all_changes)
+        return [name for name, was, now in (
+            ('positions', old.arrays['positions'], atoms.arrays['positions']),
+            ('numbers', old.arrays['numbers'], atoms.arrays['numbers']),
+            ('cell', old.cell.array, atoms.cell.array), ('pbc', old.pbc, atoms.pbc))
+            if not (was == now).all()]
+
+    def _hold(self, atoms: Atoms, system_changes: Sequence[str]) -> None:
+        """Keep what :meth:`check_state` compares next time (ASE's
+        ``Calculator.calculate`` keeps ``atoms.copy()``, and ASE's
+        ``get_property`` has made one already): the copy held is updated in
+        place when ``system_changes`` (what :meth:`check_state` found, or
+        what :meth:`compute` is told) name the positions alone and the atoms
+        and their constraints are as many as held, and made anew otherwise."""
+        old = self.atoms
+        if old is atoms:
+            return
+        if (old is None or len(old) != len(atoms)
+                or len(old.constraints) != len(atoms.constraints)
+                or not set(system_changes) <= {'positions'}):
+            self.atoms = atoms.copy()
+        else:
+            old.arrays['positions'][:] = atoms.arrays['positions']
+
+    def compute(self, atoms: Atoms, properties: Sequence[str]) -> dict[str, Any]:
+        """The ``properties`` of ``atoms`` computed now, in one call (what
+        ``get_property`` does after a move, without its change detection and
+        copy of the atoms): for an optimizer that moves the positions itself,
+        so ``atoms`` differ from those of the last call in their positions
+        only. Returns :attr:`results`."""
+        with self._lock:
+            self.results = {}
+            self.calculate(atoms, properties, ['positions'])
+            return self.results
+
+    def check_atoms(self, atoms: Atoms) -> np.ndarray:
+        """Validate ``atoms`` for this potential; return its positions.
+
+        Raises ValueError naming the problem: no atoms, periodic boundaries, a spring
+        index beyond the last atom, loads not one per atom, a non-finite
+        position, or (``dim=2``) a point off the plane of the others.
+        """
+        if atoms.pbc.any():
+            raise ValueError(f'periodic boundaries are not supported (pbc='
+                             f'{atoms.pbc.tolist()}): 1/L needs an Ewald sum;'
+                             ' set atoms.pbc = False')
+        natoms = len(atoms)
+        if natoms == 0:
+            raise ValueError('no atoms: a scene needs at least one point')
+        self.potential.check_size(natoms)   # the rest was checked by set
+        positions = atoms.get_positions()
+        if not np.isfinite(positions).all():
+            bad = np.flatnonzero(~np.isfinite(positions).all(axis=1))[0]
+            raise ValueError(f'atom {bad} has a non-finite position '
+                             f'{positions[bad].tolist()}')
+        if self.dim == 2 and natoms > 1:
+            z = positions[:, 2]
+            extent = max(np.ptp(positions[:, :2]), self.length_scale)
+            off = np.abs(z - z[0])
+            if off.max() > PLANE_TOLERANCE * extent:
+                k = int(np.argmax(off))
+                raise ValueError(f'dim=2 needs every point on one plane z = '
+                                 f'const: atom {k} has z = {z[k]}, atom 0 '
+                                 f'has z = {z[0]} (ASE drivers move z: hold it '
+                                 'with ase_maud.scenes.builders.keep_on_plane(atoms))')
+        return positions
+
+    def calculate(self, atoms: Atoms | None = None,
+                  properties: Sequence[str] = ('energy',),
+                  system_changes: Sequence[str] = all_changes) -> None:
+        if atoms is not None:
+            self._hold(atoms, system_changes)
+        positions = self.check_atoms(self.atoms)
+        potential = self.potential
+        dim, a, Q = potential.dim, potential.a, potential.Q
+        want_blocks = 'stiffness' in properties
+        want_hessian = 'hessian' in properties
+        if want_hessian:
+            self.check_hessian_size(len(positions))
+        if potential.repulsive:
+            scaled = potential.reduced(positions)
+            if want_hessian:   # energy, forces and Hessian in one pass, exact
+                choice = backends.exact_choice(self.parameters['backend'])
+                e_rep, f_rep, h_rep = choice.backend.hessian(scaled, dim)
+                block6 = diagonal_blocks(h_rep, dim) if want_blocks else None
+            else:
+                (e_rep, f_rep, block6), choice = backends.evaluate(
+                    self.parameters, scaled, dim, want_blocks)
+            backend, tolerance = choice.backend.name, choice.tolerance
+            e_unit, f_unit = potential.energy_unit, potential.force_unit
+        else:   # a = 0: springs and loads alone, in the user's units (x' = x), times Q
+            n = dim * len(positions)
+            scaled, e_rep, f_rep, backend, tolerance = positions, 0.0, 0.0, 'none', 0.0
+            h_rep = np.zeros((n, n)) if want_hessian else None
+            e_unit = f_unit = Q
+        e_spr, f_spr = potential.spring_terms(scaled)
+        results = {'energy': e_unit * (e_rep + e_spr), 'forces': f_unit * (f_rep + f_spr)}
+        if potential.loads is not None:
+            with np.errstate(over='ignore', invalid='ignore'):   # said below
+                e_load, f_load = physics.load_terms(positions, potential.loads)
+            if not np.isfinite(e_load):
+                raise ValueError(f'the energy of the loads, -sum p.x, overflows float64 '
+                                 f'(loads up to {np.abs(potential.loads).max():.3g} force '
+                                 f'units, positions up to {np.abs(positions).max():.3g}): '
+                                 'choose units nearer the scene')
+            results['energy'] += e_load
+            results['forces'] += f_load
+        if want_blocks:
+            blocks = (backends.voigt_to_blocks(block6, dim) if potential.repulsive
+                      else np.zeros((len(positions), dim, dim)))
+            blocks += physics.spring_nodal_blocks(self.springs, len(positions),
+                                                  potential.stiffnesses, dim)
+            results['stiffness'] = Q * blocks
+        if want_hessian:
+            results['hessian'] = potential.whole_hessian(h_rep)
+        bad = [name for name, value in results.items() if not all_finite(value)]
+        if bad:
+            if potential.repulsive:
+                raise_on_closest(scaled, a)   # 1/L, 1/L**2 or the Hessian's 1/L**3
+            raise ValueError(f'the {", ".join(bad)} overflow float64 at a = '
+                             f'{a!r}, Q = {Q!r} (energies scale as a^2 Q, '
+                             'forces as a Q): choose units nearer the scene')
+        if dim == 2:
+            results['forces'][:, 2] = 0.0
+        results['energy'] = float(results['energy'])
+        # results of a call at other positions are gone by now (ASE clears
+        # them without reset): only those still held count
+        held = self.last_tolerance if self.results else None
+        self.results.update(results, free_energy=results['energy'])
+        self.last_backend = backend
+        self.last_tolerance = max(held or 0.0, tolerance)
+        self.last_force_scale = potential.force_unit * (
+            math.sqrt((f_rep * f_rep).sum(axis=1).max(initial=0.0))
+            if potential.repulsive else 0.0)
+
+    def get_stiffness(self, atoms: Atoms | None = None) -> np.ndarray:
+        """Nodal blocks ``K_mm``, shape (N, dim, dim), units of ``Q``."""
+        return self.get_property('stiffness', atoms)
+
+    def get_hessian(self, atoms: Atoms | None = None) -> np.ndarray:
+        """The full analytic Hessian ``d2E/dr dr``, shape (dim N, dim N).
+
+        For analysis of small scenes only; refuses more than
+        :attr:`max_hessian_atoms` atoms with a ValueError.
+        """
+        if atoms is not None:
+            self.check_hessian_size(len(atoms))
+        return self.get_property('hessian', atoms)
+
+    def get_hessian_block(self, atoms: Atoms, indices: ArrayLike) -> np.ndarray:
+        """The rows and columns of :meth:`get_hessian` on the coordinates of
+        the atoms ``indices`` (n distinct indices), shape (dim n, dim n),
+        units of ``Q``, at ``atoms``' positions: computed anew in O(n N)
+        time and O(n**2) memory without the whole Hessian (whatever N), and
+        not kept in :attr:`results`. A ValueError names a bad index."""
+        self.potential.check_size(len(atoms))
+        positions = self.check_atoms(atoms)
+        block = self.potential.hessian_block(positions, indices)
+        if not all_finite(block):
+            if self.potential.repulsive:
+                raise_on_closest(self.potential.reduced(positions), self.potential.a)
+            raise ValueError(f'the Hessian overflows float64 at Q = {self.potential.Q!r}: '
+                             'choose units nearer the scene')
+        return block
+
+    def hessian_rows(self, atoms: Atoms, free: np.ndarray) -> np.ndarray | None:
+        """The atoms with a free coordinate (``free``: mask (N, dim)) where
+        :meth:`get_hessian_block` on them is cheaper than :meth:`get_hessian`:
+        the other atoms are more than :attr:`block_min_held` of them (a
+        Filter's region, a net held at most points); else None, and always
+        for a subclass, whose ``calculate`` may give another Hessian."""
+        rows = np.flatnonzero(free.any(axis=1))
+        cheaper = len(rows) < (1.0 - self.block_min_held) * len(atoms)
+        return rows if cheaper and type(self) is MaudCalculator else None
+
+    def check_hessian_size(self, natoms: int, what: str = 'get_hessian',
+                           ) -> None:
+        """Raise ValueError, naming the O(N)-memory alternatives, if a dense
+        Hessian of ``natoms`` atoms exceeds :attr:`max_hessian_atoms`."""
+        if natoms > self.max_hessian_atoms:
+            raise ValueError(
+                f'{what}: {natoms} atoms exceed max_hessian_atoms = '
+                f'{self.max_hessian_atoms} (the dense matrix would hold '
+                f'{(self.dim * natoms)**2:.2e} entries); use'
+                ' Hessian-vector products (calc.potential.hvp, or '
+                'ase_maud.analysis.stationary.hessian_operator'
+                " and classify(atoms, method='iterative') for the lowest "
+                'modes) instead')
+
+    def get_spring_hessian(self, atoms: Atoms | None = None) -> sp.csr_matrix:
+        """The springs' exact, constant Hessian ``Q (L_q (x) I_dim)`` (``L_q``
+        the Laplacian weighted by ``q``), shape
+        (dim N, dim N), kept by :attr:`potential` (built once per number of
+        atoms). A spring index beyond the last atom is a ValueError."""
+        atoms = atoms if atoms is not None else self.atoms
+        return self.potential.spring_hessian(len(atoms))
+
+    def unbounded_components(self, atoms: Atoms) -> list[list[int]]:
+        """Spring components of ``atoms`` proved to fly away for ever
+        (:func:`.topology.unbounded_components`); empty if there are none."""
+        return topology.unbounded_components(
+            atoms, self.potential.spring_components(len(atoms)), self.dim)
+
+    def minimum_proved(self, atoms: Atoms) -> bool:
+        """True if ``atoms`` are proved to have a finite minimum, however far
+        out (:func:`.topology.minimum_proved`): then a run that spreads far is
+        on its way there, not diverging."""
+        return topology.minimum_proved(atoms, self.potential.spring_components(len(atoms)),
+                                       self.potential.loads, self.dim)
+
+    def no_equilibrium(self, atoms: Atoms, minimum: bool = True) -> str | None:
+        """Why ``atoms`` can have no finite equilibrium, in words, or None if
+        nothing is proved: loads with a net sum along a direction nothing
+        holds (:func:`.topology.net_load`: no stationary point at all), or,
+        for a ``minimum``, spring components that fly away
+        (:meth:`unbounded_components`)."""
+        total = topology.net_load(atoms, self.potential.loads, self.dim)
+        if total is not None:
+            return topology.describe_net_load(total)
+        components = self.unbounded_components(atoms) if minimum else []
+        return topology.describe_unbounded(components) if components else None
+
+
+#: The name under which ASE's trajectory stores a MaudCalculator.
+CALC_NAME = 'maudcalculator'
+
+
+def stored_parameters(frame: Atoms) -> dict[str, Any]:
+    """The MaudCalculator parameters a frame read from a file stores with
+    its energy and forces (an ASE trajectory does), or {}."""
+    calc = frame.calc
+    stored = calc is not None and getattr(calc, 'name', '') == CALC_NAME
+    return {k: v for k, v in calc.parameters.items()
+            if k in MaudCalculator.default_parameters} if stored else {}

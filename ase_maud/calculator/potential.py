@@ -1,0 +1,365 @@
+"""The Maud potential as one value: its springs and constants, its force
+densities and loads, its units, its exact spring Hessian and its whole Hessian.
+
+:class:`MaudPotential` is what every consumer of the potential takes (the
+calculator, the Hessian and its products, analysis, modes, the stiffness
+models) instead of reading a calculator's parameters. The pair law itself is
+:mod:`ase_maud.physics`; the sum of the repulsion over every pair is a
+backend's (:mod:`ase_maud.backends`).
+
+Reduced units. Everything is computed for the scene measured in ``a``
+(``x' = x / a``) at ``a = Q = 1`` and scaled back: ``E = a**2 Q e(x')``,
+``F = a Q f(x')``, stiffness and Hessian ``Q k(x')``, so no power of ``a`` is
+formed and every result is finite wherever it is representable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike
+
+from ase_maud import backends
+from ase_maud.checks import check, check_each, check_indices
+from ase_maud.physics import pair_law as physics
+from ase_maud.physics import topology
+from ase_maud.physics.spring_list import check_range, check_springs
+
+
+@dataclass(frozen=True, eq=False)
+class MaudPotential:
+    """``E = sum_{i<j} a**3 Q / L_ij + sum_{s=(i,j) in springs} Q q_s L_ij**2 / 2
+    - sum_i F_i . r_i``.
+
+    ``springs``: (K, 2) atom index pairs (checked: :func:`.springs.check_springs`);
+    ``a``: a length; ``Q``: a force per length; ``dim``: 2 (points on a plane
+    ``z = const``, 2x2 blocks) or 3; ``q``: each spring's force density
+    multiplier of ``Q``, (K,) positive (None: every ``q_s = 1``); ``loads``:
+    constant nodal loads ``F``, (N, 3) or, for ``dim=2``, (N, 2), force units
+    (None: none; in 2D their z must be 0). Loads change the energy and
+    forces, never a Hessian. ``a = 0`` switches the repulsion off: springs
+    and loads alone, the force-density method (:attr:`repulsive`). Energies
+    count each pair once; forces have ASE's sign, ``f = -dE/dr``. Frozen: a
+    change is a new potential (the spring Hessian it caches stays valid).
+    """
+
+    springs: np.ndarray
+    a: float = 1.0
+    Q: float = 1.0
+    dim: int = 3
+    q: np.ndarray | None = None
+    loads: np.ndarray | None = None
+    _cache: dict = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        springs = check_springs(self.springs)
+        springs.flags.writeable = False
+        object.__setattr__(self, 'springs', springs)
+        for name in ('a', 'Q', 'dim'):
+            object.__setattr__(self, name, check(name, getattr(self, name)))
+        for name, value in (('q', self._checked_q()), ('loads', self._checked_loads())):
+            if value is not None:
+                value.flags.writeable = False
+            object.__setattr__(self, name, value)
+
+    def _checked_q(self) -> np.ndarray | None:
+        if self.q is None:
+            return None
+        q = check_each('q', self.q, 'spring')
+        if q.shape != (len(self.springs),):
+            raise ValueError(f'q must hold one value per spring, shape '
+                             f'({len(self.springs)},), got shape {q.shape}')
+        return q
+
+    def _checked_loads(self) -> np.ndarray | None:
+        if self.loads is None:
+            return None
+        given = check_each('loads', self.loads, 'atom')
+        if given.ndim != 2 or given.shape[1] not in (self.dim, 3):
+            shapes = '(N, 3) or (N, 2)' if self.dim == 2 else '(N, 3)'
+            raise ValueError(f'loads must have shape {shapes} (one force per atom), '
+                             f'got shape {given.shape}')
+        loads = np.zeros((len(given), 3))
+        loads[:, :given.shape[1]] = given
+        if self.dim == 2 and loads[:, 2].any():
+            k = int(np.flatnonzero(loads[:, 2])[0])
+            raise ValueError(f'loads of atom {k} has z = {float(loads[k, 2])!r}: a dim=2 '
+                             'scene takes loads in its plane (z = 0)')
+        return loads
+
+    @property
+    def repulsive(self) -> bool:
+        """Whether the points repel: ``a > 0``. At ``a = 0`` nothing is
+        computed in reduced units (there are none) and no backend is called."""
+        return self.a > 0
+
+    @property
+    def stiffnesses(self) -> float | np.ndarray:
+        """Each spring's constant ``Q q_s`` in units of ``Q``: ``q``, or 1
+        (a number) if no ``q`` was given."""
+        return 1.0 if self.q is None else self.q
+
+    def check_loads(self, natoms: int) -> None:
+        """Raise ValueError if the loads are not one per atom of ``natoms``."""
+        if self.loads is not None and len(self.loads) != natoms:
+            raise ValueError(f'loads has {len(self.loads)} rows, one per atom, but '
+                             f'the atoms are {natoms}')
+
+    # -- units --------------------------------------------------------------
+
+    @property
+    def energy_unit(self) -> float:
+        """``a**2 Q``: the energy of the reduced potential's unit."""
+        return self.a * self.a * self.Q
+
+    @property
+    def force_unit(self) -> float:
+        """``a Q``."""
+        return self.a * self.Q
+
+    def reduced(self, positions: ArrayLike) -> np.ndarray:
+        """The positions (N, 3), or (N, dim), in units of ``a``: ``x / a``
+        (N, 3), with ``z = 0`` for ``dim=2``; a ValueError names an atom whose
+        ``x / a`` overflows."""
+        given = np.asarray(positions, dtype=float)
+        if given.ndim == 2 and given.shape[1] == 3:
+            with np.errstate(over='ignore'):
+                scaled = given / self.a
+        else:
+            scaled = np.zeros((len(given), 3))
+            with np.errstate(over='ignore'):
+                np.divide(given, self.a, out=scaled[:, :given.shape[1]])
+        if not np.isfinite(scaled).all():
+            bad = np.flatnonzero(~np.isfinite(scaled).all(axis=1))[0]
+            raise ValueError(f'atom {bad} at {given[bad].tolist()} is beyond the '
+                             f'float64 range in units of a = {self.a!r}; choose a '
+                             'nearer the size of the scene')
+        if self.dim == 2:
+            scaled[:, 2] = 0.0
+        return scaled
+
+    def check_size(self, natoms: int) -> None:
+        """Raise ValueError if a spring names an atom beyond ``natoms`` or
+        the loads are not one per atom (:func:`.springs.check_range`,
+        :meth:`check_loads`)."""
+        self._springs_within(natoms)
+        self.check_loads(natoms)
+
+    # -- the springs: exact, constant ----------------------------------------
+
+    def spring_laplacian(self, natoms: int) -> sp.csr_matrix:
+        """The spring graph's Laplacian weighted by ``q``, ``sum_s q_s (e_i -
+        e_j)(e_i - e_j)^T`` (``D - A`` if every ``q_s = 1``), (natoms,
+        natoms), kept; the springs' Hessian is ``Q`` times it, times ``I_dim``."""
+        return self._kept(('laplacian', natoms), lambda: physics.spring_laplacian(
+            self._springs_within(natoms), natoms, self.stiffnesses))
+
+    def spring_terms(self, scaled: np.ndarray) -> tuple[float, np.ndarray]:
+        """Energy and forces (N, 3) of the springs at ``scaled`` positions
+        (units of ``a``), at ``a = Q = 1``: :func:`.physics.spring_terms`'s
+        law, ``Q q L**2 / 2`` and ``-Q q d``, summed spring by spring in one
+        compiled pass (:func:`_spring_sums`)."""
+        n = len(scaled)
+        springs, q = self._kept(('spring sums', n), lambda: (
+            np.ascontiguousarray(self._springs_within(n), dtype=np.int64),
+            np.broadcast_to(np.asarray(self.stiffnesses, float), len(self.springs)).copy()))
+        return _spring_sums(np.ascontiguousarray(scaled, dtype=float), springs, q)
+
+    def spring_hessian(self, natoms: int) -> sp.csr_matrix:
+        """The springs' exact, constant Hessian ``Q (L_q (x) I_dim)``
+        (:meth:`spring_laplacian`), shape (dim N, dim N), coordinates point
+        by point; built once per N."""
+        return self._kept(('hessian', natoms), lambda: physics.spring_hessian(
+            self._springs_within(natoms), natoms, self.Q * self.stiffnesses, self.dim))
+
+    def spring_components(self, natoms: int) -> np.ndarray:
+        """The spring graph's component of every atom, (N,) labels
+        (:func:`.topology.spring_components`); found once per N."""
+        return self._kept(('components', natoms), lambda: topology.spring_components(
+            natoms, self._springs_within(natoms)))
+
+    def _springs_within(self, natoms: int) -> np.ndarray:
+        """The springs, once :func:`.springs.check_range` has found none
+        beyond ``natoms`` atoms (looked for only if the highest index,
+        kept, is not below ``natoms``)."""
+        if natoms <= self._kept('highest index', lambda: int(self.springs.max(initial=-1))):
+            check_range(self.springs, natoms)
+        return self.springs
+
+    def _kept(self, key: tuple | str, build):
+        if key not in self._cache:
+            self._cache[key] = build()
+        return self._cache[key]
+
+    # -- the whole Hessian --------------------------------------------------
+
+    def hessian(self, positions: np.ndarray, backend: str = 'auto') -> np.ndarray:
+        """The dense Hessian ``d2E/dr dr``, shape (dim N, dim N), units of
+        ``Q``: ``-B_ij`` off the diagonal, the nodal block ``K_ii = sum_j
+        B_ij`` on it (:mod:`.physics`); the repulsion's part by ``backend``
+        (:func:`.backends.exact_choice`)."""
+        n = self.dim * len(positions)
+        unit = (backends.exact_choice(backend).backend.hessian(self.reduced(positions),
+                                                               self.dim)[2]
+                if self.repulsive else np.zeros((n, n)))   # a = 0: the springs alone
+        return self.whole_hessian(unit)
+
+    def hessian_block(self, positions: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """The rows and columns of :meth:`hessian` on the coordinates of the
+        points ``index`` (n,), shape (dim n, dim n), units of ``Q``, without
+        the whole: the repulsion's part in O(n N)
+        (:func:`.physics.repulsion_hessian_block`), the springs' a slice of
+        their constant Hessian."""
+        index = check_indices(index, len(positions))
+        coords = (self.dim * index[:, None] + np.arange(self.dim)).ravel()
+        block = self.spring_hessian(len(positions))[coords][:, coords].toarray()
+        if self.repulsive:
+            block += self.Q * physics.repulsion_hessian_block(
+                self.reduced(positions), index, self.dim)
+        return block
+
+    def whole_hessian(self, repulsion: np.ndarray) -> np.ndarray:
+        """The dense Hessian from the unit repulsion's (dim N, dim N): ``Q``
+        times it, plus the springs' (whose entries are kept in a flat index
+        once per N, not converted at every call); ``repulsion`` is overwritten."""
+        n = len(repulsion) // self.dim
+        flat, data = self._kept(('hessian entries', n), lambda: _flat_entries(
+            np.ascontiguousarray(self._springs_within(n), dtype=np.int64),
+            np.broadcast_to(np.asarray(self.Q * self.stiffnesses, float),
+                            len(self.springs)).copy(), self.dim, n))
+        repulsion *= self.Q
+        repulsion.ravel()[flat] += data
+        return repulsion
+
+    def hvp(self, positions: np.ndarray, v: ArrayLike) -> np.ndarray:
+        """``H v`` without forming ``H``: ``(H v)_i = sum_j B_ij (v_i - v_j)``.
+
+        ``v`` has shape (N, dim) (a displacement of every point) or
+        (m, N, dim) (m of them, one pass over the pairs); the result has its
+        shape, in units of ``Q`` times ``v``. O(N) memory per vector; the
+        repulsion's part by the registry's Hessian-vector backend
+        (:func:`.backends.repulsion_hvp`).
+        """
+        n, dim = len(positions), self.dim
+        v = np.asarray(v, dtype=float)
+        block = v.reshape(-1, n, dim)
+        u = np.zeros((len(block), n, 3))
+        u[:, :, :dim] = block
+        hv = (self.Q * backends.repulsion_hvp(self.reduced(positions), u)[:, :, :dim]
+              if self.repulsive else np.zeros(block.shape))
+        hv += (self.spring_hessian(n) @ block.reshape(len(block), -1).T
+               ).T.reshape(hv.shape)
+        return hv.reshape(v.shape)
+
+
+@numba.njit(cache=True)
+def _spring_sums(x: np.ndarray, springs: np.ndarray,
+                 q: np.ndarray) -> tuple[float, np.ndarray]:
+    """``sum_s q_s |d_s|**2 / 2`` and the forces (N, 3): ``-q_s d_s`` on
+    ``i`` and ``+q_s d_s`` on ``j`` of every spring ``s = (i, j)``, ``d_s =
+    x_i - x_j`` (:func:`.physics.spring_terms`'s law; ``x`` (N, 3))."""
+    forces = np.zeros((x.shape[0], 3))
+    energy = 0.0
+    for s in range(springs.shape[0]):
+        i, j = springs[s, 0], springs[s, 1]
+        for k in range(3):
+            d = x[i, k] - x[j, k]
+            pull = q[s] * d
+            energy += 0.5 * d * pull
+            forces[i, k] -= pull
+            forces[j, k] += pull
+    return energy, forces
+
+
+@numba.njit(cache=True)
+def _flat_entries(springs: np.ndarray, weights: np.ndarray, dim: int,
+                  natoms: int) -> tuple[np.ndarray, np.ndarray]:
+    """The entries of the springs' Hessian ``L_w (x) I_dim`` (``w`` the
+    springs' ``weights``: :func:`.physics.spring_hessian_entries`'s matrix)
+    as flat indices into a dense (dim N, dim N) array, each once, and their
+    values, row by row: an atom's diagonal (the sum of its springs' ``w``)
+    and its sprung pairs' ``-w`` (summed over the pair's springs, if it is
+    listed more than once, in either order). The springs of an atom are
+    summed where it is their first end, in their order, then where it is
+    their second: the order in which ``np.bincount`` sums those entries as
+    listed, so the values are the same to the last bit; no sort."""
+    count = springs.shape[0]
+    starts = np.zeros(natoms + 1, dtype=np.int64)   # each atom's springs, in that order
+    for s in range(count):
+        starts[springs[s, 0] + 1] += 1
+        starts[springs[s, 1] + 1] += 1
+    for atom in range(natoms):
+        starts[atom + 1] += starts[atom]
+    other = np.empty(2 * count, dtype=np.int64)
+    weight = np.empty(2 * count)
+    fill = starts[:natoms].copy()
+    for end in range(2):
+        for s in range(count):
+            atom = springs[s, end]
+            other[fill[atom]] = springs[s, 1 - end]
+            weight[fill[atom]] = weights[s]
+            fill[atom] += 1
+    rows = np.empty(natoms + 2 * count, dtype=np.int64)   # the entries, atom by atom
+    columns = np.empty(len(rows), dtype=np.int64)
+    sums = np.zeros(len(rows))
+    slot = np.full(natoms, -1, dtype=np.int64)   # a column's entry (this row's if > diagonal)
+    entries = 0
+    for row in range(natoms):
+        if starts[row] == starts[row + 1]:
+            continue
+        diagonal = entries
+        rows[diagonal], columns[diagonal] = row, row
+        entries += 1
+        for p in range(starts[row], starts[row + 1]):
+            sums[diagonal] += weight[p]
+            column = other[p]
+            if slot[column] <= diagonal:
+                slot[column] = entries
+                rows[entries], columns[entries] = row, column
+                entries += 1
+            sums[slot[column]] += -weight[p]
+    size = dim * natoms
+    flat = np.empty(dim * entries, dtype=np.int64)
+    data = np.empty(dim * entries)
+    for e in range(entries):
+        for axis in range(dim):
+            flat[dim * e + axis] = (dim * rows[e] + axis) * size + dim * columns[e] + axis
+            data[dim * e + axis] = sums[e]
+    return flat, data
+
+
+#: Pairs closer than this many ``a`` overflow the blocks ``1 / L**3`` (and
+#: from about 1e-154 a the forces): named when a result is not finite.
+CLOSEST_REDUCED_DISTANCE = 1e-100
+
+
+def raise_on_closest(scaled: np.ndarray, a: float) -> None:
+    """Raise ValueError naming the closest pair of points if it is closer
+    than :data:`CLOSEST_REDUCED_DISTANCE` ``a`` (``scaled`` is ``x / a``),
+    or at the same position."""
+    if len(scaled) < 2:
+        return
+    i, j, distance = physics.closest_pair(scaled)
+    if distance == 0:
+        raise ValueError(f'atoms {i} and {j} are at the same position '
+                         f'{(a * scaled[i]).tolist()}: the repulsion a^3 Q / L '
+                         'is infinite there')
+    if distance < CLOSEST_REDUCED_DISTANCE:
+        raise ValueError(
+            f'atoms {i} and {j} are {distance:.3g} a '
+            f'apart (a = {a!r}): 1/L**3 overflows float64 below about '
+            f'{CLOSEST_REDUCED_DISTANCE:g} a; move them apart or choose a '
+            'smaller a')
+
+
+def diagonal_blocks(hessian: np.ndarray, dim: int) -> np.ndarray:
+    """The (N, 6) xx, yy, zz, xy, xz, yz entries of the nodal blocks on the
+    diagonal of a (dim N, dim N) ``hessian`` (zeros beyond ``dim``)."""
+    n = len(hessian) // dim
+    blocks = np.zeros((n, 3, 3))
+    index = np.arange(n)
+    blocks[:, :dim, :dim] = hessian.reshape(n, dim, n, dim)[index, :, index, :]
+    return backends.blocks_to_voigt(blocks)

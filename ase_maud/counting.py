@@ -1,0 +1,81 @@
+"""What a computation cost, counted: calculator calls (:class:`CallRecorder`)
+and the work beyond them (:class:`Work`: Hessian-vector products and dense
+Hessians), and :func:`fresh_copy`, a start with a calculator of its own.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from ase import Atoms
+from ase.calculators.calculator import Calculator
+
+
+@dataclass
+class Work:
+    """What a search computed beyond its calculator calls, in force-call
+    equivalents: ``hvp_vectors``, the vectors multiplied by the Hessian
+    (:func:`hessian_operator`; a block of k vectors is k, each costing about
+    one force call), and ``hessians``, the dense Hessians computed. Apart,
+    not in :attr:`total`: ``near_products``, the products with the
+    near-field model's sparse ``P`` (:mod:`ase_maud.optimize.models.near`), each
+    O(near pairs), far below a force call."""
+
+    hvp_vectors: int = 0
+    hessians: int = 0
+    near_products: int = 0
+
+    @property
+    def total(self) -> int:
+        """Hessian-vector products and Hessians, one equivalent each."""
+        return self.hvp_vectors + self.hessians
+
+
+class CallRecorder:
+    """Context manager counting and sampling the calls of ``calc.calculate``.
+
+    It shadows the method on this calculator instance only and restores it
+    on exit. ``samples`` is the list of sample tuples so far.
+    """
+
+    def __init__(self, calc: Calculator):
+        self.calc = calc
+        self.samples: list[tuple[float, ...]] = []
+        self._overhead = np.zeros(2)           # wall, CPU seconds
+        self._t0 = self._clocks()
+
+    @staticmethod
+    def _clocks() -> np.ndarray:
+        """(wall, process CPU) seconds now."""
+        return np.array([time.perf_counter(), time.process_time()])
+
+    def __enter__(self):
+        self._calculate = self.calc.calculate
+        self.calc.calculate = self._calculate_and_sample
+        return self
+
+    def __exit__(self, *exc):
+        del self.calc.calculate
+
+    def _calculate_and_sample(self, *args, **kwargs):
+        self._calculate(*args, **kwargs)
+        now = self._clocks()
+        atoms, results = self.calc.atoms, self.calc.results
+        forces = results['forces'].copy()
+        for constraint in atoms.constraints:
+            constraint.adjust_forces(atoms, forces)
+        wall, cpu = now - self._t0 - self._overhead
+        self.samples.append((len(self.samples) + 1, wall, cpu,
+                             np.sqrt((forces**2).sum(axis=1).max()),
+                             results['energy']))
+        self._overhead += self._clocks() - now
+
+
+def fresh_copy(atoms: Atoms) -> Atoms:
+    """A copy of ``atoms`` (constraints included) with a new calculator of
+    the same class and parameters: the same start, no shared results."""
+    copy = atoms.copy()
+    copy.calc = type(atoms.calc)(**atoms.calc.parameters)
+    return copy

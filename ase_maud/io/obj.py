@@ -1,0 +1,195 @@
+"""Wavefront OBJ nets: read (points, coincident ones merged; springs from the
+faces, polylines and curves of degree 1) and written back into the original
+text (the format as :mod:`ase_maud.io` describes it)."""
+
+from __future__ import annotations
+
+import re
+from io import StringIO
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ase_maud.io.net_data import NetData, PathLike
+from ase_maud.io.text import (
+    check_finite,
+    coordinates,
+    number_text,
+    original_text,
+    parse_numbers,
+    token_lines,
+)
+from ase_maud.physics.topology import spring_components
+
+#: OBJ vertices closer than this times the diagonal of their bounding box
+#: are one point (a Rhino export gives every curve its own copies of its
+#: end vertices).
+MERGE_TOLERANCE = 1e-9
+
+
+#: OBJ curve types (``cstype``, after an optional ``rat``) read, with
+#: ``deg 1``: polylines through their control points.
+CURVE_TYPES = ('bspline', 'bezier')
+
+
+def read_obj(path: PathLike) -> NetData:
+    """Points, springs and faces of an OBJ file (see the module docstring).
+
+    Springs: the edges of every face (``f``), the segments of every polyline
+    (``l``) and of every curve of degree 1 (``curv``), each undirected pair
+    once, in order of appearance. Vertices closer than
+    :data:`MERGE_TOLERANCE` times the diagonal of their bounding box are one
+    point (:func:`merge_coincident`).
+    """
+    return _obj_file(path)[0]
+
+
+def merge_coincident(points: np.ndarray,
+                     tolerance: float = MERGE_TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
+    """The point of every one of (N, 3) ``points`` once coincident ones are
+    merged, and the merged points.
+
+    Two points closer than ``tolerance`` times the diagonal of the points'
+    bounding box are one (and so, in a chain, are all points linked by such
+    pairs); a merged point sits where its first copy does, and merged points
+    are in the order of their first copies.
+    """
+    diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
+    pairs = cKDTree(points).query_pairs(tolerance * diagonal, output_type='ndarray')
+    labels = spring_components(len(points), pairs)
+    first = np.full(labels.max() + 1, len(points))
+    np.minimum.at(first, labels, np.arange(len(points)))
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return rank[labels], points[first[order]]
+
+
+def _statements(path):
+    """(line number, tokens, whether continued) of an OBJ file's statements;
+    a line that ends in a backslash goes on in the next (numbered as its
+    first line)."""
+    held = None
+    for number, tokens in token_lines(path):
+        if held is not None:
+            number, tokens = held[0], held[1] + tokens
+        continued, held = held is not None, None
+        if tokens[-1].endswith('\\'):
+            tokens[-1] = tokens[-1][:-1]
+            held = (number, [t for t in tokens if t])
+        else:
+            yield number, tokens, continued
+    if held is not None and held[1]:
+        yield *held, True
+
+
+def _curve_indices(path, number, rest, curve):
+    """The control points' raw indices of ``curv u0 u1 v1 v2 ...``, if the
+    curve (``cstype`` and ``deg`` before it) is a polyline; else ValueError."""
+    kind, degree = curve
+    if degree is None or kind is None:
+        raise ValueError(f"{path} line {number}: a 'curv' needs 'cstype' and 'deg' "
+                         'statements before it')
+    if kind not in CURVE_TYPES or degree != 1:
+        raise ValueError(f"{path} line {number}: a curve of type {kind!r} and degree "
+                         f'{degree}; only polylines (cstype bspline or bezier, deg 1) '
+                         'are read')
+    parse_numbers(path, number, rest[:2], "'curv u0 u1 v1 v2 ...' with numbers u0 u1", float)
+    if len(rest) < 4:
+        raise ValueError(f"{path} line {number}: a 'curv' needs its parameters u0 u1 "
+                         f'and at least 2 vertex indices, got {len(rest)} numbers')
+    return rest[2:]
+
+
+def _obj_file(path):
+    """The net of an OBJ file (:class:`NetData`), the point of every ``v``
+    statement (:func:`merge_coincident`) and the line numbers of the ``v``
+    statements."""
+    vertices, rows, refs = [], [], []   # refs: (line, element kind, 0-based indices)
+    curve = (None, None)   # cstype and deg of the curves that follow
+    for number, tokens, continued in _statements(path):
+        keyword, rest = tokens[0], tokens[1:]
+        if keyword == 'v' and continued:
+            raise ValueError(f"{path} line {number}: a 'v' statement goes on in the next "
+                             "line (ends in '\\'); its coordinates are written back in "
+                             'place, so each must be on one line: join them')
+        if keyword == 'v':
+            xyz = parse_numbers(path, number, rest[:3], "'v x y z' with numbers", float)
+            if len(rest) < 3:
+                raise ValueError(f"{path} line {number}: expected 'v x y z', "
+                                 f'got {len(rest)} coordinates')
+            vertices.append(check_finite(path, f'line {number}', xyz))
+            rows.append(number)
+        elif keyword == 'cstype':
+            curve = (rest[-1] if rest else '', curve[1])
+        elif keyword == 'deg':
+            curve = (curve[0], parse_numbers(path, number, rest[:1] or ['?'], 'a degree')[0])
+        elif keyword in ('f', 'l', 'curv'):
+            least = 3 if keyword == 'f' else 2
+            if keyword == 'curv':
+                rest = _curve_indices(path, number, rest, curve)
+            if len(rest) < least:
+                raise ValueError(f'{path} line {number}: a {keyword!r} needs '
+                                 f'at least {least} vertex indices, got {len(rest)}')
+            raw = parse_numbers(path, number, [t.split('/')[0] for t in rest],
+                           'integer vertex indices (v, v/vt, v//vn or v/vt/vn)')
+            if 0 in raw:
+                raise ValueError(f'{path} line {number}: vertex index 0 (OBJ '
+                                 'counts from 1)')
+            # negative indices count back from the last vertex read so far
+            refs.append((number, keyword,
+                         [i - 1 if i > 0 else len(vertices) + i for i in raw]))
+    if not vertices:
+        raise ValueError(f"{path}: no vertices ('v x y z' lines)")
+    point_of, points = merge_coincident(np.array(vertices, dtype=float))
+    springs, seen, faces = [], set(), []
+    for number, keyword, indices in refs:
+        for i in indices:
+            if not 0 <= i < len(vertices):
+                one_based = i + 1 if i >= 0 else i - len(vertices)
+                kind = {'f': 'face', 'l': 'line', 'curv': 'curve'}[keyword]
+                raise ValueError(f'{path} line {number}: {kind} index '
+                                 f'{one_based} out of range ({len(vertices)} vertices)')
+        ring = indices + indices[:1] if keyword == 'f' else indices
+        for i, j in zip(ring[:-1], ring[1:], strict=True):
+            if point_of[i] == point_of[j]:
+                same = ('repeats next to itself' if i == j else
+                        f'and vertex {j + 1} next to it are one point (closer than '
+                        f'{MERGE_TOLERANCE:g} of the net\'s size)')
+                raise ValueError(f'{path} line {number}: vertex {i + 1} {same}: a '
+                                 'spring from a point to itself')
+            p, q = int(point_of[i]), int(point_of[j])
+            if (key := (min(p, q), max(p, q))) not in seen:
+                seen.add(key)
+                springs.append((p, q))
+        if keyword == 'f':
+            faces.append(point_of[indices].tolist())
+    net = NetData(points, np.array(springs, dtype=int).reshape(-1, 2), faces, [])
+    return net, point_of, rows
+
+
+#: An OBJ ``v`` statement's keyword and x, y, z with the space around them.
+_VERTEX = re.compile(r'(\s*v\s+)([^\s#]+)(\s+)([^\s#]+)(\s+)([^\s#]+)')
+
+
+def obj_text(atoms, like):
+    """The OBJ text of ``atoms``: ``like`` as it is but for the coordinates
+    that moved, or points and ``l`` springs."""
+    if like is None:
+        lines = [f'v {coordinates(x)}' for x in atoms.positions]
+        lines += [f'l {i + 1} {j + 1}' for i, j in atoms.calc.springs]
+        return '\n'.join(['# written by ase_maud', *lines]) + '\n'
+    net, point_of, rows = _obj_file(like)
+    if len(net.positions) != len(atoms):
+        raise ValueError(f'{like} has {len(net.positions)} points ({len(point_of)} '
+                         f'vertices, coincident ones merged), the net {len(atoms)}')
+    mark, text = original_text(like)
+    lines = list(StringIO(text, newline=''))
+    for row, point in zip(rows, point_of, strict=True):
+        line = lines[row - 1]
+        match = _VERTEX.match(line)
+        new = [number_text(match[k], x) for k, x in zip((2, 4, 6), atoms.positions[point],
+                                                          strict=True)]
+        lines[row - 1] = (match[1] + new[0] + match[3] + new[1] + match[5] + new[2]
+                          + line[match.end():])
+    return mark + ''.join(lines)

@@ -1,0 +1,272 @@
+"""How far a step goes: the acceptance test, the line-search cut, the
+per-point bounds and one trust-region loop (cf. optimistix's search apart
+from its descent).
+
+Moves are (N, 3) arrays of lengths; forces have ASE's sign (``-dE/dr``);
+a merit is the energy (``target='minimum'``) or ``|f|**2``.
+
+- :func:`merit_change`: the merit's change over a step, judged by the
+  forces where the energies cannot tell: two energies that differ by less
+  than their errors summed (rounding, or an approximate calculator's
+  tolerance, each energy with its own) are told apart by the trapezoid
+  estimate ``-(f_old + f) . dx / 2``, a directional-derivative test that
+  needs forces only; the step raised the merit where the change exceeds
+  the slack.
+- :func:`work_change`: that trapezoid estimate alone, for forces that are
+  the gradient of no merit (a band of images, ASE's NEB): a step is judged
+  by the work the forces did over it, by the forces alone as FIRE's and
+  MDMin's power test judges it.
+- :func:`cubic_cut`: the fraction of a step taken back at the minimum of
+  the cubic through both ends' slopes and the merit's change (a safe
+  line-search cut; the change judged by the forces within the noise).
+- :class:`Limits`: the longest move of each point, as a fraction of its
+  distance to its nearest other point, in length units, or as a fraction
+  of the scene's size; :func:`bound` scales a move within them (each point
+  on its own, or the whole move by one factor) and :func:`reach` says how
+  far along a move the first point meets its limit (:func:`reaches`: each
+  point).
+- :func:`trust_region`: a Newton move cut to the limits by the dogleg path
+  (a definite model) or damped to ``(K + mu I)^-1 f`` with the smallest
+  ``mu`` that keeps every point within its limit (Levenberg-Marquardt,
+  :func:`damping`).
+- :func:`trust_fraction`: a trust fraction grown or cut by the ratio of the
+  energy change to the change a quadratic model predicted.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ase_maud.optimize.models.base import TINY, DampedSolver
+from ase_maud.physics.neighbours import NearestDistances
+
+#: How far from 1 the ratio of an energy change to its prediction may be
+#: for a trust fraction to grow (by half), and beyond which it halves.
+TRUST_GOOD, TRUST_BAD = 0.25, 0.75
+
+#: The damped move is taken once its longest point is within this fraction
+#: of its limit, or the bracket of ``mu`` this narrow (in log), and
+#: :data:`DAMPING_TRIALS` damped solves at most once the bracket is found
+#: (the secant, then false position, in log mu; 14 bisections pinned ``mu`` to 0.2 %;
+#: a coarser ``mu`` took more steps: docs/optimizer.md).
+DAMPING_TOLERANCE = 2e-3
+DAMPING_TRIALS = 14
+
+
+def lengths(rows: np.ndarray) -> np.ndarray:
+    """Each row's length (N,) of an (N, 3) array: the formula of
+    ``np.linalg.norm(rows, axis=1)``, the same digits, without its argument
+    handling (several calls a step)."""
+    return np.sqrt(np.add.reduce(rows * rows, axis=1))
+
+
+def merit_tolerance(merit: float, noise: float = 1e-12) -> float:
+    """Slack when comparing merits: ``noise`` (relative; 1e-12 is the
+    rounding of energies that sum N**2 terms) times ``|merit|``."""
+    return max(noise, 1e-12) * max(abs(merit), 1e-300)
+
+
+def merit_change(last_merit: float, last_noise: float, last_forces: np.ndarray,
+                 move: np.ndarray, merit: float, forces: np.ndarray, noise: float,
+                 energy: bool) -> tuple[float, float]:
+    """The change of the merit over the step ``move`` from a point of merit
+    ``last_merit`` (forces ``last_forces``, relative error ``last_noise``) to
+    one of ``merit`` and ``forces`` (error ``noise``), and the slack within
+    which it is no rise (the step raised the merit where ``change >
+    slack``): ``(merit - last_merit, their errors)``; for an
+    ``energy`` merit whose change is within the errors of both energies
+    summed (each may be off by its own, so their difference by the sum),
+    ``(-(last_forces + forces) . move / 2, 0)``: the trapezoid estimate from
+    the forces, exact for a quadratic energy, where it is positive exactly
+    when the move went beyond twice the distance to the minimum along it
+    (the directional-derivative test ``g_new . p > |g_old . p|``)."""
+    change = merit - last_merit
+    tol = merit_tolerance(last_merit, noise + last_noise)
+    if not energy or abs(change) > tol:
+        return change, tol
+    return work_change(last_forces, move, forces)
+
+
+def work_change(last_forces: np.ndarray, move: np.ndarray,
+                forces: np.ndarray) -> tuple[float, float]:
+    """``(-(last_forces + forces) . move / 2, 0)``: minus the work the
+    forces did over ``move`` (the trapezoid rule), and no slack. It is
+    positive (an overshoot) where the forces at the end oppose the move more
+    than those at its start drove it: beyond twice the distance to where
+    the forces along the move balance. For forces that are the gradient of
+    no merit (a band of images: the spring and tangent projections make
+    ``|f|**2`` rise along ``f`` itself, so no step along the model's
+    direction lowers it and a run judged by it stagnates) this is the test
+    that needs the forces only."""
+    return -0.5 * np.vdot(last_forces + forces, move), 0.0
+
+
+def cubic_cut(last_forces: np.ndarray, move: np.ndarray, change: float,
+              forces: np.ndarray) -> float:
+    """The fraction of ``move`` (from a point of forces ``last_forces`` to
+    one of ``forces``, over which the merit changed by ``change``:
+    :func:`merit_change`) at the minimum of the cubic through both ends'
+    slopes along it and that change, clipped to [0.1, 0.5] (a safe
+    line-search cut)."""
+    g0, g1 = -np.vdot(last_forces, move), -np.vdot(forces, move)
+    d1 = g0 + g1 - 3.0 * change
+    radicand = d1 * d1 - g0 * g1
+    if radicand < 0 or not np.isfinite(radicand):
+        return 0.5
+    d2 = np.sqrt(radicand)
+    denominator = g1 - g0 + 2.0 * d2
+    if denominator == 0:
+        return 0.5
+    t = 1.0 - (g1 + d2 - d1) / denominator
+    return float(np.clip(t, 0.1, 0.5)) if np.isfinite(t) else 0.5
+
+
+@dataclass(frozen=True)
+class Limits:
+    """The longest move allowed to each point (length units): ``maxstep_nn``
+    times its distance to its nearest other point (``nearest``), at most
+    ``maxstep``, at most ``maxstep_size`` times the scene's size (the
+    largest distance from the centroid); None: no such bound."""
+
+    nearest: NearestDistances
+    maxstep_nn: float | None = None
+    maxstep: float | None = None
+    maxstep_size: float | None = None
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        limit = (np.full(len(x), np.inf) if self.maxstep_nn is None
+                 else self.maxstep_nn * self.nearest(x))
+        if self.maxstep is not None:
+            limit = np.minimum(limit, self.maxstep)
+        if self.maxstep_size is not None and len(x) > 1:
+            size = lengths(x - x.mean(axis=0)).max()
+            limit = np.minimum(limit, self.maxstep_size * size)
+        return limit
+
+
+def reach(start: np.ndarray, step: np.ndarray, limit: np.ndarray) -> float:
+    """The largest ``t`` in [0, inf] with every point's ``|start_i + t
+    step_i| <= limit_i`` (``start`` within its limits): the smallest of
+    :func:`reaches`."""
+    return float(reaches(start, step, limit).min(initial=np.inf))
+
+
+def reaches(start: np.ndarray, step: np.ndarray, limit: np.ndarray) -> np.ndarray:
+    """Each point's largest ``t`` in [0, inf] with ``|start_i + t step_i| <=
+    limit_i`` (``start`` within its limits; (N,)): the positive root of
+    ``|start_i + t step_i|**2 = limit_i**2``, inf for a point that does not
+    move, and 0 (not a negative rounding) for one on its limit moving out."""
+    a = np.einsum('ij,ij->i', step, step)
+    b = np.einsum('ij,ij->i', start, step)
+    c = np.einsum('ij,ij->i', start, start) - limit**2
+    roots = np.full(len(a), np.inf)
+    moving = a > 0
+    roots[moving] = (-b[moving] + np.sqrt(np.maximum(b[moving]**2 - a[moving] * c[moving],
+                                                     0.0))) / a[moving]
+    return np.maximum(roots, 0.0)
+
+
+def bound(step: np.ndarray, limit: np.ndarray, whole: bool = False) -> np.ndarray:
+    """Scale each point's move down to its allowed length, or (``whole``)
+    the whole move by the one factor that brings every point within its
+    length (a descent direction stays one)."""
+    length = lengths(step)
+    scale = np.divide(limit, length, out=np.ones_like(length),
+                      where=length > limit)
+    if whole:
+        return step * scale.min(initial=1.0)
+    return step * scale[:, None]
+
+
+def longest(move: np.ndarray, limit: np.ndarray) -> float:
+    """The largest ratio of a point's move to its limit."""
+    return float((lengths(move) / limit).max(initial=0.0))
+
+
+def trust_region(model: DampedSolver, forces: np.ndarray, newton: np.ndarray, gamma: float,
+                 limit: np.ndarray) -> np.ndarray:
+    """The move whose ``gamma`` times keeps every point within ``limit``:
+    ``newton`` (the model's move, or its L-BFGS correction) if it does; else,
+    for a definite model, the longest such move along the dogleg path (from 0
+    to the Cauchy point ``(f.f / f.K f) f``, then to ``newton``); else the
+    damped move ``(K + mu I)^-1 f`` with the smallest such ``mu``
+    (:func:`damping`; far from a minimum this turns the step towards the
+    forces instead of shortening it)."""
+    if gamma * longest(newton, limit) <= 1:
+        return newton
+    if model.definite:
+        return _dogleg(model, forces, newton, gamma, limit)
+    return damping(model.damped(forces), gamma, limit, model.scale)
+
+
+def _dogleg(model: DampedSolver, forces: np.ndarray, newton: np.ndarray, gamma: float,
+            limit: np.ndarray) -> np.ndarray:
+    curvature = np.vdot(forces, model.dot(forces))
+    cauchy = forces * (np.vdot(forces, forces) / curvature) if curvature > 0 else None
+    for start, end in ((np.zeros_like(forces), cauchy), (cauchy, newton)):
+        if end is None:
+            return forces * reach(np.zeros_like(forces), gamma * forces, limit)
+        t = reach(gamma * start, gamma * (end - start), limit)
+        if t < 1:
+            return start + t * (end - start)
+    return newton
+
+
+def damping(moves: Callable[[float], np.ndarray | None], gamma: float,
+            limit: np.ndarray, scale: float) -> np.ndarray:
+    """The move ``moves(mu)`` (None where the damped model is not definite)
+    of the smallest damping ``mu`` whose ``gamma`` times keeps every point
+    within ``limit``: ``mu`` grows tenfold from ``scale`` until it does, then
+    the bracket from ``1e-12`` of that is narrowed in ``log mu`` on the log
+    of the longest point's ratio to its limit to :data:`DAMPING_TOLERANCE`:
+    while no lower end has a move, by the secant through the last two moves
+    that fit (at first the slope -1 of a move ``f / mu``; never below the
+    bracket's geometric middle), then by false position (Illinois)."""
+    def excess(move: np.ndarray | None) -> float:
+        return np.inf if move is None else float(np.log(max(gamma * longest(move, limit), TINY)))
+
+    high = max(scale, TINY)
+    best = moves(high)
+    while (f_high := excess(best)) > 0:
+        high *= 10.0
+        best = moves(high)
+    low, kept, slope = high * 1e-12, None, -1.0
+    g_high, g_low = f_high, np.inf   # what false position weighs: Illinois halves an end kept twice
+    for _ in range(DAMPING_TRIALS):
+        if f_high >= -DAMPING_TOLERANCE or np.log(high / low) <= DAMPING_TOLERANCE:
+            break
+        if np.isinf(g_low):
+            mid = max(high * np.exp(-f_high / slope), np.sqrt(low * high))
+        else:
+            mid = high * (low / high) ** (g_high / (g_high - g_low))
+        move = moves(mid)
+        if (f := excess(move)) > 0:
+            low, g_low = mid, f
+            g_high *= 0.5 if kept == 'high' else 1.0
+            kept = 'high'
+        else:
+            if f > f_high:   # the secant of the moves that fit
+                slope = (f - f_high) / np.log(mid / high)
+            high, f_high, g_high, best = mid, f, f, move
+            g_low *= 0.5 if kept == 'low' else 1.0
+            kept = 'low'
+    return best
+
+
+def trust_fraction(gamma: float, actual: float, predicted: float, gamma_max: float,
+                   slack: float) -> float:
+    """``gamma`` grown by half (at most ``gamma_max``) when the energy change
+    ``actual`` is within :data:`TRUST_GOOD` of the ``predicted`` one, halved
+    beyond :data:`TRUST_BAD`; unchanged when the prediction is within
+    ``slack`` of zero (no ratio to judge by)."""
+    if abs(predicted) <= slack:
+        return gamma
+    ratio = actual / predicted
+    if abs(ratio - 1) <= TRUST_GOOD:
+        return min(1.5 * gamma, gamma_max)
+    if abs(ratio - 1) > TRUST_BAD:
+        return 0.5 * gamma
+    return gamma

@@ -1,0 +1,281 @@
+"""One attempt at a saddle from a minimum: a climb along a mode, a region's
+climb and release, or the path to a partner minimum.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from ase import Atoms
+from ase.filters import Filter
+from scipy.spatial import cKDTree
+
+from ase_maud.analysis.stationary import classify
+from ase_maud.counting import CallRecorder, Work, fresh_copy
+from ase_maud.errors import MaudError
+from ase_maud.optimize.maud import Maud
+from ase_maud.optimize.models.exact import EXACT_MAX_DOFS
+from ase_maud.physics.dofs import free_dofs
+from ase_maud.saddles.between_minima import saddle_between
+
+#: A local region: the free points within this many times the centre
+#: point's nearest-neighbour distance.
+RADIUS = 2.0
+
+
+#: The region grows by these factors of :data:`RADIUS` (while the exact
+#: model takes it) before the whole scene is released.
+GROWTH = (2.0, 4.0)
+
+
+#: Steps of a region's climb (each a call and a Hessian of the region): one
+#: that has not converged by then has no local saddle (a tighter bound, tried:
+#: docs/bench/saddles.md, "A region's first climb bounded, tried").
+REGION_STEPS = 60
+
+
+#: The surroundings of a region's saddle are relaxed with the region held (to
+#: this fraction of the largest force before), and the region climbed again,
+#: in turn (at most this many times, each run at most this many steps),
+#: while each turn cuts the largest force by this factor at least.
+SETTLE_RATIO, SETTLE_CYCLES, SETTLE_STEPS, SETTLE_GAIN = 0.1, 40, 20, 0.8
+
+
+#: The whole scene is released from a region's saddle with the exact model
+#: (a dense Hessian and its eigen-decomposition a step) up to this many free
+#: coordinates, above it with the springs model after settling the
+#: surroundings (the measurements that set it: docs/bench/saddles.md,
+#: "Released with the exact model" and "Above 1500 free coordinates").
+RELEASE_EXACT_MAX_DOFS = 3000
+
+
+#: Above this many free coordinates the exact release stops (outcome 'exact
+#: release steps') after this many steps: a step costs seconds there, so one
+#: that wanders would take hundreds within the budget (docs/bench/saddles.md,
+#: "The exact release capped").
+RELEASE_CAP_DOFS, RELEASE_CAP_STEPS = 1500, 60
+
+
+#: An attempt whose region's saddle lies this close in direction (cosine of
+#: the moves from the minimum) to a saddle found is rejected.
+SAME_DIRECTION = 0.9
+
+
+@dataclass
+class Attempt:
+    """One attempt of a :func:`search_saddles`: its ``kind`` ('mode': a
+    whole-scene climb along mode ``where`` of the minimum, ``sign`` +1 or
+    -1; 'local': an activation around point ``where``; 'path': a band to
+    the second minimum given, :func:`~ase_maud.saddles.between_minima.saddle_between`), how it ended
+    (``outcome``: 'saddle', 'known saddle', 'known direction', 'budget', 'no
+    local saddle', 'steps', 'exact release steps' (:data:`RELEASE_CAP_STEPS`),
+    or the error that stopped it), the points of its last region
+    (``region``, local ones), what it computed (``calls``, ``hvp_vectors``,
+    ``hessians``) and its CPU seconds, and the energy it ended at (a
+    saddle's, or where it stopped)."""
+
+    kind: str
+    where: int
+    sign: float = 1.0
+    outcome: str = ''
+    region: int = 0
+    calls: int = 0
+    hvp_vectors: int = 0
+    hessians: int = 0
+    cpu_s: float = 0.0
+    energy: float = float('nan')
+    #: the index in :attr:`SaddleSearch.saddles` of the saddle it reached
+    #: ('saddle' or 'known saddle'; None otherwise)
+    saddle: int | None = None
+
+    @property
+    def cost(self) -> int:
+        """Calls, Hessian-vector product vectors and Hessians: force-call
+        equivalents."""
+        return self.calls + self.hvp_vectors + self.hessians
+
+    def describe(self) -> str:
+        """One line: what was tried, how it ended and what it cost."""
+        what = {'mode': f"mode {self.where} {'+' if self.sign > 0 else '-'}",
+                'path': 'path to the second minimum'}.get(
+                    self.kind, f'local at point {self.where} ({self.region} points)')
+        return (f'{what}: {self.outcome}, {self.calls} calls + {self.hvp_vectors} HVP '
+                f'vectors + {self.hessians} Hessians = {self.cost}, {self.cpu_s:.2f} CPU s')
+
+
+class Tally:
+    """The calls, products, Hessians and CPU seconds of one attempt, and
+    whether it is over its budget."""
+
+    def __init__(self, attempt: Attempt, budget: int | None):
+        self.attempt = attempt
+        #: the negative mode the attempt follows (N, 3), once it has one
+        self.mode: np.ndarray | None = None
+        self.budget = np.inf if budget is None else budget
+        self.cpu = time.process_time()
+
+    def run(self, opt: Maud, atoms: Atoms, fmax: float, steps: int) -> str:
+        """Run ``opt`` to ``fmax`` in at most ``steps`` steps within the
+        budget; '' if it converged on the index sought, else why not."""
+        attempt, why = self.attempt, 'steps'
+        with CallRecorder(atoms.calc) as calls:
+            try:
+                for converged in opt.irun(fmax=fmax, steps=steps):
+                    if converged:
+                        why = ''
+                        break
+                    if attempt.cost + len(calls.samples) + opt.work.total >= self.budget:
+                        why = 'budget'
+                        break
+            except MaudError as error:
+                why = f'{type(error).__name__}: {str(error).splitlines()[0][:100]}'
+        attempt.calls += len(calls.samples)
+        attempt.hvp_vectors += opt.work.hvp_vectors
+        attempt.hessians += opt.work.hessians
+        return why
+
+    def end(self, outcome: str, atoms: Atoms) -> Attempt:
+        attempt = self.attempt
+        attempt.outcome = outcome
+        attempt.cpu_s = time.process_time() - self.cpu
+        attempt.energy = atoms.get_potential_energy()
+        return attempt
+
+
+def climb_mode(start: Atoms, direction: np.ndarray, attempt: Attempt, fmax: float,
+           steps: int, budget: int | None, whole: int | None = None,
+           ) -> tuple[Atoms | None, Attempt, tuple | None]:
+    """A whole-scene climb from ``start`` along ``direction`` within
+    ``budget``: the saddle (else None), the attempt, and if it stopped on
+    ``budget`` short of ``whole``, its continuation's arguments (else None)."""
+    atoms = fresh_copy(start)
+    tally = Tally(attempt, budget)
+    opt = Maud(atoms, target='saddle', mode=direction, logfile=None)
+    why = tally.run(opt, atoms, fmax, steps)
+    attempt = tally.end(why or 'saddle', atoms)
+    rest = None
+    if why == 'budget' and whole is not None and whole > attempt.cost:
+        along = direction if opt.state.modes is None else opt.state.modes[0].copy()
+        rest = (atoms, along, Attempt('mode', attempt.where, attempt.sign), fmax, steps,
+                whole - attempt.cost)
+    return (None if why else atoms), attempt, rest
+
+
+def climb_region(minimum: Atoms, centre: int, known: list[np.ndarray], fmax: float,
+              steps: int, budget: int | None) -> tuple[Atoms | None, Attempt]:
+    """A local activation around point ``centre`` of ``minimum`` (module
+    docstring); ``known``: the moves from the minimum to the saddles found."""
+    atoms = fresh_copy(minimum)
+    tally = Tally(Attempt('local', centre), budget)
+    x = minimum.positions
+    free = free_dofs(atoms, atoms.calc.potential.dim)
+    movable = free.any(axis=1)
+    tree = cKDTree(x)
+    reach = tree.query(x[centre], k=2)[0][1]
+    mode = None
+    for factor in (1.0, *GROWTH):
+        region = np.array(sorted(tree.query_ball_point(x[centre], factor * RADIUS * reach)))
+        region = region[movable[region]]
+        if free[region].sum() > EXACT_MAX_DOFS or region.size == movable.sum():
+            break
+        opt = Maud(Filter(atoms, indices=region), target='saddle', logfile=None,
+                   mode=None if mode is None else mode[region])
+        tally.attempt.region = int(region.size)
+        why = tally.run(opt, atoms, fmax, REGION_STEPS)
+        if why:
+            return None, tally.end('no local saddle' if why == 'steps' else why, atoms)
+        mode, held = opt.found.modes[0], region
+        if factor == 1.0 and along_known(atoms.positions - x, known):
+            return None, tally.end('known direction', atoms)
+    exact = free.sum() <= RELEASE_EXACT_MAX_DOFS
+    if mode is not None and not exact:
+        saddle = _settle(atoms, tally, held, np.setdiff1d(np.flatnonzero(movable), held),
+                         mode, fmax)
+        if isinstance(saddle, str):
+            return None, tally.end(saddle, atoms)
+        if saddle is not None:
+            return atoms, tally.end('saddle', atoms)
+        mode = tally.mode
+    opt = Maud(atoms, target='saddle', mode=mode, logfile=None,
+               model='exact' if exact else 'auto')
+    cap = min(steps, RELEASE_CAP_STEPS) if exact and free.sum() > RELEASE_CAP_DOFS else steps
+    why = tally.run(opt, atoms, fmax, cap)
+    if why == 'steps' and cap < steps:
+        why = 'exact release steps'
+    return (None if why else atoms), tally.end(why or 'saddle', atoms)
+
+
+def _settle(atoms: Atoms, tally: Tally, held: np.ndarray, rest: np.ndarray,
+            mode: np.ndarray, fmax: float) -> Atoms | str | None:
+    """From the saddle of the region ``held`` (its negative mode ``mode``),
+    the ``rest`` relaxed with the region held and the region climbed again,
+    in turn, at most :data:`SETTLE_CYCLES` times: ``atoms`` if that
+    converges (largest force below ``fmax``) on a verified index-1 saddle,
+    why not if it fails (the budget spent, the region's saddle lost), else
+    None (the whole scene is then released from there along
+    ``tally.mode``)."""
+    largest = np.linalg.norm(atoms.get_forces(), axis=1).max()
+    tally.mode = mode
+    for _ in range(SETTLE_CYCLES):
+        if tally.run(Maud(Filter(atoms, indices=rest), logfile=None), atoms,
+                     max(fmax, SETTLE_RATIO * largest), SETTLE_STEPS) == 'budget':
+            return 'budget'
+        opt = Maud(Filter(atoms, indices=held), target='saddle', mode=tally.mode[held],
+                   logfile=None)
+        why = tally.run(opt, atoms, fmax, SETTLE_STEPS)
+        if why:
+            return f'region lost while settling ({why})'
+        tally.mode = opt.found.modes[0]
+        settled = np.linalg.norm(atoms.get_forces(), axis=1).max()
+        if settled < fmax:
+            work = Work()
+            point = classify(atoms, ftol=fmax, work=work)
+            tally.attempt.hvp_vectors += work.hvp_vectors
+            tally.attempt.hessians += work.hessians
+            return atoms if point.index == 1 and not point.n_zero else None
+        if settled > SETTLE_GAIN * largest:   # no longer converging: release
+            return None
+        largest = settled
+    return None
+
+
+def path_to_partner(minimum: Atoms, partner: Atoms, fmax: float, relax: int | None = None,
+          distance_atol: float = 0.0) -> tuple[Atoms | None, Attempt]:
+    """The saddle between ``minimum`` and ``partner`` by a band of images (or,
+    if none, the first verified saddle a refinement from the band reached
+    elsewhere: :attr:`~ase_maud.saddles.between_minima.Transition.elsewhere`);
+    ``partner`` first relaxed in at most ``relax`` steps if given (a mirror
+    image: its calls and CPU seconds counted in the attempt), no path if no
+    point then lies further than ``distance_atol`` from its place in
+    ``minimum`` (a mirror image has the pair distances of its original, so
+    :func:`~ase_maud.analysis.stationary.same_point` cannot tell them apart)."""
+    attempt = Attempt('path', 0)
+    if relax is not None:
+        cpu = time.process_time()
+        with CallRecorder(partner.calc) as calls:
+            relaxed = Maud(partner, logfile=None).run(fmax=fmax, steps=relax)
+        attempt.calls, attempt.cpu_s = len(calls.samples), time.process_time() - cpu
+        if not relaxed:
+            attempt.outcome = f'the mirror image did not relax to fmax {fmax:g} in {relax} steps'
+            return None, attempt
+        if np.abs(partner.positions - minimum.positions).max() <= distance_atol:
+            attempt.outcome = 'the mirror image relaxed back to the minimum'
+            return None, attempt
+    found = saddle_between(minimum, partner, fmax=fmax)
+    saddle = found.saddle if found.saddle is not None else next(iter(found.elsewhere), None)
+    attempt.outcome = 'saddle' if saddle is not None else found.outcome
+    attempt.calls += found.calls
+    attempt.hvp_vectors, attempt.hessians = found.work.hvp_vectors, found.work.hessians
+    attempt.cpu_s += found.cpu_s
+    if saddle is not None:
+        attempt.energy = saddle.get_potential_energy()
+    return saddle, attempt
+
+
+def along_known(move: np.ndarray, known: list[np.ndarray]) -> bool:
+    """Whether ``move`` points (cosine above :data:`SAME_DIRECTION`) along one
+    of the ``known`` moves."""
+    size = np.linalg.norm(move)
+    return any(np.vdot(move, k) > SAME_DIRECTION * size * np.linalg.norm(k) for k in known)

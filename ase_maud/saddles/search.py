@@ -1,0 +1,280 @@
+"""Saddles around a minimum at any size: whole-scene climbs along its lowest
+modes, then local activation (in the manner of ART nouveau), each attempt
+bounded by a budget of force-call equivalents.
+
+:func:`search_saddles` is the saddle search the landscape
+(:func:`ase_maud.saddles.landscape.landscape`) and ``ase-maud saddles`` use. From a
+minimum it makes, in order:
+
+1. **Mode climbs**: ``Maud(target='saddle', mode=...)`` along each of the
+   minimum's ``modes`` lowest Hessian modes, both ways (what the landscape
+   did before local activation), first within :data:`CLIMB_SHARE` of the
+   budget each, continued with the rest after the local attempts.
+2. **Local activations** from ``local`` points drawn (seeded) among the
+   free ones. The point and its neighbourhood (the free points within
+   :data:`RADIUS` times the point's nearest-neighbour distance) are climbed
+   along their lowest curvature with the rest of the scene held
+   (``Maud(Filter(atoms, indices=region), target='saddle')``: eigenvector
+   following on the Hessian's block on the region, computed alone
+   (:meth:`~ase_maud.calculator.maud_calculator.MaudCalculator.get_hessian_block`), the
+   trust length a fraction of the neighbour distance per step), until that
+   curvature has turned
+   negative and the region's forces vanish: a saddle of the region in its
+   held surroundings (within :data:`REGION_STEPS` steps, else the region
+   has none). The region then grows (twice, four times the radius,
+   while it has at most :data:`~ase_maud.optimize.models.exact.EXACT_MAX_DOFS` free
+   coordinates), each time climbed again from where the last left off along
+   its negative mode. The whole scene is then released from there along
+   that mode (``Maud(target='saddle', mode=...)``) and converged on a
+   verified index-1 saddle: with the exact model (eigenvector following on
+   the whole scene's dense Hessian: one call and one Hessian a step) while
+   the scene has at most :data:`RELEASE_EXACT_MAX_DOFS` free coordinates
+   (above :data:`RELEASE_CAP_DOFS`, at most :data:`RELEASE_CAP_STEPS` steps).
+   Above that, the rest of the scene is first relaxed with the region
+   held, and the region climbed again, in turn, while that converges: to a
+   saddle of the whole scene (verified: ``classify``), or else, where it
+   stops converging, released with the springs model (minimum-mode
+   following, its lowest modes from LOBPCG on Hessian-vector products,
+   started from the region's negative mode).
+
+With an energy ``window`` these two make a round, and the search goes on
+in rounds (the next ``modes`` modes, ``local`` more points) until
+``empty_rounds`` rounds in a row find no new saddle whose barrier above the
+minimum is below the window (and that passes a test given, ``connected``:
+the landscape's asks whether it joins the minimum): until new searches stop
+finding new saddles. The saddles missed lie along higher modes or where
+only a local activation reaches, so a round that finds nothing is no sign
+that the next will not.
+
+3. **A path**, if none of these found a saddle and a second minimum of the
+   scene is given (``partner``), or asked for as the minimum's mirror image
+   (``mirror``: through the plane of its fixed points,
+   :func:`ase_maud.saddles.between_minima.reflection`, relaxed, its calls counted): a
+   band of images between the two, its highest image refined to a verified
+   index-1 saddle (:func:`ase_maud.saddles.between_minima.saddle_between`): a dome's
+   snap-through, a whole-scene path no local push reaches. Where the
+   refinement reached a verified saddle that is not the band's (another
+   barrier), that saddle is the attempt's.
+
+An attempt is rejected, and said so, when the region's saddle lies along the
+direction of a saddle already found (the cosine between the two moves from
+the minimum above :data:`SAME_DIRECTION`), or when its end point is a saddle
+already found (:func:`ase_maud.analysis.stationary.same_point`). Each attempt stops
+once its calls, Hessian-vector product vectors and Hessians
+(:class:`~ase_maud.counting.Work`) reach ``budget``; every attempt is
+reported (:class:`Attempt`), and a search that found nothing says what it
+tried (:meth:`SaddleSearch.report`). The mode climbs, and the local
+activations, are independent tasks: with a ``dask.distributed`` client they
+run on its workers (the direction of a saddle found by another task of the
+same batch is then not known to an attempt: the point it reaches still is).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from ase import Atoms
+
+from ase_maud.analysis.stationary import StationaryPoint, classify, same_point
+from ase_maud.checks import check, check_all
+from ase_maud.counting import Work
+from ase_maud.physics.dofs import free_dofs
+from ase_maud.saddles.attempts import Attempt, climb_mode, climb_region, path_to_partner
+from ase_maud.saddles.between_minima import check_same_scene, reflection
+
+#: Default budget of one attempt, force-call equivalents (calls, Hessians,
+#: Hessian-vector product vectors).
+BUDGET = 500
+#: A mode climb's first part: this share of the budget (docs/bench/saddles.md,
+#: "Whole-scene climbs bounded").
+CLIMB_SHARE = 0.2
+
+
+@dataclass
+class SaddleSearch:
+    """What :func:`search_saddles` found: the distinct verified index-1
+    ``saddles`` (Atoms with their own calculators, in the order found), each
+    :class:`Attempt` in the order made, the minimum's classification
+    (``work``: what it computed, beside the attempts') and the ``rounds``
+    made."""
+
+    saddles: list[Atoms] = field(default_factory=list)
+    attempts: list[Attempt] = field(default_factory=list)
+    work: Work = field(default_factory=Work)
+    #: rounds of attempts made (one without a window)
+    rounds: int = 0
+
+    @property
+    def cost(self) -> int:
+        """Force-call equivalents of every attempt and of the minimum's modes."""
+        return sum(a.cost for a in self.attempts) + self.work.total
+
+    @property
+    def cpu_s(self) -> float:
+        """CPU seconds of the attempts."""
+        return sum(a.cpu_s for a in self.attempts)
+
+    @property
+    def coverage(self) -> float | None:
+        """The estimated share of the saddles this search's attempts reach
+        that it found: Good and Turing's ``1 - f1 / n`` over the ``n``
+        attempts that reached a saddle, ``f1`` of the saddles reached by one
+        attempt only (a saddle met once suggests others not met yet); None
+        before any attempt reached one. An estimate for attempts drawn alike:
+        saddles no kind of attempt made here can reach are not in it."""
+        reached = np.bincount([a.saddle for a in self.attempts if a.saddle is not None],
+                              minlength=len(self.saddles))
+        if not reached.sum():
+            return None
+        return 1.0 - float((reached == 1).sum()) / float(reached.sum())
+
+    def report(self) -> str:
+        """What was found and tried, one attempt a line; a search that found
+        no saddle says so first."""
+        head = (f'{len(self.saddles)} index-1 saddles' if self.saddles
+                else 'no index-1 saddle found')
+        estimate = self.coverage
+        coverage = ('' if estimate is None else
+                    f' (estimated {estimate:.0%} of those its attempts reach)')
+        lines = [f'{head}{coverage} in {len(self.attempts)} attempts ({self.rounds} '
+                 f"round{'s' if self.rounds != 1 else ''}), {self.cost} force-call "
+                 f'equivalents ({self.work.total} for the minimum\'s modes), '
+                 f'{self.cpu_s:.2f} CPU s:']
+        return '\n'.join(lines + ['  ' + a.describe() for a in self.attempts])
+
+
+def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int | None = None,
+                   budget: int | None = BUDGET, fmax: float = 1e-6, steps: int = 1000,
+                   seed: int = 0, energy_rtol: float = 1e-8, distance_atol: float = 1e-4,
+                   client: Any = None, point: StationaryPoint | None = None,
+                   partner: Atoms | None = None, mirror: bool = False,
+                   window: float | None = None, empty_rounds: int = 1,
+                   connected: Callable[[Atoms], bool] | None = None) -> SaddleSearch:
+    """The :class:`SaddleSearch` from the minimum ``minimum`` (a MaudCalculator
+    scene relaxed to ``fmax``; see the module docstring): climbs along its
+    ``modes`` lowest modes both ways, then ``local`` activations at points
+    drawn with ``seed``, each attempt to ``fmax`` within ``steps`` steps
+    and ``budget`` force-call equivalents (None: no bound but the steps); it
+    stops once ``wanted`` distinct saddles are found (None: every attempt
+    is made). Saddles are compared by
+    :func:`~ase_maud.analysis.stationary.same_point` with ``energy_rtol`` and
+    ``distance_atol``. ``point``: the minimum's classification if known
+    (else computed here, its work counted in :attr:`SaddleSearch.work`).
+    ``client``: a ``dask.distributed`` client whose workers run the
+    attempts. ``partner``: a second minimum of the scene (a dome's mirror
+    image, :func:`~ase_maud.saddles.between_minima.mirrored`, say); if the attempts
+    found no saddle, a last one joins the two by a band of images
+    (:func:`~ase_maud.saddles.between_minima.saddle_between`; no budget but its own
+    steps; a partner that is not a configuration of the same scene is a
+    ValueError before any attempt, :func:`~ase_maud.saddles.between_minima.check_same_scene`).
+    ``mirror``: the second minimum is ``minimum``'s mirror image through
+    the plane of its fixed points (a ValueError before any attempt if they
+    span none, or with a ``partner`` too), relaxed to ``fmax`` within
+    ``steps`` only if the attempts found no saddle (the path's attempt
+    counts its calls; if it relaxes back to ``minimum`` there is no path).
+    ``window``: a barrier (energy units, above the minimum): the
+    search goes on in rounds like the first (the next ``modes`` modes both
+    ways, ``local`` more points) until ``empty_rounds`` rounds in a row find
+    no new saddle whose barrier is below it, or the modes (those of
+    ``point``) and the free points are used up (None: the first round
+    only); ``connected``: a test
+    a new saddle must pass too, asked once a saddle (the landscape's: one
+    side of it relaxes into ``minimum``; None: every saddle passes).
+    Arguments are checked first (a ValueError names a bad one)."""
+    checked = check_all(local=local, budget=budget, fmax=fmax, steps=steps, seed=seed,
+                        energy_rtol=energy_rtol, distance_atol=distance_atol, window=window,
+                        empty_rounds=empty_rounds)
+    modes = check('modes', modes)
+    local, budget, fmax, steps, window, empty_rounds = (
+        checked[k] for k in ('local', 'budget', 'fmax', 'steps', 'window', 'empty_rounds'))
+    if wanted is not None:
+        wanted = check('wanted', wanted, 'count')
+    if partner is not None:
+        check_same_scene(minimum, partner)
+    if mirror:
+        if partner is not None:
+            raise ValueError('give a partner or mirror=True, not both')
+        partner = reflection(minimum)   # relaxed only if the attempts find nothing
+    found = SaddleSearch()
+    if point is None:
+        point = classify(minimum, ftol=np.inf, work=found.work)
+
+    def enough() -> bool:
+        return wanted is not None and len(found.saddles) >= wanted
+
+    def merge(results: list[tuple[Atoms | None, Attempt]]) -> None:
+        for saddle, attempt in results:
+            if saddle is not None:
+                known = next((i for i, s in enumerate(found.saddles)
+                              if same_point(s, saddle, energy_rtol, distance_atol)), None)
+                if known is not None:
+                    attempt.outcome, attempt.saddle = 'known saddle', known
+                elif not enough():
+                    attempt.saddle = len(found.saddles)
+                    found.saddles.append(saddle)
+            found.attempts.append(attempt)
+
+    free = np.flatnonzero(free_dofs(minimum, minimum.calc.potential.dim).any(axis=1))
+    order = np.random.default_rng(seed).permutation(free)
+    energy = minimum.get_potential_energy()
+
+    judged: list[bool] = []   # for each saddle found, whether it counts
+
+    def below() -> int:   # the saddles found that count: below the window, connected
+        for saddle in found.saddles[len(judged):]:
+            judged.append(bool(saddle.get_potential_energy() - energy < window
+                               and (connected is None or connected(saddle))))
+        return sum(judged)
+
+    empty = 0   # rounds in a row that found no new saddle that counts
+    for turn in itertools.count():   # rounds: modes [turn modes, (turn + 1) modes), ...
+        before = 0 if window is None else below()
+        share = None if budget is None else max(1, round(CLIMB_SHARE * budget))
+        climbs = [(minimum, sign * point.modes[k], Attempt('mode', k, sign), fmax, steps,
+                   share, budget)
+                  for k in range(turn * modes, min((turn + 1) * modes, len(point.modes)))
+                  for sign in (1.0, -1.0)]
+        stopped = []   # the continuations of climbs stopped at their share
+        for batch in _batches(climbs, client, enough):
+            results = run_tasks(client, climb_mode, batch)
+            merge([(saddle, attempt) for saddle, attempt, _ in results])
+            stopped += [rest for _, _, rest in results if rest is not None]
+        for batch in _batches(list(order[turn * local:(turn + 1) * local]), client, enough):
+            known = [s.positions - minimum.positions for s in found.saddles]
+            merge(run_tasks(client, climb_region, [(minimum, int(c), known, fmax, steps, budget)
+                                                for c in batch]))
+        for batch in _batches(stopped, client, enough):
+            merge([(saddle, attempt)
+                   for saddle, attempt, _ in run_tasks(client, climb_mode, batch)])
+        found.rounds = turn + 1
+        used_up = (turn + 1) * modes >= len(point.modes) and (turn + 1) * local >= len(free)
+        empty = 0 if window is None or below() > before else empty + 1
+        if window is None or enough() or used_up or empty >= empty_rounds:
+            break
+    if partner is not None and not found.saddles:
+        merge([path_to_partner(minimum, partner, fmax, steps if mirror else None, distance_atol)])
+    return found
+
+
+def _batches(tasks: list, client: Any, enough: Callable[[], bool]):
+    """``tasks`` in batches, one task each in this process, as many as the
+    workers of ``client`` otherwise, until ``enough()``."""
+    size = 1 if client is None else max(len(client.scheduler_info()['workers']), 1)
+    for start in range(0, len(tasks), size):
+        if enough():
+            return
+        yield tasks[start:start + size]
+
+
+def run_tasks(client: Any, task: Callable, arguments: list[tuple]) -> list:
+    """``task(*a)`` for each ``a`` of ``arguments``, in their order: on the
+    workers of ``client`` if given, else here."""
+    if client is None:
+        return [task(*a) for a in arguments]
+    return client.gather([client.submit(task, *a, pure=False) for a in arguments])
+
+

@@ -29,7 +29,7 @@ OLD_MODULES = {
     'assembly': 'optimize.run_setup',
     'atomic': 'files.atomic_replace',
     'calculator': 'calculator.maud_calculator',
-    'cli': 'cli.main',
+    'cli': 'cli.command',
     'descent': 'optimize.directions',
     'dofs': 'physics.dofs',
     'evaluation': 'optimize.evaluation',
@@ -130,6 +130,9 @@ CARRIED = {
     'restart': {
         'RestartFileError': 'errors',
     },
+    'resuming': {
+        'Resumable': 'optimize.maud:Maud',
+    },
     'scenes': {
         'COLLECTIVE': 'scenes.catalogue',
         'LARGE': 'scenes.catalogue',
@@ -174,14 +177,20 @@ CARRIED = {
 def new_home(old: str, name: str) -> tuple[str, str]:
     """The module and name that ``name`` of the 0.1 module ``old`` (below
     ``ase_maud.``) has now."""
-    home = CARRIED.get(old, {}).get(name, OLD_MODULES[old])
+    home = CARRIED.get(old, {}).get(name, OLD_MODULES.get(old, old))
     module, _, new_name = home.partition(':')
     return f'ase_maud.{module}', new_name or name
 
 
-def _warn(old: str) -> None:
-    warnings.warn(f'ase_maud.{old} is now ase_maud.{OLD_MODULES[old]}: the old path '
-                  'works until ase_maud 0.3', FutureWarning, stacklevel=3)
+def _warn(old: str, name: str | None = None) -> None:
+    """The FutureWarning of the 0.1 path ``ase_maud.old`` (``.name``)."""
+    if name is None:
+        what, now = f'ase_maud.{old}', f'ase_maud.{OLD_MODULES[old]}'
+    else:
+        module, new_name = new_home(old, name)
+        what, now = f'ase_maud.{old}.{name}', f'{module}.{new_name}'
+    warnings.warn(f'{what} is now {now}: the old path works until ase_maud 0.3',
+                  FutureWarning, stacklevel=3)
 
 
 def old_names(old: str, warn: bool = True) -> Callable[[str], Any]:
@@ -190,12 +199,14 @@ def old_names(old: str, warn: bool = True) -> Callable[[str], Any]:
     ``warn``."""
     def __getattr__(name: str) -> Any:
         module, new_name = new_home(old, name)
+        if (module, new_name) == (f'ase_maud.{old}', name):   # a module that stayed
+            raise AttributeError(f'module ase_maud.{old} has no attribute {name!r}')
         try:
             value = getattr(importlib.import_module(module), new_name)
         except AttributeError:
             raise AttributeError(f'module ase_maud.{old} has no attribute {name!r}') from None
         if warn:
-            _warn(old)
+            _warn(old, name)
         return value
     return __getattr__
 

@@ -31,6 +31,7 @@ from ase import Atoms
 
 from ase_maud.bench.optimizers import OPTIMIZERS
 from ase_maud.counting import CallRecorder, fresh_copy
+from ase_maud.old_paths import old_names
 
 #: Fields of one sample, the columns of :attr:`Run.samples`.
 SAMPLE_FIELDS = ('calls', 'time_s', 'cpu_s', 'fmax', 'energy')
@@ -124,3 +125,8 @@ def run_status(samples: np.ndarray, converged: bool, error: str, e_ref: float,
     if abs(samples[-1, ENERGY] - e_ref) > energy_rtol * abs(e_ref):
         return 'other_minimum'
     return 'converged'
+
+
+#: The names this module had in ase_maud 0.1 and gave to ase_maud.counting
+#: (``CallRecorder``, ``fresh_copy``) or renamed (``classify``: :func:`run_status`).
+__getattr__ = old_names('bench.runner')

@@ -10,10 +10,12 @@ corners fixed; ``rim``: the net with its whole rim fixed, which buckles into a d
 tube of ``size`` rings of ``size`` points with both end rings fixed). From each start and seed
 (the scene's and the search's: which points are activated) one search for one saddle
 (``wanted=1``): ``--modes`` whole-scene climbs both ways, then up to ``--local`` activations, each
-attempt within ``--budget`` force-call equivalents, to ``--fmax``; with ``--mirror``, where those
-found nothing on a scene with a plane of fixed points, the path to the minimum's mirror image
-through it (``search_saddles(mirror=True)``: the image's relaxation, the band and the refinement
-counted as one attempt, with no budget but their steps).
+attempt within ``--budget`` force-call equivalents, to ``--fmax``; where those found nothing,
+the path to the minimum's mirror image through the plane of its fixed points wherever the
+image is another configuration (search_saddles' default; ``--mirror`` forces it on the scenes
+with fixed points: the image's relaxation, the band and the refinement counted as one
+attempt, with no budget but their steps). The headline is the CPU of a search in units of one
+energy-and-forces call of the scene (``SaddleSearch.force_call_cpu_s``).
 
 Counted per search: the calculator's calls, the Hessian-vector product vectors and the Hessians
 (:class:`ase_maud.counting.Work`, the minimum's modes included), their sum (force-call
@@ -43,7 +45,7 @@ from ase_maud.saddles.search import search_saddles
 from ase_maud.scenes.catalogue import build
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from saddles import OWN_SCENES  # noqa: E402  (the benchmark's own scenes)
+from saddles_vs_sella import OWN_SCENES  # noqa: E402  (the benchmark's own scenes)
 
 #: The scenes with fixed points to fit a plane to (the tube's two end rings too): ``--mirror``
 #: gives their searches the path to the mirror image through that plane where the climbs and
@@ -70,13 +72,15 @@ def one(start: str, seed: int, args: argparse.Namespace) -> dict:
     cpu = time.process_time()
     found = search_saddles(atoms, modes=args.modes, local=args.local, wanted=1,
                            budget=args.budget, fmax=args.fmax, steps=args.steps, seed=seed,
-                           mirror=args.mirror and scene in MIRRORED)
+                           mirror=True if args.mirror and scene in MIRRORED else None)
     cpu = time.process_time() - cpu
     row = {'start': start, 'seed': seed, 'natoms': len(atoms), 'found': bool(found.saddles),
            'calls': sum(a.calls for a in found.attempts),
            'hvp_vectors': sum(a.hvp_vectors for a in found.attempts) + found.work.hvp_vectors,
            'hessians': sum(a.hessians for a in found.attempts) + found.work.hessians,
-           'cost': found.cost, 'cpu_s': cpu, 'attempts': len(found.attempts),
+           'cost': found.cost, 'cpu_s': cpu,
+           'cpu_in_force_calls': cpu / found.force_call_cpu_s,
+           'force_call_cpu_s': found.force_call_cpu_s, 'attempts': len(found.attempts),
            'index': '', 'fmax': '', 'barrier': '',
            'outcomes': '; '.join(f"{a.kind} {a.where}: {a.outcome} ({a.cost})"
                                  for a in found.attempts)}
@@ -103,10 +107,11 @@ def summary(rows: list[dict], fmax: float) -> str:
     """Per start and in all: searches that found a verified index-1 saddle, and the median
     force-call equivalents and CPU seconds of those (and of all searches), and of the
     attempt that found the saddle alone."""
-    lines = ['| start | N | verified index 1 | median equivalents (found) | '
+    lines = ['| start | N | verified index 1 | median CPU in force calls (all) | '
+             'median equivalents (found) | '
              'median CPU s (found) | median equivalents (all) | median CPU s (all) | '
              'median equivalents of the finding attempt |',
-             '|---|---|---|---|---|---|---|---|']
+             '|---|---|---|---|---|---|---|---|---|']
     groups = {s: [r for r in rows if r['start'] == s]
               for s in dict.fromkeys(r['start'] for r in rows)}
     for name, mine in [*groups.items(), ('all', rows)]:
@@ -117,7 +122,8 @@ def summary(rows: list[dict], fmax: float) -> str:
         cpu = (f"{np.median([float(r['cpu_s']) for r in hits]):.2f}" if hits else '-')
         alone = [winning(r) for r in hits]
         lines.append(f"| {name} | {mine[0]['natoms'] if name != 'all' else ''} | "
-                     f"{len(hits)} of {len(mine)} | {med('cost', hits)} | {cpu} | "
+                     f"{len(hits)} of {len(mine)} | {med('cpu_in_force_calls', mine)} | "
+                     f"{med('cost', hits)} | {cpu} | "
                      f"{med('cost', mine)} | {np.median([float(r['cpu_s']) for r in mine]):.2f} | "
                      f"{f'{np.median(alone):.0f}' if alone else '-'} |")
     return '\n'.join(lines) + '\n'
@@ -135,7 +141,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--steps', type=int, default=1000)
     parser.add_argument('--mirror', action='store_true',
                         help='where nothing else found a saddle, the path to the mirror image '
-                        f'through the plane of the fixed points (scenes {", ".join(MIRRORED)})')
+                        f'through the plane of the fixed points (scenes {", ".join(MIRRORED)}), '
+                        'even where the image is the minimum again')
     parser.add_argument('--out', type=Path, default=Path('activation'))
     parser.add_argument('--tables-from', type=Path, metavar='CSV',
                         help='write the table of the rows of a CSV this tool wrote, running '
@@ -159,6 +166,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{start:12s} {seed:3d} found {row['found']!s:5s} index {row['index']!s:2s} "
                   f"{row['calls']:5d} calls {row['hvp_vectors']:6d} HVP vectors "
                   f"{row['hessians']:4d} Hessians {row['cost']:6d} in all {row['cpu_s']:7.2f} s "
+                  f"= {row['cpu_in_force_calls']:8.0f} force calls' CPU "
                   f"{row['attempts']} attempts: {row['outcomes']}", flush=True)
     if not rows:
         print('no start was a minimum: nothing written', file=sys.stderr)

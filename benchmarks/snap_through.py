@@ -32,7 +32,7 @@ from ase_maud.counting import fresh_copy
 from ase_maud.saddles.between_minima import mirrored, saddle_between
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from saddles import OWN_SCENES  # noqa: E402  (the benchmark's own scenes)
+from saddles_vs_sella import OWN_SCENES  # noqa: E402  (the benchmark's own scenes)
 
 COLUMNS = ('size', 'natoms', 'seed', 'threads', 'ends_cpu_s', 'cpu_s', 'wall_s', 'band_calls',
            'band_steps', 'saddle_calls', 'hvp_vectors', 'hessians', 'cost', 'barrier',

@@ -285,11 +285,13 @@ def build_parser() -> argparse.ArgumentParser:
                         'relaxed to --fmax; where the climbs and local activations find '
                         'no saddle, a band of images between the two minima finds the '
                         'one between them (ase_maud.saddles.between_minima.saddle_between)')
-    second.add_argument('--mirror', action='store_true',
+    second.add_argument('--mirror', action=argparse.BooleanOptionalAction, default=None,
                         help='the second minimum is the mirror image of the net through '
                         'the plane of its fixed points (a dome and its snap-through; '
                         'ase_maud.saddles.between_minima.reflection), relaxed only if the '
-                        'climbs and local activations find no saddle')
+                        'climbs and local activations find no saddle; by default wherever '
+                        'the fixed points span a plane the net sags out of '
+                        '(--no-mirror: never)')
     spread = p.add_mutually_exclusive_group()
     spread.add_argument('--workers', type=ruled('count', int), metavar='N',
                         help='run the climbs and descents on a dask LocalCluster of N '

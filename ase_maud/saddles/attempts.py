@@ -96,13 +96,17 @@ class Attempt:
         equivalents."""
         return self.calls + self.hvp_vectors + self.hessians
 
-    def describe(self) -> str:
-        """One line: what was tried, how it ended and what it cost."""
+    def describe(self, force_call_cpu_s: float | None = None) -> str:
+        """One line: what was tried, how it ended and what it cost (its CPU
+        also in force calls of ``force_call_cpu_s`` CPU seconds, if given)."""
         what = {'mode': f"mode {self.where} {'+' if self.sign > 0 else '-'}",
                 'path': 'path to the second minimum'}.get(
                     self.kind, f'local at point {self.where} ({self.region} points)')
+        in_calls = ('' if not force_call_cpu_s else
+                    f' = {self.cpu_s / force_call_cpu_s:.0f} force calls\' CPU')
         return (f'{what}: {self.outcome}, {self.calls} calls + {self.hvp_vectors} HVP '
-                f'vectors + {self.hessians} Hessians = {self.cost}, {self.cpu_s:.2f} CPU s')
+                f'vectors + {self.hessians} Hessians = {self.cost}, {self.cpu_s:.2f} CPU s'
+                f'{in_calls}')
 
 
 class Tally:

@@ -105,7 +105,7 @@ class Landscape:
 def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 1000,
               energy_rtol: float = ENERGY_RTOL, distance_atol: float = DISTANCE_ATOL,
               client: Any = None, local: int = 1, budget: int | None = None,
-              seed: int = 0, partner: Atoms | None = None, mirror: bool = False,
+              seed: int = 0, partner: Atoms | None = None, mirror: bool | None = None,
               window: float | None = None, empty_rounds: int = 6) -> Landscape:
     """The :class:`Landscape` around the minimum ``atoms`` (a MaudCalculator
     scene relaxed to ``fmax``; a ValueError if it is not a minimum): the
@@ -122,7 +122,8 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
     the one a band of images between the two reaches
     (:func:`~ase_maud.saddles.between_minima.saddle_between`); ``mirror``: that second
     minimum is ``atoms``' mirror image through the plane of its fixed points,
-    relaxed only if needed (:func:`~ase_maud.saddles.search.search_saddles`).
+    relaxed only if needed; None (default): wherever the image is another
+    configuration (:func:`~ase_maud.saddles.search.search_saddles`).
     ``window``: a barrier
     above the minimum (energy units): the search goes on in rounds like the
     first (the next ``modes`` modes, ``local`` more points) until

@@ -72,6 +72,7 @@ same batch is then not known to an attempt: the point it reaches still is).
 from __future__ import annotations
 
 import itertools
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -81,7 +82,7 @@ from ase import Atoms
 
 from ase_maud.analysis.stationary import StationaryPoint, classify, same_point
 from ase_maud.checks import check, check_all
-from ase_maud.counting import Work
+from ase_maud.counting import Work, fresh_copy
 from ase_maud.physics.dofs import free_dofs
 from ase_maud.saddles.attempts import Attempt, climb_mode, climb_region, path_to_partner
 from ase_maud.saddles.between_minima import check_same_scene, reflection
@@ -107,6 +108,10 @@ class SaddleSearch:
     work: Work = field(default_factory=Work)
     #: rounds of attempts made (one without a window)
     rounds: int = 0
+    #: CPU seconds of one energy-and-forces call of the scene (a fresh
+    #: calculator at the minimum, the median of three): the unit of
+    #: :attr:`cpu_in_force_calls`
+    force_call_cpu_s: float = float('nan')
 
     @property
     def cost(self) -> int:
@@ -117,6 +122,19 @@ class SaddleSearch:
     def cpu_s(self) -> float:
         """CPU seconds of the attempts."""
         return sum(a.cpu_s for a in self.attempts)
+
+    @property
+    def cpu_in_force_calls(self) -> float:
+        """:attr:`cpu_s` in units of one energy-and-forces call of the scene
+        (:attr:`force_call_cpu_s`): what the search cost, dense algebra
+        included, where :attr:`cost` counts a Hessian or a product as one."""
+        return self.cpu_s / self.force_call_cpu_s
+
+    @property
+    def found_by(self) -> list[Attempt]:
+        """The attempts that found each of :attr:`saddles`, in its order."""
+        return [next(a for a in self.attempts if a.saddle == k and a.outcome == 'saddle')
+                for k in range(len(self.saddles))]
 
     @property
     def coverage(self) -> float | None:
@@ -143,15 +161,16 @@ class SaddleSearch:
         lines = [f'{head}{coverage} in {len(self.attempts)} attempts ({self.rounds} '
                  f"round{'s' if self.rounds != 1 else ''}), {self.cost} force-call "
                  f'equivalents ({self.work.total} for the minimum\'s modes), '
-                 f'{self.cpu_s:.2f} CPU s:']
-        return '\n'.join(lines + ['  ' + a.describe() for a in self.attempts])
+                 f'{self.cpu_s:.2f} CPU s = {self.cpu_in_force_calls:.0f} force calls\' CPU:']
+        return '\n'.join(lines + ['  ' + a.describe(self.force_call_cpu_s)
+                                  for a in self.attempts])
 
 
 def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int | None = None,
                    budget: int | None = BUDGET, fmax: float = 1e-6, steps: int = 1000,
                    seed: int = 0, energy_rtol: float = 1e-8, distance_atol: float = 1e-4,
                    client: Any = None, point: StationaryPoint | None = None,
-                   partner: Atoms | None = None, mirror: bool = False,
+                   partner: Atoms | None = None, mirror: bool | None = None,
                    window: float | None = None, empty_rounds: int = 1,
                    connected: Callable[[Atoms], bool] | None = None) -> SaddleSearch:
     """The :class:`SaddleSearch` from the minimum ``minimum`` (a MaudCalculator
@@ -175,7 +194,10 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     the plane of its fixed points (a ValueError before any attempt if they
     span none, or with a ``partner`` too), relaxed to ``fmax`` within
     ``steps`` only if the attempts found no saddle (the path's attempt
-    counts its calls; if it relaxes back to ``minimum`` there is no path).
+    counts its calls; if it relaxes back to ``minimum`` there is no path);
+    None (default): the mirror image wherever no ``partner`` is given, the
+    fixed points span a plane and the image is another configuration (a
+    net sagging out of the plane of its supports), else none.
     ``window``: a barrier (energy units, above the minimum): the
     search goes on in rounds like the first (the next ``modes`` modes both
     ways, ``local`` more points) until ``empty_rounds`` rounds in a row find
@@ -195,11 +217,12 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
         wanted = check('wanted', wanted, 'count')
     if partner is not None:
         check_same_scene(minimum, partner)
-    if mirror:
-        if partner is not None:
-            raise ValueError('give a partner or mirror=True, not both')
-        partner = reflection(minimum)   # relaxed only if the attempts find nothing
-    found = SaddleSearch()
+    if mirror and partner is not None:
+        raise ValueError('give a partner or mirror=True, not both')
+    if mirror or (mirror is None and partner is None):
+        partner = _mirror_image(minimum, distance_atol, required=bool(mirror))
+        mirror = partner is not None   # relaxed only if the attempts find nothing
+    found = SaddleSearch(force_call_cpu_s=force_call_cpu(minimum))
     if point is None:
         point = classify(minimum, ftol=np.inf, work=found.work)
 
@@ -258,6 +281,36 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     if partner is not None and not found.saddles:
         merge([path_to_partner(minimum, partner, fmax, steps if mirror else None, distance_atol)])
     return found
+
+
+def _mirror_image(minimum: Atoms, distance_atol: float, required: bool) -> Atoms | None:
+    """``minimum``'s mirror image through the plane of its fixed points
+    (:func:`~ase_maud.saddles.between_minima.reflection`); unless
+    ``required``, None where the fixed points span no plane or the image is
+    ``minimum`` again (a flat scene), else the ValueError of the former."""
+    try:
+        image = reflection(minimum)
+    except ValueError:
+        if required:
+            raise
+        return None
+    moved = np.abs(image.positions - minimum.positions).max(initial=0.0)
+    return image if required or moved > distance_atol else None
+
+
+def force_call_cpu(atoms: Atoms, repeat: int = 3) -> float:
+    """CPU seconds of one energy-and-forces call of ``atoms``' scene: the
+    median of ``repeat`` calls of a fresh calculator there (the kernels
+    compiled first), the unit of :attr:`SaddleSearch.cpu_in_force_calls`."""
+    copy = fresh_copy(atoms)
+    copy.get_forces()
+    times = []
+    for _ in range(repeat):
+        copy.calc.reset()
+        start = time.process_time()
+        copy.get_forces()
+        times.append(time.process_time() - start)
+    return max(float(np.median(times)), time.get_clock_info('process_time').resolution)
 
 
 def _batches(tasks: list, client: Any, enough: Callable[[], bool]):

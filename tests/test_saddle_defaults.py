@@ -1,0 +1,55 @@
+"""search_saddles' defaults find what its options find: a net held at points
+that span a plane gets the path to its mirror image by itself; and every
+search reports its CPU in units of one force call of the scene."""
+
+import numpy as np
+import pytest
+from ase.constraints import FixAtoms
+
+from ase_maud import Maud, classify, search_saddles
+from ase_maud.counting import fresh_copy
+from ase_maud.scenes import build
+
+
+def corner_net(size: int, seed: int):
+    """``net3d`` of ``size`` x ``size`` points with its four corners held."""
+    atoms = build('net3d', size, seed=seed)
+    side = int(round(np.sqrt(len(atoms))))
+    atoms.set_constraint(FixAtoms([0, side - 1, side * (side - 1), side * side - 1]))
+    return atoms
+
+
+@pytest.mark.parametrize('seed', [11, 12, 13])
+def test_the_default_call_finds_a_corner_net_s_saddle_by_its_mirror(seed):
+    net = corner_net(6, seed)
+    assert Maud(net, logfile=None).run(fmax=1e-8, steps=5000)
+    assert classify(net).verdict == 'minimum'
+    found = search_saddles(net, modes=0, local=0)
+    assert found.saddles, found.report()
+    point = classify(fresh_copy(found.saddles[0]), ftol=1e-6)
+    assert point.verdict == 'saddle' and point.index == 1
+    assert [a.kind for a in found.found_by] == ['path']
+    none = search_saddles(net, modes=0, local=0, mirror=False)
+    assert not none.saddles and not none.attempts   # what the default adds
+
+
+def test_a_flat_scene_gets_no_mirror_attempt_by_default():
+    """A 2D scene (every point on one plane with its held points) is its own
+    mirror image: the default makes no path attempt."""
+    ring = build('ring', 12, seed=3)
+    ring.set_constraint(FixAtoms([0, 4, 8]))
+    assert Maud(ring, logfile=None).run(fmax=1e-8, steps=5000)
+    found = search_saddles(ring, modes=0, local=0)
+    assert not any(a.kind == 'path' for a in found.attempts)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_search_reports_its_cpu_in_force_calls(seed):
+    cluster = build('all_pairs', 7, seed=seed)
+    assert Maud(cluster, logfile=None).run(fmax=1e-9, steps=2000)
+    found = search_saddles(cluster, modes=1, local=1, wanted=1, seed=seed)
+    assert found.force_call_cpu_s > 0 and np.isfinite(found.force_call_cpu_s)
+    assert found.cpu_in_force_calls == pytest.approx(found.cpu_s / found.force_call_cpu_s)
+    lines = found.report().splitlines()
+    assert "force calls' CPU" in lines[0]
+    assert all("force calls' CPU" in line for line in lines[1:])

@@ -14,7 +14,7 @@ date and the command to ``--out``::
 
     pip install -e '.[bench]'
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
-        python benchmarks/a_rule.py --out docs/bench/a_rule.md
+        python benchmarks/a_rule.py --out docs/dev/bench/a_rule.md
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ FORCE_ERROR_PER_EPS.
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \
         python benchmarks/backend_crossover.py --errors \
-        --out docs/bench/crossover_backends.md
+        --out docs/dev/bench/crossover_backends.md
     NUMBA_NUM_THREADS=2 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \
         python benchmarks/backend_crossover.py --out crossover_2threads.md
 """

@@ -13,7 +13,7 @@ printed as a markdown table and written with the raw rows (CSV) to
 
     pip install -e '.[bench]'
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
-        python benchmarks/compas_nets.py --out docs/bench/compas
+        python benchmarks/compas_nets.py --out docs/dev/bench/compas
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@ may move before ``P`` is rebuilt), calculator calls and CPU seconds to an fmax
 on larger scenes. docs/optimizer.md quotes the output.
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \
-        python benchmarks/global_model_sweep.py --out docs/bench/global_model_sweep.md
+        python benchmarks/global_model_sweep.py --out docs/dev/bench/global_model_sweep.md
 """
 
 import argparse

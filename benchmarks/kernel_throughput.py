@@ -21,7 +21,8 @@ pair, ``threads * clock * t / (N (N - 1) / 2)``, with ``clock`` the mean
 not seen). Raw numbers go to a CSV file, the table with date and command to a
 Markdown file next to it.
 
-    python benchmarks/kernel_throughput.py --threads 2 --out docs/bench/kernel/kernel_throughput.csv
+    python benchmarks/kernel_throughput.py --threads 2 \
+        --out docs/dev/bench/kernel/kernel_throughput.csv
 """
 
 import argparse

@@ -4,7 +4,7 @@ suite's scenes. Calls (and Hessian-vector products) and CPU seconds to
 ``--fmax`` (in ``Q a``), one thread::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
-        python benchmarks/large_model_sweep.py --out docs/bench/large_models.md
+        python benchmarks/large_model_sweep.py --out docs/dev/bench/large_models.md
 
 - ``springs``: ``Q L`` per coordinate, factorised once, L-BFGS memory 20 (the
   package's large-scene model);

@@ -5,7 +5,7 @@ calls and CPU seconds to an fmax. The crossover sets
 docs/optimizer.md quotes the output.
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \
-        python benchmarks/model_crossover.py --out docs/bench/crossover.md
+        python benchmarks/model_crossover.py --out docs/dev/bench/crossover.md
 """
 
 import argparse

@@ -5,7 +5,7 @@ hub net. Calls (Hessian-vector products counted as one call each, beside),
 CPU seconds and the energy reached, to ``--fmax`` (in ``Q a``), one thread::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
-        python benchmarks/repulsion_models.py --out docs/bench/repulsion
+        python benchmarks/repulsion_models.py --out docs/dev/bench/repulsion
 
 A scene is ``name:size[:seed]`` (:func:`ase_maud.scenes.catalogue.build`, seed 0 by default) or
 ``compas:<sample>`` (a compas sample mesh); a variant is ``L-BFGS-B``, a
@@ -15,7 +15,7 @@ the repulsion block of every sprung pair (``per_point=None``, the
 prototype's pairs), or ``near-lu`` / ``near-lu-<k>``: the prototype
 :class:`NearFieldModel` below, the same ``P`` less the springs model's shifts,
 factorised at every step or kept for ``k`` steps. The factorised prototype
-measured no CPU win over the springs model (docs/benchmarks.md), so it lives
+measured no CPU win over the springs model (docs/dev/benchmarks.md), so it lives
 here, not in the package. ``H v`` counts Hessian-vector products (each
 about a force call, none here); ``P v`` the near-field model's sparse
 products with its ``P`` (``work.near_products``, O(pairs) each), which the

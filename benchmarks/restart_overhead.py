@@ -4,7 +4,7 @@ times each; the median wall seconds of each and their ratio, and the size of
 the restart files. The state is written after every step (docs/hard_cases.md)::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
-        python benchmarks/restart_overhead.py --out docs/bench/restart_overhead.md
+        python benchmarks/restart_overhead.py --out docs/dev/bench/restart_overhead.md
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ subprocess (so that the peak resident memory is that measurement's own):
 Raw rows go to ``OUT/calls.csv`` and ``OUT/relax.csv``, tables to
 ``OUT/summary.md``, and log-log plots to ``OUT/scale.png``::
 
-    python benchmarks/scale.py --threads 2 --out docs/bench/scale
+    python benchmarks/scale.py --threads 2 --out docs/dev/bench/scale
 
 A measurement slower than ``--budget`` seconds (estimated from the previous
 size by N**2 for the direct sum) is skipped and reported as such.

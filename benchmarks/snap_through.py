@@ -13,7 +13,7 @@ minimum, the band's highest image, and the saddle classified again from a fresh 
 ``OUT/snap_through.md``. Run::
 
     NUMBA_NUM_THREADS=2 OMP_NUM_THREADS=2 OPENBLAS_NUM_THREADS=2 \\
-        python benchmarks/snap_through.py --sizes 20 --seeds 0 1 2 --out docs/bench/snap_through
+        python benchmarks/snap_through.py --sizes 20 --seeds 0 1 2 --out docs/dev/bench/snap_through
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ pivoting) and by pyamg's smoothed aggregation (CG to a relative residual of
 columns, and the factor's nonzeros. ``AMG_MIN_DOFS`` is chosen from it::
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/spd_solvers.py \\
-        --out docs/bench/spd_solvers.md
+        --out docs/dev/bench/spd_solvers.md
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ needs; a ``P`` that is not positive definite is marked. Dense, for a few
 hundred points::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
-        python dev/repulsion_spectrum.py --out docs/bench/repulsion/spectrum.md
+        python dev/repulsion_spectrum.py --out docs/dev/bench/repulsion/spectrum.md
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """Calculator property requests per Maud step (each one runs ASE's change
-detection): docs/benchmarks.md quotes the output::
+detection): docs/dev/benchmarks.md quotes the output::
 
     python dev/requests_per_step.py chain 20
 """

@@ -9,7 +9,7 @@ decade of ``fmax`` and the steps taken back in each::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
         python dev/step_trace.py --scenes hub_net:48:0 hanging_net:50 disc:3000 \\
-        --out docs/bench/repulsion_cg/trace
+        --out docs/dev/bench/repulsion_cg/trace
 
 A scene is ``name:size[:seed]`` (:func:`ase_maud.scenes.catalogue.build`); ``--model``
 is a ``model=`` name of :class:`ase_maud.Maud` seeking a minimum. The trace

@@ -103,6 +103,25 @@ def make_phonopy(atoms: Atoms, masses: ArrayLike | None = None,
     constants are dense).
 
     Frequencies come out angular in ``sqrt(Q / mass)`` (unit conversion 1).
+
+    Parameters
+    ----------
+    atoms : Atoms
+        The scene, with a :class:`~ase_maud.MaudCalculator`.
+    masses : array-like of shape (n,) or None, default None
+        One mass per point of ``points`` (None: 1 each).
+    points : ndarray of int or None, default None
+        The points phonopy sees (None: all).
+
+    Returns
+    -------
+    phonopy.Phonopy
+        The scene in a cubic box, no symmetry, no force constants yet.
+
+    Raises
+    ------
+    ValueError
+        More atoms than ``MaudCalculator.max_hessian_atoms``.
     """
     atoms.calc.check_hessian_size(len(atoms), 'make_phonopy')
     phonon = Phonopy(phonopy_cell(atoms, masses, points),
@@ -123,6 +142,32 @@ def gamma_modes(atoms: Atoms, masses: ArrayLike | None = None,
     the fixed ones); the Phonopy object of the free points, with its force
     constants set, for anything else phonopy offers. ``masses``: one per
     point (N), default 1.
+
+    Parameters
+    ----------
+    atoms : Atoms
+        The scene, with a :class:`~ase_maud.MaudCalculator` and its fixed
+        points as constraints.
+    masses : array-like of shape (N,) or None, default None
+        One mass per point (None: 1 each, so that the squared frequencies
+        are the Hessian's eigenvalues in ``Q``).
+
+    Returns
+    -------
+    frequencies : ndarray of shape (3n,)
+        Angular, ascending, in ``sqrt(Q / mass)``; negative for an imaginary
+        one (an unstable mode).
+    modes : ndarray of shape (3n, N, 3)
+        Real unit eigenvectors of the mass-weighted Hessian of the free
+        points, zero on the fixed ones.
+    phonon : phonopy.Phonopy
+        The free points' Phonopy object, its force constants set.
+
+    Raises
+    ------
+    ValueError
+        More atoms than ``MaudCalculator.max_hessian_atoms``, or atoms the
+        calculator refuses.
     """
     free = free_indices(atoms)
     masses = None if masses is None else np.asarray(masses, dtype=float)[free]
@@ -171,6 +216,25 @@ def vibrations(atoms: Atoms, masses: ArrayLike | None = None) -> VibrationsData:
     fixed points held (:func:`free_indices`). ``masses`` (default 1) are set
     on the copy the object keeps; its energies assume ASE's units (eV,
     Angstrom, amu).
+
+    Parameters
+    ----------
+    atoms : Atoms
+        A scene whose calculator is a :class:`~ase_maud.MaudCalculator`;
+        its constraints say which points are fixed.
+    masses : array-like or None, default None
+        Per point, N of them; None sets 1 on each.
+
+    Returns
+    -------
+    ase.vibrations.VibrationsData
+        The Hessian block of the free points (``Q``), on a copy of the atoms.
+
+    Raises
+    ------
+    ValueError
+        More atoms than ``MaudCalculator.max_hessian_atoms``, or atoms the
+        calculator refuses.
     """
     copy = atoms.copy()
     copy.set_masses(np.ones(len(atoms)) if masses is None else masses)

@@ -12,7 +12,7 @@ verdict. Three paths give the same counts:
   ``syevr`` asked for those only), for up to :data:`LOWEST_MAX_DOFS`: one
   Hessian where ``iterative`` takes hundreds of products (the soft modes of
   a large minimum hold LOBPCG to its iteration limit), and less than ``eigh``
-  of every eigenvalue (docs/bench/saddles.md, "Above 1500 free
+  of every eigenvalue (docs/dev/bench/saddles.md, "Above 1500 free
   coordinates").
 - ``iterative``: the lowest ``k`` eigenvalues by LOBPCG on Hessian-vector
   products (:meth:`ase_maud.calculator.potential.MaudPotential.hvp`), O(N) memory,
@@ -88,6 +88,31 @@ class StationaryPoint:
     ``tolerance`` is ``rtol * max|lambda|``. ``stationary`` is
     ``fmax <= ftol`` (force units, the ``ftol`` used); if it is False the
     verdict describes the curvature at a point that is not stationary.
+
+    Built by :func:`classify`; a frozen record.
+
+    Parameters
+    ----------
+    verdict : {'minimum', 'saddle', 'maximum', 'degenerate'}
+        What kind of point.
+    index : int
+        The number of negative curvatures (the saddle's order).
+    eigenvalues : ndarray of shape (m,)
+        Ascending curvatures in ``Q`` (energy per length squared).
+    modes : ndarray of shape (m, N, 3)
+        Unit vectors of the modes, zero on fixed coordinates.
+    n_negative, n_zero, n_positive : int
+        The counts over all free, non-rigid modes.
+    n_rigid, n_fixed : int
+        Rigid-body modes and fixed coordinates left out.
+    tolerance : float
+        The zero tolerance, ``rtol * max|lambda|`` (``Q``).
+    fmax, ftol : float
+        The largest force and the tolerance it was judged by (``Q a``).
+    stationary : bool
+        ``fmax <= ftol``.
+    method : {'dense', 'lowest', 'iterative'}
+        The path taken.
     """
 
     verdict: str
@@ -182,6 +207,9 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
 
     Parameters
     ----------
+    atoms : Atoms
+        The configuration, with a :class:`~ase_maud.MaudCalculator` and its
+        constraints (fixed coordinates are left out).
     method : 'auto', 'dense', 'lowest' or 'iterative'
         ``auto`` is dense up to :data:`DENSE_MAX_DOFS` free degrees of freedom,
         lowest up to :data:`LOWEST_MAX_DOFS`, iterative above.
@@ -195,6 +223,26 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
         about as not stationary; default :data:`FTOL` ``* Q a``.
     work : Work
         If given, counts the dense Hessian or the Hessian-vector products.
+
+    Returns
+    -------
+    StationaryPoint
+        The verdict, the index (negative curvatures), the eigenvalues (``Q``,
+        ascending) and modes on the free, non-rigid coordinates.
+
+    Raises
+    ------
+    ValueError
+        An unknown ``method``; the ``k`` lowest eigenvalues all negative
+        or zero (the index is not known: ask for a larger ``k``); ``dense``
+        on more atoms than ``MaudCalculator.max_hessian_atoms``; atoms the
+        calculator refuses.
+
+    Warns
+    -----
+    UserWarning
+        ``not a stationary point: fmax = ... > ftol``: the verdict describes
+        the curvature there only.
     """
     calc = atoms.calc
     potential = calc.potential
@@ -363,6 +411,28 @@ def displace_along_mode(atoms: Atoms, point: StationaryPoint, mode: int = 0,
     the largest displacement of any point (default ``0.1 a``). Each copy gets
     a fresh calculator with the same parameters, ready to be relaxed into the
     minimum on its side of the saddle.
+
+    Parameters
+    ----------
+    atoms : Atoms
+        The saddle, with a :class:`~ase_maud.MaudCalculator`.
+    point : StationaryPoint
+        :func:`classify` of ``atoms``.
+    mode : int, default 0
+        Which unstable mode (0 the most negative).
+    step : float or None, default None
+        The largest displacement of a point, in the unit of ``a`` (None:
+        ``0.1 a``).
+
+    Returns
+    -------
+    tuple of two Atoms
+        The copies moved ``+step`` and ``-step`` along the mode.
+
+    Raises
+    ------
+    ValueError
+        ``mode`` is not one of the point's negative curvatures.
     """
     if not 0 <= mode < point.n_negative:
         raise ValueError(f'mode {mode} is not unstable: the point has '
@@ -389,7 +459,28 @@ def same_point(a: Atoms, b: Atoms, energy_rtol: float = ENERGY_RTOL,
                distance_atol: float = DISTANCE_ATOL) -> bool:
     """Whether ``a`` and ``b`` are the same configuration up to rigid motion and
     relabelling: energies within ``energy_rtol`` (relative) and sorted pair
-    distances within ``distance_atol`` (length units)."""
+    distances within ``distance_atol`` (length units).
+
+    Parameters
+    ----------
+    a, b : Atoms
+        The two configurations, each with a calculator, as many points.
+    energy_rtol : float, default 1e-8
+        The energies' relative tolerance.
+    distance_atol : float, default 1e-4
+        The sorted pair distances' tolerance, in the unit of ``a``.
+
+    Returns
+    -------
+    bool
+        True if the same point up to rigid motion and relabelling.
+
+    Raises
+    ------
+    ValueError
+        The two have different numbers of points, or a calculator refuses
+        its atoms.
+    """
     ea, eb = a.get_potential_energy(), b.get_potential_energy()
     if abs(ea - eb) > energy_rtol * max(abs(ea), abs(eb)):
         return False

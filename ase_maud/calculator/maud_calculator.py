@@ -101,8 +101,26 @@ class MaudCalculator(Calculator):
         forces are good to ``fmm_eps`` of the largest repulsive force);
         and ASE's own calculator keywords.
 
+    Raises
+    ------
+    ValueError
+        When set (at construction or by :meth:`set`): a spring list that is
+        not index pairs, a duplicate or self-spring (the spring named);
+        ``a`` not >= 0 or ``Q`` not positive and finite; ``q`` not one
+        positive finite value per spring; ``loads`` of another shape or, for
+        ``dim=2``, with a z component; an unknown parameter. At a call:
+        periodic boundaries, no atoms, a non-finite position, two points at
+        one position or closer than about ``1e-100 a``, a ``dim=2`` point off
+        the plane, a spring index beyond the last atom, loads not one row
+        per atom, results that overflow float64.
+
     Notes
     -----
+    Units: positions in the unit of ``a`` (the calculator works in units of
+    ``a`` inside), energies in ``Q a^2``, forces in ``Q a`` with
+    ASE's sign ``f = -dE/dr``, stiffness blocks and Hessians in ``Q``; the
+    energy counts each pair once.
+
     Accuracy per run. ``calc.set(tol=...)`` changes the accuracy for the
     next calls (an optimiser lowers it as its forces approach ``fmax``:
     ``tol = safety * fmax / calc.last_force_scale``). Results already held
@@ -225,7 +243,25 @@ class MaudCalculator(Calculator):
     def set_tolerance(self, tol: float) -> None:
         """Set ``tol`` for the next calls (:class:`ase_maud.calculator.accuracy.ToleranceAware`):
         :meth:`set` with ``tol`` alone, without its checks of the other
-        parameters when the results held already meet it."""
+        parameters when the results held already meet it.
+
+        Parameters
+        ----------
+        tol : float
+            The force error allowed of the next calls, relative to the
+            largest repulsive force (``Q a``); 0 asks for the exact direct sum.
+
+        Returns
+        -------
+        None
+            The calls from now on are asked for ``tol``; held results that
+            meet it stay.
+
+        Raises
+        ------
+        ValueError
+            ``tol`` not a number in [0, 1).
+        """
         if self.last_tolerance is not None and self.last_tolerance <= tol:
             self.parameters['tol'] = check('tol', tol)
         else:
@@ -400,7 +436,24 @@ class MaudCalculator(Calculator):
             if potential.repulsive else 0.0)
 
     def get_stiffness(self, atoms: Atoms | None = None) -> np.ndarray:
-        """Nodal blocks ``K_mm``, shape (N, dim, dim), units of ``Q``."""
+        """Nodal blocks ``K_mm``, shape (N, dim, dim), units of ``Q``.
+
+        Parameters
+        ----------
+        atoms : Atoms or None, default None
+            The scene (None: the atoms of the last call).
+
+        Returns
+        -------
+        ndarray of shape (N, dim, dim)
+            ``K_mm = d2E / dr_m dr_m``, the diagonal blocks of the Hessian, in
+            ``Q`` (the repulsion's blocks are traceless in 3D).
+
+        Raises
+        ------
+        ValueError
+            Atoms the calculator refuses (see :class:`MaudCalculator`).
+        """
         return self.get_property('stiffness', atoms)
 
     def get_hessian(self, atoms: Atoms | None = None) -> np.ndarray:
@@ -408,6 +461,24 @@ class MaudCalculator(Calculator):
 
         For analysis of small scenes only; refuses more than
         :attr:`max_hessian_atoms` atoms with a ValueError.
+
+        Parameters
+        ----------
+        atoms : Atoms or None, default None
+            The scene; None takes the atoms the calculator last computed.
+
+        Returns
+        -------
+        ndarray of shape (dim N, dim N)
+            The dense symmetric Hessian in ``Q``, rows and columns ordered
+            atom by atom (x, y[, z] of atom 0, then atom 1, ...), constrained
+            atoms included.
+
+        Raises
+        ------
+        ValueError
+            More than :attr:`max_hessian_atoms` atoms (the message names the
+            O(N)-memory alternatives), or atoms the calculator refuses.
         """
         if atoms is not None:
             self.check_hessian_size(len(atoms))
@@ -418,7 +489,27 @@ class MaudCalculator(Calculator):
         the atoms ``indices`` (n distinct indices), shape (dim n, dim n),
         units of ``Q``, at ``atoms``' positions: computed anew in O(n N)
         time and O(n**2) memory without the whole Hessian (whatever N), and
-        not kept in :attr:`results`. A ValueError names a bad index."""
+        not kept in :attr:`results`. A ValueError names a bad index.
+
+        Parameters
+        ----------
+        atoms : Atoms
+            The scene.
+        indices : array-like of int
+            The atoms whose coordinates make the block's rows and columns,
+            in the order given.
+
+        Returns
+        -------
+        ndarray of shape (dim n, dim n)
+            The block of the Hessian, in ``Q``.
+
+        Raises
+        ------
+        ValueError
+            A bad or repeated index, atoms the calculator refuses, or a
+            block that overflows float64.
+        """
         self.potential.check_size(len(atoms))
         positions = self.check_atoms(atoms)
         block = self.potential.hessian_block(positions, indices)
@@ -457,7 +548,25 @@ class MaudCalculator(Calculator):
         """The springs' exact, constant Hessian ``Q (L_q (x) I_dim)`` (``L_q``
         the Laplacian weighted by ``q``), shape
         (dim N, dim N), kept by :attr:`potential` (built once per number of
-        atoms). A spring index beyond the last atom is a ValueError."""
+        atoms). A spring index beyond the last atom is a ValueError.
+
+        Parameters
+        ----------
+        atoms : Atoms or None, default None
+            The scene (None: the atoms of the last call); only its number of
+            atoms is used.
+
+        Returns
+        -------
+        scipy.sparse.csr_matrix of shape (dim N, dim N)
+            The springs' part of the Hessian, in ``Q`` (the repulsion's is
+            not in it).
+
+        Raises
+        ------
+        ValueError
+            A spring names an atom beyond the last one.
+        """
         atoms = atoms if atoms is not None else self.atoms
         return self.potential.spring_hessian(len(atoms))
 
@@ -470,7 +579,26 @@ class MaudCalculator(Calculator):
     def minimum_proved(self, atoms: Atoms) -> bool:
         """True if ``atoms`` are proved to have a finite minimum, however far
         out (:func:`.topology.minimum_proved`): then a run that spreads far is
-        on its way there, not diverging."""
+        on its way there, not diverging.
+
+        Parameters
+        ----------
+        atoms : Atoms
+            The scene, with its constraints.
+
+        Returns
+        -------
+        bool
+            True if every constraint is a ``FixAtoms`` or ``FixCartesian`` and
+            every spring component is held along each direction (or there is
+            one component whose loads sum to zero there); False if nothing
+            is proved.
+
+        Raises
+        ------
+        ValueError
+            A spring names an atom beyond the last one.
+        """
         return topology.minimum_proved(atoms, self.potential.spring_components(len(atoms)),
                                        self.potential.loads, self.dim)
 
@@ -479,7 +607,27 @@ class MaudCalculator(Calculator):
         nothing is proved: loads with a net sum along a direction nothing
         holds (:func:`.topology.net_load`: no stationary point at all), or,
         for a ``minimum``, spring components that fly away
-        (:meth:`unbounded_components`)."""
+        (:meth:`unbounded_components`).
+
+        Parameters
+        ----------
+        atoms : Atoms
+            The scene, with its constraints.
+        minimum : bool, default True
+            Also report spring components that fly away (a minimum is
+            sought); False: only a net load (no stationary point at all).
+
+        Returns
+        -------
+        str or None
+            One sentence saying what is wrong and what to fix (the message
+            of :class:`~ase_maud.NoEquilibriumError`), or None.
+
+        Raises
+        ------
+        ValueError
+            A spring names an atom beyond the last one.
+        """
         total = topology.net_load(atoms, self.potential.loads, self.dim)
         if total is not None:
             return topology.describe_net_load(total)

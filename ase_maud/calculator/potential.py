@@ -44,6 +44,29 @@ class MaudPotential:
     and loads alone, the force-density method (:attr:`repulsive`). Energies
     count each pair once; forces have ASE's sign, ``f = -dE/dr``. Frozen: a
     change is a new potential (the spring Hessian it caches stays valid).
+
+    Parameters
+    ----------
+    springs : array-like of shape (K, 2)
+        Atom index pairs tied by a spring, each pair once.
+    a : float, default 1.0
+        The repulsion's length (>= 0; 0: no repulsion).
+    Q : float, default 1.0
+        The spring constant, force per length (> 0).
+    dim : {2, 3}, default 3
+        The dimension of the scene.
+    q : array-like of shape (K,) or None, default None
+        Each spring's force density multiplier of ``Q`` (positive).
+    loads : array-like of shape (N, dim) or (N, 3), or None, default None
+        Constant nodal loads ``F`` in ``Q a``.
+
+    Raises
+    ------
+    ValueError
+        A spring list that is not index pairs, a duplicate or self-spring
+        (named); ``a``, ``Q``, ``dim`` or ``q`` outside their rules; ``q``
+        not one value per spring; loads of another shape or, for ``dim=2``,
+        with a z component.
     """
 
     springs: np.ndarray
@@ -153,7 +176,23 @@ class MaudPotential:
     def spring_laplacian(self, natoms: int) -> sp.csr_matrix:
         """The spring graph's Laplacian weighted by ``q``, ``sum_s q_s (e_i -
         e_j)(e_i - e_j)^T`` (``D - A`` if every ``q_s = 1``), (natoms,
-        natoms), kept; the springs' Hessian is ``Q`` times it, times ``I_dim``."""
+        natoms), kept; the springs' Hessian is ``Q`` times it, times ``I_dim``.
+
+        Parameters
+        ----------
+        natoms : int
+            The number of points.
+
+        Returns
+        -------
+        scipy.sparse.csr_matrix of shape (natoms, natoms)
+            The weighted Laplacian (dimensionless: ``q`` weights).
+
+        Raises
+        ------
+        ValueError
+            A spring names a point beyond ``natoms - 1``.
+        """
         return self._kept(('laplacian', natoms), lambda: physics.spring_laplacian(
             self._springs_within(natoms), natoms, self.stiffnesses))
 
@@ -200,7 +239,25 @@ class MaudPotential:
         """The dense Hessian ``d2E/dr dr``, shape (dim N, dim N), units of
         ``Q``: ``-B_ij`` off the diagonal, the nodal block ``K_ii = sum_j
         B_ij`` on it (:mod:`.physics`); the repulsion's part by ``backend``
-        (:func:`.backends.exact_choice`)."""
+        (:func:`.backends.exact_choice`).
+
+        Parameters
+        ----------
+        positions : ndarray of shape (N, 3) or (N, dim)
+            The points, in the unit of ``a``.
+        backend : str, default 'auto'
+            The repulsion's exact backend (``'auto'``, ``'numba'``, ``'numpy'``).
+
+        Returns
+        -------
+        ndarray of shape (dim N, dim N)
+            The Hessian in ``Q``.
+
+        Raises
+        ------
+        ValueError
+            A point whose ``x / a`` overflows, or an unknown backend.
+        """
         n = self.dim * len(positions)
         unit = (backends.exact_choice(backend).backend.hessian(self.reduced(positions),
                                                                self.dim)[2]
@@ -242,6 +299,24 @@ class MaudPotential:
         shape, in units of ``Q`` times ``v``. O(N) memory per vector; the
         repulsion's part by the registry's Hessian-vector backend
         (:func:`.backends.repulsion_hvp`).
+
+        Parameters
+        ----------
+        positions : ndarray of shape (N, 3) or (N, dim)
+            The points, in the unit of ``a``.
+        v : array-like of shape (N, dim) or (m, N, dim)
+            One displacement of every point, or m of them.
+
+        Returns
+        -------
+        ndarray of the shape of ``v``
+            ``H v`` in ``Q`` times the unit of ``v`` (the change of
+            ``-f`` per unit move along ``v``).
+
+        Raises
+        ------
+        ValueError
+            ``v`` of another shape, or a point whose ``x / a`` overflows.
         """
         n, dim = len(positions), self.dim
         v = np.asarray(v, dtype=float)

@@ -23,7 +23,25 @@ __all__ = ['force_density_positions', 'solve_force_density', 'unsupported']
 
 def solve_force_density(atoms: Atoms) -> None:
     """Move the free points of the net ``atoms`` to the equilibrium of its
-    springs and loads (:func:`force_density_positions`), the supports held."""
+    springs and loads (:func:`force_density_positions`), the supports held.
+
+    Parameters
+    ----------
+    atoms : Atoms
+        The net, with a :class:`~ase_maud.MaudCalculator` (its springs, ``Q``,
+        ``q``, loads) and its supports as constraints; moved in place.
+
+    Returns
+    -------
+    None
+        ``atoms`` are moved in place.
+
+    Raises
+    ------
+    ValueError
+        As :func:`force_density_positions`: no MaudCalculator, or supports
+        that leave the equilibrium not unique.
+    """
     atoms.set_positions(force_density_positions(atoms), apply_constraint=False)
 
 
@@ -37,6 +55,25 @@ def force_density_positions(atoms: Atoms) -> np.ndarray:
     where :func:`unsupported` says why they do not make the equilibrium
     unique (a point held in some directions only: relax with
     :class:`~ase_maud.Maud` instead). A ``dim=2`` net stays on its plane.
+
+    Parameters
+    ----------
+    atoms : Atoms
+        The net, with a :class:`~ase_maud.MaudCalculator` and its supports as
+        constraints (``FixAtoms``, or ``FixCartesian`` of every direction).
+
+    Returns
+    -------
+    ndarray of shape (N, 3)
+        The positions at ``Q L_ff x_f = F_f - Q L_fs x_s``, in the unit of
+        the given positions; the supports where they are.
+
+    Raises
+    ------
+    ValueError
+        ``atoms.calc`` is not a MaudCalculator, or the supports do not make
+        the equilibrium unique (a spring component with no support, a point
+        held in some directions only: the message says which).
     """
     calc = atoms.calc
     if not isinstance(calc, MaudCalculator):

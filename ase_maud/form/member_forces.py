@@ -58,21 +58,36 @@ FREE_MOTION = 1e-3
 class FormResult:
     """Forces of a net (see the module docstring for the signs).
 
-    Attributes
+    Built by :func:`form_result`; a frozen record. Units: lengths in the
+    positions' unit (that of ``a``), forces in ``Q a`` (force units),
+    force densities in ``Q`` (force per length).
+
+    Parameters
     ----------
-    vertices : (N, 3) positions (length units).
-    edges : (K, 2) point indices of each member (spring).
-    force_densities : (K,) ``Q q_s`` of each member (force per length).
-    lengths : (K,) each member's length.
-    forces : (K,) each member's force ``Q q_s L_s`` (tension positive).
-    supports : (M,) indices of the points held in every direction.
-    reactions : (M, 3) the force each support exerts on its point.
-    loads : (N, 3) the loads (zero where there are none).
-    residuals : (N, 3) the total force (members, repulsion, loads) at each
-        free point; zero at the supports.
-    out_of_balance : (N, 3) the members' pulls plus the load at each free
-        point (zero at the supports): what the repulsion carries at an
-        equilibrium of Maud, and the force-density method's residual.
+    vertices : ndarray of shape (N, 3)
+        The positions.
+    edges : ndarray of shape (K, 2)
+        The point indices of each member (spring).
+    force_densities : ndarray of shape (K,)
+        ``Q q_s`` of each member (force per length).
+    lengths : ndarray of shape (K,)
+        Each member's length.
+    forces : ndarray of shape (K,)
+        Each member's force ``Q q_s L_s`` (tension positive; a zero-length
+        spring is never in compression).
+    supports : ndarray of shape (M,)
+        The indices of the points held in every direction.
+    reactions : ndarray of shape (M, 3)
+        The force each support exerts on its point.
+    loads : ndarray of shape (N, 3)
+        The loads (zero where there are none).
+    residuals : ndarray of shape (N, 3)
+        The total force (members, repulsion, loads) at each free point, ASE's
+        sign; zero at the supports.
+    out_of_balance : ndarray of shape (N, 3)
+        The members' pulls plus the load at each free point (zero at the
+        supports): what the repulsion carries at an equilibrium of Maud, and
+        the force-density method's residual.
     """
 
     vertices: np.ndarray
@@ -134,6 +149,24 @@ def form_result(atoms: Atoms) -> FormResult:
     call (none if its forces are held). Supports are the points a constraint
     holds in all three directions; a point held in some directions only is
     treated as free (its residual then includes what the constraint takes).
+
+    Parameters
+    ----------
+    atoms : Atoms
+        The net, with a :class:`~ase_maud.MaudCalculator` and its supports as
+        constraints.
+
+    Returns
+    -------
+    FormResult
+        Member forces (tension positive, ``Q a``), reactions (the force each
+        support exerts on its point), residuals and out-of-balance (ASE's
+        sign).
+
+    Raises
+    ------
+    ValueError
+        ``atoms.calc`` is not a MaudCalculator, or atoms it refuses.
     """
     calc = atoms.calc
     if not isinstance(calc, MaudCalculator):
@@ -170,6 +203,26 @@ def write_forces_csv(path: str | Path, result: FormResult) -> Path:
     reaction's size and ``rx, ry, rz`` its components: the force the support
     exerts on the point). Numbers in full precision (``repr``); the file is
     replaced whole (:mod:`ase_maud.files.atomic_replace`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file to write.
+    result : FormResult
+        What :func:`form_result` gave.
+
+    Returns
+    -------
+    Path
+        The file written.
+
+    Raises
+    ------
+    ValueError
+        A path that cannot be written (a missing or read-only directory, a
+        directory).
+    OSError
+        The disk refused the write (the old file is left whole).
     """
     path = Path(path)
     text = io.StringIO()
@@ -191,7 +244,23 @@ def write_forces_csv(path: str | Path, result: FormResult) -> Path:
 def describe_result(result: FormResult) -> str:
     """The numbers of ``result`` a designer reads first, in one phrase:
     the largest member force, the sum of the reactions, the largest residual
-    and the members' and loads' out-of-balance (over the mean member force)."""
+    and the members' and loads' out-of-balance (over the mean member force).
+
+    Parameters
+    ----------
+    result : FormResult
+        What :func:`form_result` gave.
+
+    Returns
+    -------
+    str
+        One phrase, forces in ``Q a``, for a log or a summary line.
+
+    Raises
+    ------
+    None
+        It reads the record only.
+    """
     total = ', '.join(f'{value:.4g}' for value in result.reaction_sum.tolist())
     return (f'largest member force {result.max_force:.4g}, reactions sum to ({total}), '
             f'residual {result.max_residual:.3g}, out-of-balance {result.max_out_of_balance:.3g}'

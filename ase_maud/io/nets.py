@@ -119,7 +119,25 @@ def default_a(atoms: Atoms, springs: np.ndarray) -> float:
     spring length, the largest fraction of 0.1, 0.2, 0.3, 0.4, 0.5, 0.7, 1
     with which each of ten compas sample nets (32 to 4900 points), its
     boundary (leaves) fixed, relaxes within the bounding box of its supports
-    (docs/bench/a_rule.md).
+    (docs/dev/bench/a_rule.md).
+
+    Parameters
+    ----------
+    atoms : Atoms
+        The net's points, with its supports as constraints.
+    springs : ndarray of shape (K, 2)
+        Its springs (0-based index pairs).
+
+    Returns
+    -------
+    float
+        ``a`` in the unit of the positions: 0, or
+        :data:`A_PER_MEAN_SPRING` times the mean spring length.
+
+    Raises
+    ------
+    ValueError
+        A spring names a point beyond the last one.
     """
     if unsupported(atoms, springs) is None:
         return 0.0
@@ -219,6 +237,26 @@ def read_net(path: PathLike, edges: PathLike | None = None,
         A constant load (force units) on every free point
         (:func:`free_point_loads`; self-weight, say), replacing the loads
         the file holds.
+
+    Returns
+    -------
+    Atoms
+        The points (in the file's length unit), their supports as
+        ``FixAtoms``, and a :class:`~ase_maud.MaudCalculator` with the
+        springs, ``a``, ``Q``, ``dim``, force densities ``q`` and loads
+        (force units ``Q a``).
+
+    Raises
+    ------
+    ValueError
+        A file that cannot be read or is malformed (the file, and the line
+        where the format has lines), a format no reader takes, a net with
+        no springs, a frame beyond the file's (``no frame -999: the file
+        holds 4 frames ...``), a ``fixed`` rule that finds no point or a
+        fixed point out of range or given twice, an edge listed twice with
+        two ``q``, or ``a``, ``Q``, ``dim``, ``load`` outside their rules.
+    OSError
+        The file cannot be opened.
     """
     return _read(path, edges, fixed, a, Q, dim, index, load)[0]
 
@@ -228,7 +266,26 @@ def read_frames(path: PathLike, edges: PathLike | None = None,
                 a: float | None = None, Q: float | None = None,
                 dim: int | None = None,
                 load: Sequence[float] | None = None) -> list[Atoms]:
-    """Every frame of a file (one for OBJ and JSON), as :func:`read_net`."""
+    """Every frame of a file (one for OBJ and JSON), as :func:`read_net`.
+
+    Parameters
+    ----------
+    path, edges, fixed, a, Q, dim, load
+        As for :func:`read_net`.
+
+    Returns
+    -------
+    list of Atoms
+        One net per frame, in the file's order, each with its own
+        :class:`~ase_maud.MaudCalculator`.
+
+    Raises
+    ------
+    ValueError
+        As :func:`read_net`.
+    OSError
+        The file cannot be opened.
+    """
     return _read(path, edges, fixed, a, Q, dim, slice(None), load)
 
 
@@ -416,6 +473,34 @@ def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None,
     ``atoms``), holds the member forces and reactions
     (:func:`~ase_maud.io.compas.compas_text`); the other formats ignore
     ``result``.
+
+    Parameters
+    ----------
+    path : file name
+        Where to write; its suffix chooses the format (``.obj``, ``.json``,
+        ``.traj``, ``.xyz``, or any ASE writes). Replaced whole, atomically,
+        keeping the old file's permissions.
+    atoms : Atoms
+        The net, with a :class:`~ase_maud.MaudCalculator`.
+    like : file name or None, default None
+        The file the net was read from, kept but for the moved coordinates.
+    result : FormResult or None, default None
+        Member forces and reactions to store (COMPAS JSON only).
+
+    Returns
+    -------
+    list of Path
+        The files written (the net, and an edge list beside it where the
+        format holds no springs).
+
+    Raises
+    ------
+    ValueError
+        Atoms without a MaudCalculator, a suffix no writer takes, a
+        ``like`` of another format or number of points, or a path that
+        cannot be written (a missing or read-only directory).
+    OSError
+        The disk refused the write (the old file is left whole).
     """
     path = Path(path)
     kind = net_format(path)

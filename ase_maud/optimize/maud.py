@@ -73,28 +73,79 @@ class Maud(Optimizer):
     """The Maud optimiser; see the module docstring, and docs/optimizer.md
     for every keyword and why it has its default.
 
+    Units: lengths in ``a``, energies in ``Q a^2``, forces in ``Q a`` on a
+    :class:`~ase_maud.MaudCalculator` (the calculator's own units, eV and
+    Angstrom, on any other); forces have ASE's sign, ``f = -dE/dr``.
+
     Parameters
     ----------
     atoms : Atoms (or anything with ``__ase_optimizable__``)
-        The system to relax.
+        The system to relax: Atoms with a calculator that computes forces,
+        a Filter, a cell filter or ASE's ``NEB``. Moved in place.
+    restart : str or None, default None
+        A restart file (``maud.json`` and its ``maud.json.arrays``) written
+        after each step; if it exists, the run carries on from it
+        (:meth:`resume`).
+    logfile : file, str or None, default '-'
+        ASE's log: ``'-'`` standard output, a file name or an open file.
+    trajectory : str or None, default None
+        An ASE trajectory written at each step.
+    append_trajectory : bool, default False
+        Append to ``trajectory`` instead of starting it afresh.
     model : 'auto', a name of ``ase_maud.optimize.models.registry.MODELS`` or a StiffnessModel
-        The stiffness ``K`` of the step (:func:`ase_maud.optimize.models.registry.choose_model`);
-        ``method`` ('tensor' or 'scalar') is the nodal model's, ``floor`` a
-        model's relative eigenvalue floor, ``kappa0`` the secant and bfgs models' start.
+        The stiffness ``K`` of the step (:func:`ase_maud.optimize.models.registry.choose_model`):
+        'auto' takes the exact Hessian up to 150 free coordinates, the
+        springs model above, 'bfgs' for a calculator with forces only.
+    method : 'tensor' or 'scalar', default 'tensor'
+        The nodal model's blocks (``model='nodal'``, the specification's step).
     target : 'minimum', 'stationary', 'saddle' or None
         Only downhill, any stationary point, or one with exactly ``order``
-        negative curvatures (``mode``: the Hessian mode, by index or as a move
-        (N, 3), to climb first; :attr:`found`: the point, classified; a
-        WrongIndexError if of another index). None: 'minimum' ('stationary'
-        for a band of images, ASE's ``NEB``).
-    gamma, gamma_max, gamma_growth, overshoot_shrink, beta_max, memory, maxstep_nn, maxstep
-        The step rule (:data:`ase_maud.optimize.step_rules.STEP_DEFAULTS`; None: the model's).
-    divergence_factor, patience
-        The growth of a MaudCalculator's scene between two looks at its forces
-        that stops the run as diverging (default 2; inf: never), and the steps
-        without progress that stop it as stagnant (:class:`~ase_maud.optimize.monitor.RunMonitor`).
-    restart, logfile, trajectory, append_trajectory, **kwargs
-        As for every ASE optimizer.
+        negative curvatures (:attr:`found`: the point, classified). None:
+        'minimum' ('stationary' for a band of images, ASE's ``NEB``).
+    gamma, gamma_max, gamma_growth, overshoot_shrink : float or None
+        The step rule (:data:`ase_maud.optimize.step_rules.STEP_DEFAULTS`;
+        None: the model's): the step factor, its cap and growth, the cut
+        after an overshoot.
+    beta_max, memory, maxstep_nn, maxstep : float, int or None
+        Day's momentum cap, the L-BFGS memory (pairs), the largest move of
+        a point as a fraction of its nearest distance (below 0.5), and the
+        largest move of a point (``a``) where there is no such distance.
+    floor : float or None, default None
+        A model's relative eigenvalue floor (None: the model's).
+    kappa0 : float, default 70.0
+        The secant and bfgs models' starting curvature (energy per length
+        squared, ASE's 70 eV/A^2).
+    divergence_factor : float, default 2.0
+        The growth of a MaudCalculator's scene between two looks at its
+        forces; two looks that see no balance ahead stop the run as
+        diverging (``inf``: never).
+    patience : int, default 2000
+        Steps without progress that stop the run as stagnant.
+    order : int, default 1
+        The index sought with ``target='saddle'``.
+    mode : int, array (N, 3) or None, default None
+        With ``target='saddle'``: the Hessian mode to climb first, by index
+        (0 the lowest) or as a move.
+    **kwargs
+        As for every ASE optimizer (``maxstep`` of ASE, ``master``, ...).
+
+    Raises
+    ------
+    ValueError
+        A keyword outside its rule (named, with what it accepts), atoms
+        without a calculator that computes forces, ``target='saddle'``
+        with every coordinate held, or a file argument that cannot be
+        written.
+    FileInUseError
+        Another run holds the lock of ``trajectory`` or ``restart``.
+    RestartFileError
+        ``restart`` exists but is damaged, of another scene or of another
+        version (raised by :meth:`run` when it reads it).
+
+    See Also
+    --------
+    ase_maud.MaudCalculator : the calculator whose stiffness the default model uses.
+    ase_maud.search_saddles : saddles from a minimum, several attempts.
     """
 
     def __init__(self, atoms: Atoms, restart: str | None = None,
@@ -214,6 +265,25 @@ class Maud(Optimizer):
         self._stop(no_step_error(self.nsteps, why, self.model, self._atoms()))
 
     def irun(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS) -> Iterator[bool]:
+        """ASE's ``irun``: the run step by step, one bool a step.
+
+        Parameters
+        ----------
+        fmax, steps : float, int
+            As for :meth:`run` (``Q a``; the most steps).
+
+        Yields
+        ------
+        bool
+            Whether the run has converged, after each step.
+
+        Raises
+        ------
+        ValueError, NoEquilibriumError
+            As :meth:`run`, when ``irun`` is called (not when iterated).
+        MaudError, RestartFileError
+            As :meth:`run`, from the step where they arise.
+        """
         steps = self._preflight(fmax, steps)   # bad arguments refused here, not when iterated
         return self._locked(super().irun(self.fmax, steps))
 
@@ -226,7 +296,40 @@ class Maud(Optimizer):
 
     def run(self, fmax: float = 0.05, steps: int = DEFAULT_MAX_STEPS) -> bool:
         """ASE's ``run``; on arrays (:mod:`ase_maud.optimize.array_loop`, the same steps)
-        where nothing watches the run step by step."""
+        where nothing watches the run step by step.
+
+        Parameters
+        ----------
+        fmax : float, default 0.05
+            Converged when the largest force on a point is below ``fmax``
+            (``Q a`` on a MaudCalculator; for ``target='saddle'`` the index
+            must be reached too). Write ``1e-300`` to run exactly ``steps``.
+        steps : int, default ASE's ``DEFAULT_MAX_STEPS``
+            The most steps to take (0 takes none).
+
+        Returns
+        -------
+        bool
+            True if converged; False if ``steps`` ran out first (no error).
+
+        Raises
+        ------
+        ValueError
+            ``fmax`` not a positive finite number, ``steps`` not a whole
+            number >= 0, or atoms the calculator refuses (named).
+        NoEquilibriumError
+            The scene is proved to have no finite equilibrium (before the
+            first step; the atoms are not moved).
+        MaudError
+            The run cannot go on: :class:`DivergenceError`,
+            :class:`StagnationError`, :class:`WrongIndexError`, a non-finite
+            energy or force (the positions are those of the last finite
+            step); the message is in the log too.
+        FileInUseError
+            A file of this run was written by another run since it started.
+        RestartFileError
+            The restart file cannot be read or is of another run.
+        """
         steps = self._preflight(fmax, steps)
         with self._lock, accuracy.kept(getattr(self._atoms(), 'calc', None)):
             try:
@@ -322,8 +425,35 @@ class Maud(Optimizer):
         file's positions if it exists (its state belongs to them; it is never
         ahead of the trajectory, at most one frame behind, which is then
         written again). The trajectory is appended to; the resumed run makes
-        the steps the uninterrupted one would have made. ``kwargs`` go to
-        Maud.
+        the steps the uninterrupted one would have made.
+
+        Parameters
+        ----------
+        atoms : Atoms, Filter or NEB
+            The run's atoms (moved in place).
+        restart : str or Path, default 'maud.json'
+            The run's restart file (need not exist).
+        trajectory : str or Path, default 'maud.traj'
+            The run's trajectory, appended to (a damaged end is dropped,
+            the cut file kept as ``NAME.damaged``).
+        **kwargs
+            The other keywords of :class:`Maud`, as the run was given them.
+
+        Returns
+        -------
+        Maud
+            The optimizer; call :meth:`run` on it.
+
+        Raises
+        ------
+        ValueError
+            A trajectory that cannot be read (cut into its header), or a
+            keyword outside its rule.
+        RestartFileError
+            The restart file or trajectory is of another scene (the
+            difference named), damaged, or of another version.
+        FileInUseError
+            Another run holds the lock of these files.
         """
         to_last_step(atoms, trajectory)
         return cls(atoms, restart=restart, trajectory=trajectory,

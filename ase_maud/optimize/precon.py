@@ -44,6 +44,18 @@ class MaudPrecon(Precon):
         Rebuild ``P`` when a point has moved more than this fraction of its
         nearest-neighbour distance since the last build (default 0.5, the
         global model's; 0 means at every call).
+
+    Raises
+    ------
+    ValueError
+        ``floor`` or ``refresh`` outside their rules (named). When ASE
+        builds ``P`` (``make_precon``): atoms whose calculator offers no
+        stiffness, or atoms the calculator refuses.
+
+    Examples
+    --------
+    >>> from ase.optimize.precon import PreconLBFGS           # doctest: +SKIP
+    >>> PreconLBFGS(atoms, precon=MaudPrecon()).run(fmax=1e-4)  # doctest: +SKIP
     """
 
     def __init__(self, floor: float = 1e-2, refresh: float = 0.5):

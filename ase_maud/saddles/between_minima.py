@@ -77,7 +77,29 @@ class Transition:
     ``elsewhere``: the verified index-1 saddles a refinement reached that
     are not the band's (their barrier more than :data:`AGREE` from its
     highest image's), in the order reached: saddles of the scene, not
-    known to lie between the two minima."""
+    known to lie between the two minima.
+
+    Parameters
+    ----------
+    saddle : Atoms or None
+        The verified index-1 saddle, or None (``outcome`` says why).
+    band : list of Atoms
+        The relaxed band, ends included.
+    outcome : str
+        How the search ended, in words.
+    elsewhere : list of Atoms
+        Verified saddles a refinement reached that are not the band's.
+    barriers : (float, float)
+        The saddle's energy above the first and the second minimum, ``Q a^2``.
+    climbing : float
+        The band's highest image above the first minimum, ``Q a^2``.
+    band_calls, band_steps, saddle_calls : int
+        Calls and steps of the band, calls of the refinement.
+    work : Work
+        Hessian-vector product vectors and Hessians.
+    cpu_s : float
+        CPU seconds.
+    """
 
     saddle: Atoms | None
     band: list[Atoms]
@@ -103,7 +125,19 @@ class Transition:
         return self.calls + self.work.total
 
     def describe(self) -> str:
-        """One line: how it ended, the barrier and what it cost."""
+        """One line: how it ended, the barrier and what it cost.
+
+        Returns
+        -------
+        str
+            The outcome or the barrier (``Q a^2``), then the calls, products,
+            Hessians, their sum in force-call equivalents and the CPU seconds.
+
+        Raises
+        ------
+        None
+            It reads the record only.
+        """
         found = (f'saddle {self.barriers[0]:.6g} above the first minimum (climbing image '
                  f'{self.climbing:.6g})' if self.saddle is not None else self.outcome)
         return (f'{found}: {self.band_calls} band calls ({self.band_steps} steps) + '
@@ -126,7 +160,42 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
     :data:`BAND_FMAX` ``Q a``; at most ``band_steps`` steps each time), then
     its highest image refined to ``fmax`` in at most ``steps`` steps.
     Neither minimum is changed. A ValueError names a bad argument, or what
-    the two scenes do not share."""
+    the two scenes do not share.
+
+    Parameters
+    ----------
+    first, second : Atoms
+        Two minima of one scene (same points, springs, ``a``, ``Q``, ``dim``,
+        constraints), each with a :class:`~ase_maud.MaudCalculator`.
+    images : int, default 7
+        Moving images of the band.
+    band_fmax : float or None, default None
+        The band's convergence, ``Q a`` (None: :data:`BAND_FMAX` ``Q a``).
+    fmax : float, default 1e-6
+        The refined saddle's convergence, ``Q a``.
+    steps : int, default 200
+        Steps of the refinement.
+    band_steps : int, default 2000
+        Steps of each of the band's two relaxations.
+    spring : float or None, default None
+        The band's springs, force per length (None: the scene's ``Q``).
+    interpolation : {'linear', 'idpp'}, default 'linear'
+        The band's first images.
+    seed : int, default 0
+        The seed of the images' jitter (up to :data:`JITTER` ``a``).
+
+    Returns
+    -------
+    Transition
+        The verified saddle (or None and why), the band, the barriers
+        (``Q a^2``) and the cost.
+
+    Raises
+    ------
+    ValueError
+        An argument outside its rule, or two scenes that differ (what they
+        do not share is named).
+    """
     checked = check_all(fmax=fmax, steps=steps)
     fmax, steps = checked['fmax'], checked['steps']
     if not (isinstance(images, int) and images >= 1):
@@ -180,7 +249,30 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
 def mirrored(minimum: Atoms, fmax: float = 1e-6, steps: int = 5000) -> Atoms:
     """The mirror image of ``minimum`` (:func:`reflection`) relaxed by Maud to
     ``fmax`` in at most ``steps`` steps. A ValueError if the fixed points do
-    not span a plane, or the relaxation does not converge."""
+    not span a plane, or the relaxation does not converge.
+
+    Parameters
+    ----------
+    minimum : Atoms
+        A minimum with a :class:`~ase_maud.MaudCalculator` and at least three
+        fixed points not on one line.
+    fmax : float, default 1e-6
+        The relaxation's convergence, ``Q a``.
+    steps : int, default 5000
+        Its most steps.
+
+    Returns
+    -------
+    Atoms
+        The relaxed mirror image, with its own calculator.
+
+    Raises
+    ------
+    ValueError
+        The fixed points span no plane, or the relaxation did not converge.
+    MaudError
+        The relaxation could not go on (see :meth:`ase_maud.Maud.run`).
+    """
     image = reflection(minimum)
     if not Maud(image, logfile=None).run(fmax=fmax, steps=steps):
         raise ValueError(f'the mirror image did not relax to fmax {fmax:g} in {steps} steps')
@@ -192,7 +284,24 @@ def reflection(minimum: Atoms) -> Atoms:
     fixed points not on one line: a net with its rim fixed, say) with its own
     calculator, its free points reflected through the plane fitted (least
     squares) to the fixed points; not relaxed. A ValueError if the fixed
-    points do not span a plane."""
+    points do not span a plane.
+
+    Parameters
+    ----------
+    minimum : Atoms
+        A scene with a :class:`~ase_maud.MaudCalculator` and at least three
+        fixed points not on one line.
+
+    Returns
+    -------
+    Atoms
+        The reflected copy, with its own calculator.
+
+    Raises
+    ------
+    ValueError
+        Fewer than three fixed points, or all on one line.
+    """
     fixed = ~free_dofs(minimum, 3).any(axis=1)
     rim = minimum.positions[fixed]
     if len(rim) < 3 or np.linalg.matrix_rank(rim - rim.mean(axis=0), tol=1e-9) < 2:

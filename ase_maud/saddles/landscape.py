@@ -65,7 +65,23 @@ class Landscape:
     search tried (:class:`~ase_maud.saddles.search.SaddleSearch`), and beside
     it, ``calls`` and ``work``: the descents' calculator calls and the
     Hessian-vector product vectors and Hessians of the descents and of the
-    start's and each saddle's classification."""
+    start's and each saddle's classification.
+
+    Parameters
+    ----------
+    minima, saddles : list of Atoms
+        The points, each with its own calculator (energies in ``Q a^2``).
+    joins : list of (int, int)
+        For each saddle, the indices in ``minima`` of the two it joins.
+    failed : int
+        Attempts and descents that failed.
+    search : SaddleSearch or None
+        What the saddle search tried.
+    calls : int
+        The descents' calculator calls.
+    work : Work
+        Hessian-vector products and Hessians beside the search's.
+    """
 
     minima: list[Atoms] = field(default_factory=list)
     saddles: list[Atoms] = field(default_factory=list)
@@ -85,7 +101,19 @@ class Landscape:
 
     def todict(self) -> dict:
         """The graph as plain data (JSON): energies and positions of the
-        minima and saddles, ``joins``, ``barriers`` and ``failed``."""
+        minima and saddles, ``joins``, ``barriers`` and ``failed``.
+
+        Returns
+        -------
+        dict
+            Keys :data:`GRAPH_KEYS`; energies in ``Q a^2``, positions in the
+            unit of ``a``.
+
+        Raises
+        ------
+        None
+            It reads the record only.
+        """
         def points(atoms_list):
             return [{'energy': a.get_potential_energy(), 'positions': a.positions.tolist()}
                     for a in atoms_list]
@@ -96,7 +124,18 @@ class Landscape:
 
     def barriers(self) -> list[tuple[float, float]]:
         """For each saddle, its energy above each of the two minima it joins
-        (energy units), in the order of :attr:`joins`."""
+        (energy units), in the order of :attr:`joins`.
+
+        Returns
+        -------
+        list of (float, float)
+            The two barriers of each saddle, in ``Q a^2``.
+
+        Raises
+        ------
+        None
+            It reads the record only.
+        """
         return [(saddle.get_potential_energy() - self.minima[i].get_potential_energy(),
                  saddle.get_potential_energy() - self.minima[j].get_potential_energy())
                 for saddle, (i, j) in zip(self.saddles, self.joins, strict=True)]
@@ -109,29 +148,62 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
               window: float | None = None, empty_rounds: int = 6) -> Landscape:
     """The :class:`Landscape` around the minimum ``atoms`` (a MaudCalculator
     scene relaxed to ``fmax``; a ValueError if it is not a minimum): the
-    saddles of :func:`~ase_maud.saddles.search.search_saddles` (climbs along its
-    ``modes`` lowest modes both ways, then ``local`` local activations at
-    points drawn with ``seed``, each attempt within ``budget`` force-call
-    equivalents, None: no bound but the steps), each saddle's two sides
-    relaxed, all to ``fmax`` in at most ``steps`` steps; points compared by
-    :func:`same_point` with ``energy_rtol`` and ``distance_atol``. The
-    attempts and descents run on the workers of ``client`` (a
-    ``dask.distributed.Client``) if given, else in this process.
-    ``partner``: a second minimum of the scene (a dome's mirror image,
-    :func:`~ase_maud.saddles.between_minima.mirrored`): if the search found no saddle,
-    the one a band of images between the two reaches
-    (:func:`~ase_maud.saddles.between_minima.saddle_between`); ``mirror``: that second
-    minimum is ``atoms``' mirror image through the plane of its fixed points,
-    relaxed only if needed; None (default): wherever the image is another
-    configuration (:func:`~ase_maud.saddles.search.search_saddles`).
-    ``window``: a barrier
-    above the minimum (energy units): the search goes on in rounds like the
-    first (the next ``modes`` modes, ``local`` more points) until
-    ``empty_rounds`` rounds in a row find no new saddle below it that joins
-    the minimum (each new saddle below it is then descended from at once,
-    in this process; None: one round). Each
-    argument is checked first (:data:`~ase_maud.checks.RULES`): a ValueError
-    names a bad one."""
+    saddles of :func:`~ase_maud.saddles.search.search_saddles`, each saddle's
+    two sides relaxed, all to ``fmax`` in at most ``steps`` steps; points
+    compared by :func:`same_point`.
+
+    Parameters
+    ----------
+    atoms : Atoms
+        A minimum with a :class:`~ase_maud.MaudCalculator` and its
+        constraints, relaxed to ``fmax``.
+    modes : int, default 2
+        The lowest modes climbed, each both ways, a round.
+    fmax : float, default 1e-6
+        Convergence of every attempt and descent, ``Q a``.
+    steps : int, default 1000
+        Steps an attempt or descent may take.
+    energy_rtol, distance_atol : float, default 1e-8, 1e-4
+        When two points are one (:func:`same_point`; distances in ``a``).
+    client : dask.distributed.Client or None, default None
+        Workers to run the attempts and descents on (None: in this process).
+    local : int, default 1
+        Local activations a round, at points drawn with ``seed``.
+    budget : int or None, default None
+        Force-call equivalents an attempt may spend (None: no bound but
+        ``steps``).
+    seed : int, default 0
+        The seed of the points activated.
+    partner : Atoms or None, default None
+        A second minimum of the scene (a dome's mirror image,
+        :func:`~ase_maud.saddles.between_minima.mirrored`): if the search
+        found no saddle, the one a band of images between the two reaches.
+    mirror : bool or None, default None
+        Take as partner ``atoms``' mirror image through the plane of its
+        fixed points, relaxed only if needed; None: wherever the fixed
+        points span a plane and the image is another configuration; False:
+        never.
+    window : float or None, default None
+        A barrier above the minimum (``Q a^2``): go on in rounds until
+        ``empty_rounds`` rounds in a row find no new saddle below it that
+        joins the minimum (None: one round).
+    empty_rounds : int, default 6
+        See ``window``.
+
+    Returns
+    -------
+    Landscape
+        The distinct minima (the start first) and index-1 saddles, which two
+        minima each saddle joins, the barriers (``Q a^2``), the failed
+        attempts and descents, and the cost in force-call equivalents.
+
+    Raises
+    ------
+    ValueError
+        An argument outside its rule (:data:`~ase_maud.checks.RULES`, named,
+        before any work); ``atoms`` not a minimum within ``fmax``; a partner
+        of another scene, or ``partner`` with ``mirror=True``.
+    """
     checked = check_all(modes=modes, fmax=fmax, steps=steps, energy_rtol=energy_rtol,
                         distance_atol=distance_atol)
     modes, fmax, steps = checked['modes'], checked['fmax'], checked['steps']

@@ -47,8 +47,8 @@ only a local activation reaches, so a round that finds nothing is no sign
 that the next will not.
 
 3. **A path**, if none of these found a saddle and a second minimum of the
-   scene is given (``partner``), or asked for as the minimum's mirror image
-   (``mirror``: through the plane of its fixed points,
+   scene is given (``partner``), or the minimum's mirror image is another
+   configuration (``mirror``, by default: through the plane of its fixed points,
    :func:`ase_maud.saddles.between_minima.reflection`, relaxed, its calls counted): a
    band of images between the two, its highest image refined to a verified
    index-1 saddle (:func:`ase_maud.saddles.between_minima.saddle_between`): a dome's
@@ -101,7 +101,19 @@ class SaddleSearch:
     ``saddles`` (Atoms with their own calculators, in the order found), each
     :class:`Attempt` in the order made, the minimum's classification
     (``work``: what it computed, beside the attempts') and the ``rounds``
-    made."""
+    made.
+
+    Parameters
+    ----------
+    saddles : list of Atoms
+        The saddles, each with its own calculator, energies in ``Q a^2``.
+    attempts : list of Attempt
+        Every attempt, with what it reached and cost.
+    work : Work
+        What classifying the minimum computed.
+    rounds : int
+        Rounds of attempts made.
+    """
 
     saddles: list[Atoms] = field(default_factory=list)
     attempts: list[Attempt] = field(default_factory=list)
@@ -152,7 +164,19 @@ class SaddleSearch:
 
     def report(self) -> str:
         """What was found and tried, one attempt a line; a search that found
-        no saddle says so first."""
+        no saddle says so first.
+
+        Returns
+        -------
+        str
+            The saddles found, the estimated coverage, the cost in force-call
+            equivalents and CPU seconds, then one line per attempt.
+
+        Raises
+        ------
+        None
+            It reads the record only.
+        """
         head = (f'{len(self.saddles)} index-1 saddles' if self.saddles
                 else 'no index-1 saddle found')
         estimate = self.coverage
@@ -175,38 +199,77 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
                    connected: Callable[[Atoms], bool] | None = None) -> SaddleSearch:
     """The :class:`SaddleSearch` from the minimum ``minimum`` (a MaudCalculator
     scene relaxed to ``fmax``; see the module docstring): climbs along its
-    ``modes`` lowest modes both ways, then ``local`` activations at points
-    drawn with ``seed``, each attempt to ``fmax`` within ``steps`` steps
-    and ``budget`` force-call equivalents (None: no bound but the steps); it
-    stops once ``wanted`` distinct saddles are found (None: every attempt
-    is made). Saddles are compared by
-    :func:`~ase_maud.analysis.stationary.same_point` with ``energy_rtol`` and
-    ``distance_atol``. ``point``: the minimum's classification if known
-    (else computed here, its work counted in :attr:`SaddleSearch.work`).
-    ``client``: a ``dask.distributed`` client whose workers run the
-    attempts. ``partner``: a second minimum of the scene (a dome's mirror
-    image, :func:`~ase_maud.saddles.between_minima.mirrored`, say); if the attempts
-    found no saddle, a last one joins the two by a band of images
-    (:func:`~ase_maud.saddles.between_minima.saddle_between`; no budget but its own
-    steps; a partner that is not a configuration of the same scene is a
-    ValueError before any attempt, :func:`~ase_maud.saddles.between_minima.check_same_scene`).
-    ``mirror``: the second minimum is ``minimum``'s mirror image through
-    the plane of its fixed points (a ValueError before any attempt if they
-    span none, or with a ``partner`` too), relaxed to ``fmax`` within
-    ``steps`` only if the attempts found no saddle (the path's attempt
-    counts its calls; if it relaxes back to ``minimum`` there is no path);
-    None (default): the mirror image wherever no ``partner`` is given, the
-    fixed points span a plane and the image is another configuration (a
-    net sagging out of the plane of its supports), else none.
-    ``window``: a barrier (energy units, above the minimum): the
-    search goes on in rounds like the first (the next ``modes`` modes both
-    ways, ``local`` more points) until ``empty_rounds`` rounds in a row find
-    no new saddle whose barrier is below it, or the modes (those of
-    ``point``) and the free points are used up (None: the first round
-    only); ``connected``: a test
-    a new saddle must pass too, asked once a saddle (the landscape's: one
-    side of it relaxes into ``minimum``; None: every saddle passes).
-    Arguments are checked first (a ValueError names a bad one)."""
+    lowest modes both ways, then local activations (a point's neighbourhood
+    climbed with the rest held, the rest settled, the whole released), each
+    attempt within a budget of force-call equivalents; every saddle found is
+    verified index 1 from a fresh calculator.
+
+    Parameters
+    ----------
+    minimum : Atoms
+        A minimum with a :class:`~ase_maud.MaudCalculator` and its
+        constraints, relaxed to ``fmax`` (``Q a``).
+    modes : int, default 1
+        The lowest modes climbed, each both ways, a round.
+    local : int, default 8
+        Local activations a round, at points drawn with ``seed``.
+    wanted : int or None, default None
+        Stop once this many distinct saddles are found (None: make every
+        attempt).
+    budget : int or None, default ``BUDGET`` (500)
+        Force-call equivalents an attempt may spend (calls, Hessian-vector
+        products and Hessians); None: no bound but ``steps``.
+    fmax : float, default 1e-6
+        Convergence of each attempt, ``Q a``.
+    steps : int, default 1000
+        Steps an attempt may take.
+    seed : int, default 0
+        The seed of the points activated.
+    energy_rtol, distance_atol : float, default 1e-8, 1e-4
+        When two saddles are one
+        (:func:`~ase_maud.analysis.stationary.same_point`; distances in ``a``).
+    client : dask.distributed.Client or None, default None
+        Workers to run the attempts on (None: in this process).
+    point : StationaryPoint or None, default None
+        The minimum's classification if known (else computed here, its work
+        counted in :attr:`SaddleSearch.work`).
+    partner : Atoms or None, default None
+        A second minimum of the same scene (a dome's mirror image,
+        :func:`~ase_maud.saddles.between_minima.mirrored`, say): if the
+        attempts found no saddle, a last one joins the two by a band of
+        images (:func:`~ase_maud.saddles.between_minima.saddle_between`).
+    mirror : bool or None, default None
+        Take as partner the mirror image of ``minimum`` through the plane of
+        its fixed points (relaxed only if the attempts found nothing); None:
+        wherever no ``partner`` is given, the fixed points span a plane and
+        the image is another configuration (a net sagging out of the plane
+        of its supports); False: never.
+    window : float or None, default None
+        A barrier (``Q a^2`` above the minimum): go on in rounds (the next
+        ``modes`` modes, ``local`` more points) until ``empty_rounds``
+        rounds in a row find no new saddle below it, or the modes and points
+        are used up (None: the first round only).
+    empty_rounds : int, default 1
+        See ``window``.
+    connected : callable or None, default None
+        A test a new saddle must pass too (the landscape's: one side of it
+        relaxes into ``minimum``); None: every saddle passes.
+
+    Returns
+    -------
+    SaddleSearch
+        The distinct verified index-1 saddles (Atoms with their own
+        calculators), every attempt with its cost, and the search's cost
+        (:attr:`SaddleSearch.cost`, :meth:`SaddleSearch.report`).
+
+    Raises
+    ------
+    ValueError
+        An argument outside its rule (named, before any attempt); a
+        ``partner`` that is not a configuration of the same scene; both a
+        ``partner`` and ``mirror=True``; ``mirror=True`` where the fixed
+        points span no plane; a minimum the calculator refuses.
+    """
     checked = check_all(local=local, budget=budget, fmax=fmax, steps=steps, seed=seed,
                         energy_rtol=energy_rtol, distance_atol=distance_atol, window=window,
                         empty_rounds=empty_rounds)

@@ -81,7 +81,40 @@ def scene_sizes(names: list[str] | None, sizes: list | None,
 
 def build(name: str, size: int | str | None = None, seed: int = 0, **kwargs: float) -> Atoms:
     """Build scene ``name`` (a key of :data:`SCENES`); ``size=None`` takes
-    the builder's default. Other keywords (``a``, ``Q``) go to the builder."""
+    the builder's default. Other keywords (``a``, ``Q``) go to the builder.
+
+    Parameters
+    ----------
+    name : str
+        A scene of :data:`SCENES`: ``'dimer'``, ``'ring'``, ``'chain'``,
+        ``'net2d'``, ``'net3d'``, ``'hanging_net'``, ``'weighted_net'``,
+        ``'random_graph'``, ``'all_pairs'``, ``'all_pairs2d'``, ``'tree'``,
+        ``'wheel'``, ``'molecule'``, ``'cage'``, ``'hub_net'``, ``'disc'``,
+        ``'neighbour_graph'``.
+    size : int, str or None, default None
+        The builder's size (points, or points along a side for the nets;
+        a molecule's name for ``'molecule'``); None: its default.
+    seed : int, default 0
+        The seed of the start's random displacements (whole number >= 0).
+    **kwargs : float
+        ``a`` and ``Q``, the potential's length and spring constant (default
+        1 each).
+
+    Returns
+    -------
+    Atoms
+        The start, with a :class:`~ase_maud.MaudCalculator` (springs, ``a``,
+        ``Q``, ``dim``) and its fixed points as ``FixAtoms``; positions in
+        the unit of ``a``. Planar scenes hold their z
+        (:func:`~ase_maud.scenes.builders.keep_on_plane`).
+
+    Raises
+    ------
+    ValueError
+        An unknown scene (the known ones listed), a seed that is not a whole
+        number >= 0, a keyword other than ``a`` and ``Q``, or a size the
+        builder refuses (``ring needs an integer size >= 3, got 'x'``).
+    """
     if not (isinstance(name, str) and name in SCENES):
         raise ValueError(f'unknown scene {name!r}; known: {", ".join(SCENES)}')
     whole_seed = as_whole(seed)

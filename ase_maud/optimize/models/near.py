@@ -39,7 +39,7 @@ The model learns nothing in a run (the pairs are found again at every step,
 from the positions alone), so a run stopped and resumed repeats the
 uninterrupted one bit for bit. Its step rule is the springs model's
 (:data:`ase_maud.optimize.step_rules.STEP_DEFAULTS`, by class). Only ``target='minimum'``.
-docs/benchmarks.md ("Repulsion-dominated scenes") has where it pays.
+docs/performance.md (and the notebook, docs/dev/benchmarks.md) has where it pays.
 """
 
 from __future__ import annotations

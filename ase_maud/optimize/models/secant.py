@@ -48,7 +48,7 @@ class BFGSModel(SecantModel):
     geometric mean ``|y| / |s|`` of the two secant (Barzilai-Borwein)
     curvatures ``s.y / s.s`` and ``y.y / s.y`` of the last step with ``s.y
     > 0`` (the smaller one alone, the model's first form, took up to 1.7x
-    BFGS's calls on Lennard-Jones clusters: docs/benchmarks.md). Its
+    BFGS's calls on Lennard-Jones clusters: docs/dev/benchmarks.md). Its
     history is the run's state (the pairs of
     :class:`~ase_maud.optimize.state.MaudState`, in the restart file)."""
 

@@ -26,9 +26,9 @@ import csv
 import math
 
 from ase_maud import Maud
-from ase_maud.analysis.stationary import classify
-from ase_maud.counting import CallRecorder
-from ase_maud.scenes.catalogue import build
+from ase_maud.analysis import classify
+from ase_maud.bench.runner import CallRecorder
+from ase_maud.scenes import build
 
 #: The starts of ``--suite saddles``.
 SADDLE_STARTS = [('all_pairs', 12), ('tree', 40), ('random_graph', 30), ('chain', 30),

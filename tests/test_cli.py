@@ -396,7 +396,7 @@ def test_saddles_prints_draws_and_writes_the_landscape(tmp_path, capsys, seed, w
     assert len(graph['minima']) == len(found.minima)
     saddle_lines = [line for line in lines if line.startswith('saddle ')]
     assert len(graph['saddles']) == len(found.saddles) == len(saddle_lines)
-    assert lines[0].endswith('CPU s:')   # the search's report: one line an attempt
+    assert lines[0].endswith("force calls' CPU:")   # the search's report: one line an attempt
     assert sum(line.startswith('  mode ') for line in lines) == len(
         [a for a in found.search.attempts if a.kind == 'mode'])
     assert window is not None or len(found.search.attempts) == 2 * 2 + 1   # one round

@@ -157,7 +157,7 @@ def benchmark(starts: list[tuple[str, object, int]], optimisers: list[str],
               argv: list[str] | None = None) -> bool:
     """:func:`run_suite`, then the summary (CSV, markdown, overall table, PNGs)
     in ``out``; prints the markdown. Returns whether it was interrupted."""
-    from ase_maud.bench import report
+    from ase_maud.bench import report  # here: it imports matplotlib, a second
     out.mkdir(parents=True, exist_ok=True)
     levels = sorted(levels, reverse=True)
     runs, interrupted = run_suite(

@@ -14,6 +14,7 @@ if TYPE_CHECKING:
 
 def bench_command(args: argparse.Namespace) -> int:
     """``ase-maud bench``: exit status 0, or 130 if interrupted."""
+    # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud.bench.suite import benchmark
     from ase_maud.scenes.catalogue import SUITES, scene_sizes
 
@@ -31,6 +32,7 @@ def bench_command(args: argparse.Namespace) -> int:
 
 def backends_command(args: argparse.Namespace) -> int:
     """``ase-maud backends``: exit status 0."""
+    # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud.bench.backends import write_backends_report
 
     print(write_backends_report(Path(args.out), args.natoms, args.backends,

@@ -30,6 +30,7 @@ def classify_command(args: argparse.Namespace) -> int:
     """``ase-maud classify``: exit status 0 if stationary, else 1. Stationary
     means fmax at most ``--fmax``, by default the fmax a trajectory was
     relaxed to, else analysis's default (:func:`judging_fmax`)."""
+    # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud.analysis.stationary import classify as classify_point
     from ase_maud.io.nets import read_net
 

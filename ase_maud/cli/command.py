@@ -94,6 +94,7 @@ def _top_parser() -> tuple[argparse.ArgumentParser, Any]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser of ``ase-maud`` and its commands."""
+    # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud import backends as registry
     from ase_maud.bench.optimizers import OPTIMIZERS
     from ase_maud.checks import RULES
@@ -396,6 +397,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.parse_args(words)   # --help, or an error
         parser.print_help()
         return 0
+    # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud.errors import MaudError
     from ase_maud.threads import pin_threads
 

@@ -24,6 +24,8 @@ def ruled(name: str, parse=float):
     """An argparse type: the text parsed by ``parse``, then checked by
     ``ase_maud.checks.RULES[name]`` (its message on a bad value)."""
     def convert(text):
+        # Imported when the command runs, so that ase-maud --help answers at once.
+        # Imported when the command runs, so that ase-maud --help answers at once.
         from ase_maud.checks import check
 
         try:
@@ -45,6 +47,7 @@ def judging_fmax(args: argparse.Namespace) -> tuple[float | None, str]:
     """The fmax at which show and classify call a net converged, and why:
     --fmax, else the fmax a trajectory was relaxed to
     (:func:`ase_maud.io.nets.relaxed_fmax`), else None (analysis's 1e-6 Q a)."""
+    # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud.io.nets import relaxed_fmax
 
     if args.fmax is not None:
@@ -68,6 +71,7 @@ def check_outputs(args: argparse.Namespace) -> None:
     """Every file the command of ``args`` will write, checked before any
     work: a ValueError naming the option and what is wrong, or an output
     that names an input or another output (:mod:`ase_maud.files.output_paths`)."""
+    # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud.checks import check_writable
     from ase_maud.files.output_paths import check_distinct, check_own_json
     from ase_maud.io.nets import check_net_path
@@ -108,6 +112,7 @@ def named_files(args: argparse.Namespace) -> tuple[list, list]:
     or the one beside a point file), its --fix file and relax's --loads and
     --q tables; --traj, --log, --out and the edge list or graph JSON written
     beside it, relax's --forces, --output."""
+    # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud.io.nets import FIX_RULES, edges_path, net_format
 
     net = getattr(args, 'net', None) or getattr(args, 'file', None)
@@ -148,6 +153,7 @@ def add_file(parser):
 
 def add_net_options(parser):
     """--edges, --fix, --a, --Q and --dim of a command that reads a net."""
+    # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud.io.nets import A_PER_MEAN_SPRING
 
     parser.add_argument('--edges', metavar='EDGES_FILE',

@@ -17,6 +17,7 @@ if TYPE_CHECKING:
 def progress_bar(opt, atoms, fmax: float, steps: int):
     """A tqdm bar on stderr of the optimizer ``opt``'s steps out of
     ``steps``, showing fmax against its target ``fmax`` and the energy."""
+    # Imported when the command runs, so that ase-maud --help answers at once.
     from tqdm import tqdm
 
     bar = tqdm(total=steps, unit='step', file=sys.stderr, dynamic_ncols=True)
@@ -33,6 +34,7 @@ def progress_bar(opt, atoms, fmax: float, steps: int):
 
 def relax_command(args: argparse.Namespace) -> int:
     """``ase-maud relax``: exit status 0 if converged, else 1."""
+    # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud.counting import CallRecorder
     from ase_maud.files.output_paths import StagedTrajectory
     from ase_maud.form.force_density import solve_force_density

@@ -18,6 +18,7 @@ def saddles_command(args: argparse.Namespace) -> int:
     (:func:`ase_maud.saddles.landscape.landscape`) printed, drawn (--out) and written
     as JSON beside the picture; exit status 0 (1 if a climb or descent
     failed)."""
+    # Imported when the command runs, so that ase-maud --help answers at once.
     import json
 
     from ase_maud.files.atomic_replace import replace_text, replace_with
@@ -56,6 +57,7 @@ def mirror_partner(args: argparse.Namespace, minimum: Atoms) -> Atoms | None:
     on the net of ``minimum``, relaxed by Maud to --fmax (--mirror asks the
     search for the mirror image instead). A ValueError names a --partner
     file whose points are not the net's, or one that does not relax."""
+    # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud.counting import fresh_copy
     from ase_maud.io.nets import read_net
     from ase_maud.optimize.maud import Maud
@@ -84,6 +86,7 @@ def dask_client(workers: int | None, scheduler: str | None):
         yield None
         return
     try:
+        # Imported when the command runs, so that ase-maud --help answers at once.
         import distributed
     except ImportError:
         raise ValueError("--workers and --scheduler need dask.distributed: pip install "

@@ -14,6 +14,7 @@ if TYPE_CHECKING:
 
 def show_command(args: argparse.Namespace) -> int:
     """``ase-maud show``: exit status 0."""
+    # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud.files.atomic_replace import replace_with
     from ase_maud.form.pictures import save_animation, save_picture
     from ase_maud.io.nets import read_frames, read_net

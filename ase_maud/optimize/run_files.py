@@ -13,6 +13,7 @@ import numpy as np
 from ase import Atoms
 from ase.filters import Filter
 
+from ase_maud.calculator.maud_calculator import MaudCalculator, stored_parameters
 from ase_maud.checks import check_writable
 from ase_maud.files.output_paths import check_run_files
 from ase_maud.files.run_lock import RunLock
@@ -56,7 +57,6 @@ def frame_atoms(system: Any) -> list[Atoms]:
 def other_scene(frame: Atoms, atoms: Atoms) -> str | None:
     """How a trajectory's ``frame`` and the ``atoms`` given differ (points,
     fixed points, and with a MaudCalculator its springs, a, Q, dim), or None."""
-    from ase_maud.calculator.maud_calculator import MaudCalculator, stored_parameters
     if len(frame) != len(atoms):
         return f'points {len(frame)} in it, {len(atoms)} in the atoms given'
     potential = getattr(atoms.calc, 'potential', None)

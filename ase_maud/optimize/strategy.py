@@ -73,6 +73,7 @@ from typing import Any
 import numpy as np
 from ase import Atoms
 
+from ase_maud.analysis.stationary import RTOL, classify
 from ase_maud.errors import WrongIndexError
 from ase_maud.optimize.directions import (
     ModeFollowing,
@@ -302,7 +303,6 @@ class Saddle(Strategy):
         starts from is left, not reported. The eigensolver starts from the
         modes followed, before the first step from the move given as ``mode``
         (:meth:`~ase_maud.optimize.directions.ModeFollowing.guess`; cold if none)."""
-        from ase_maud.analysis.stationary import RTOL
         order = self.rule.order
         guess = self.following.guess() if state.modes is None else state.modes[:order + 1]
         values = local().eigenpairs(order + 1, guess)[0]
@@ -317,7 +317,6 @@ class Saddle(Strategy):
         already), and a WrongIndexError
         (else None) if its index is not ``order`` or a zero curvature leaves
         it unknown (``step``: where it converged)."""
-        from ase_maud.analysis.stationary import classify
         work = None if self.model.needs(atoms) == 'hessian' else work
         point, order = classify(atoms, ftol=ftol, work=work), self.rule.order
         if point.index == order and not point.n_zero:

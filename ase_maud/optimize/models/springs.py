@@ -13,6 +13,7 @@ import scipy.sparse as sp
 from ase import Atoms
 from scipy.sparse.linalg import LinearOperator
 
+from ase_maud.analysis.stationary import hessian_operator
 from ase_maud.counting import Work
 from ase_maud.optimize.models.base import ModeSolver, Solver, StiffnessModel
 from ase_maud.optimize.models.sparse import spd_inverse
@@ -122,7 +123,6 @@ class _LowestModes(ModeSolver):
     Hessian is counted in ``work``."""
 
     def __init__(self, inner: Solver, atoms: Atoms, free: np.ndarray, work: Work):
-        from ase_maud.analysis.stationary import hessian_operator
         self.inner, self.free = inner, free
         self.rigid = rigid_body_modes(atoms.positions, free, free.shape[1])
         self.operator = hessian_operator(atoms, free, self.rigid, work)

@@ -21,12 +21,12 @@ from ase_maud.saddles import search as activation
 from ase_maud.saddles.attempts import Attempt
 from ase_maud.saddles.landscape import landscape, same_point
 from ase_maud.saddles.search import SaddleSearch, search_saddles
+from ase_maud.scenes.saddle_scenes import SADDLE_SCENES
 
-#: The benchmark's own scenes (benchmarks/saddles_vs_sella.py): ``chords`` (a ring with a
+#: The saddle scenes (ase_maud.scenes.saddle_scenes): ``chords`` (a ring with a
 #: chord from each point to the one a third of the way round, 2D) and ``rim``
 #: (a free net with its whole rim fixed, buckled into a dome).
-SCENES = runpy.run_path(str(Path(__file__).parent.parent / 'benchmarks'
-                          / 'saddles_vs_sella.py'))['OWN_SCENES']
+SCENES = SADDLE_SCENES
 
 
 def relaxed(scene, size, seed):

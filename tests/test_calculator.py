@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.distance import pdist, squareform
 
+from ase_maud.bench.hard_inputs import wrong_results_of_threads
 from ase_maud.calculator.maud_calculator import MaudCalculator
 from ase_maud.scenes.catalogue import build
 
@@ -507,7 +508,6 @@ def test_unbounded_components(random_points, dim, expected):
 def test_every_move_is_seen_at_any_scale(a):
     # ASE's default change detection (absolute 1e-15) misses moves of tiny
     # scenes; the calculator compares positions exactly.
-    from ase_maud.scenes.catalogue import build
     atoms = build('ring', 8, seed=int(a > 1), a=a)
     before = atoms.get_forces().copy()
     atoms.positions[3, 0] += 1e-3 * a
@@ -623,39 +623,6 @@ def test_pairs_closer_than_float64_allows_name_two_atoms(gap):
     atoms.calc = MaudCalculator()
     with pytest.raises(ValueError, match=r'atoms 1 and 4 are 1e-\d+ a apart'):
         atoms.get_forces()
-
-
-def wrong_results_of_threads(seed, threads=12, calls=100):
-    """How many of ``threads`` x ``calls`` calls, by threads that share one
-    calculator (each with its own jittered net), got other energy or forces
-    than a fresh calculator gives their atoms."""
-    import threading
-    base = build('hanging_net', 10, seed=seed)
-    shared = MaudCalculator(**base.calc.parameters)
-    rng = np.random.default_rng(seed)
-    scenes, expected = [], []
-    for _ in range(threads):
-        atoms = base.copy()
-        atoms.positions += rng.normal(scale=0.3, size=atoms.positions.shape)
-        alone = atoms.copy()
-        alone.calc = MaudCalculator(**base.calc.parameters)
-        expected.append((alone.get_potential_energy(), alone.get_forces()))
-        atoms.calc = shared
-        scenes.append(atoms)
-    wrong = []
-
-    def work(k):
-        for _ in range(calls):
-            energy, forces = scenes[k].get_potential_energy(), scenes[k].get_forces()
-            if energy != expected[k][0] or not np.array_equal(forces, expected[k][1]):
-                wrong.append(k)
-
-    running = [threading.Thread(target=work, args=(k,)) for k in range(threads)]
-    for thread in running:
-        thread.start()
-    for thread in running:
-        thread.join()
-    return len(wrong)
 
 
 @pytest.mark.parametrize('seed', [0, 1])

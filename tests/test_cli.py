@@ -17,6 +17,7 @@ from ase_maud.cli import saddles as saddles_cli
 from ase_maud.cli.command import main
 from ase_maud.io.nets import read_net, write_net
 from ase_maud.scenes.catalogue import SUITE, build, scene_sizes
+from ase_maud.scenes.saddle_scenes import rim
 
 
 def test_no_command_prints_help(capsys):
@@ -430,15 +431,13 @@ def test_saddles_takes_the_path_to_a_second_minimum_given_or_mirrored(tmp_path, 
     minima (seeds 1-2 of 5 x 5 domes), verified index 1, joining two minima
     (not always the two given: the band's highest saddle may lie between two
     minima of the path)."""
-    from test_transition import DOMES
-
     from ase_maud import Maud
     from ase_maud.analysis.stationary import classify
     from ase_maud.counting import fresh_copy
     from ase_maud.saddles.between_minima import mirrored, saddle_between
 
     for seed in (1, 2):
-        first = DOMES(5, seed)
+        first = rim(5, seed)
         write_net(tmp_path / f'dome{seed}.traj', first)
         assert Maud(first, logfile=None).run(fmax=1e-6, steps=5000)
         second = mirrored(first)
@@ -460,10 +459,9 @@ def test_saddles_takes_the_path_to_a_second_minimum_given_or_mirrored(tmp_path, 
 def test_saddles_names_a_partner_that_is_not_the_nets(tmp_path):
     """A --partner file with other points than the net's, or none, is named
     (no search runs with it)."""
-    from test_transition import DOMES
 
-    write_net(tmp_path / 'dome.traj', DOMES(5, 0))
-    write_net(tmp_path / 'other.traj', DOMES(6, 0))
+    write_net(tmp_path / 'dome.traj', rim(5, 0))
+    write_net(tmp_path / 'other.traj', rim(6, 0))
     base = ['saddles', str(tmp_path / 'dome.traj'), '--modes', '0', '--out',
             str(tmp_path / 'g.png')]
     with pytest.raises(ValueError, match="--partner .*other.traj' has 36 points, the net "

@@ -4,13 +4,12 @@ against BFGS on the same filter from the same start."""
 
 import numpy as np
 import pytest
-from ase.build import bulk
-from ase.calculators.emt import EMT
 from ase.constraints import FixAtoms, FixBondLength, FixBondLengths, Hookean
 from ase.filters import Filter, FrechetCellFilter, StrainFilter, UnitCellFilter
 from ase.optimize import BFGS
 
 from ase_maud import Maud, MaudCalculator
+from ase_maud.bench.hard_inputs import relaxed_in_a_cell_filter
 from ase_maud.scenes.catalogue import build
 
 MODELS = ['auto', 'exact', 'springs', 'nodal', 'global', 'secant', 'near']
@@ -102,20 +101,6 @@ def test_a_small_filter_steps_on_the_hessians_block(target, seed, monkeypatch):
         for k, _ in enumerate(other.irun(fmax=1e-8, steps=25)):
             np.testing.assert_allclose(whole.positions, steps[k], rtol=0, atol=1e-9)
     assert other.nsteps == one.nsteps and any('hessian' in props for props in asked)
-
-
-def relaxed_in_a_cell_filter(cell_filter, seed):
-    """(converged, energy) of Maud and the energy of BFGS, each on
-    ``cell_filter`` of a rattled, stretched EMT copper crystal, to fmax 1e-5."""
-    crystal = bulk('Cu', cubic=True) * (2, 2, 2)
-    crystal.rattle(0.05, seed=seed)
-    crystal.set_cell(crystal.cell * 1.03, scale_atoms=True)
-    reference = crystal.copy()
-    crystal.calc, reference.calc = EMT(), EMT()
-    BFGS(cell_filter(reference), logfile=None).run(fmax=1e-5, steps=2000)
-    with Maud(cell_filter(crystal), logfile=None) as opt:
-        converged = opt.run(fmax=1e-5, steps=2000)
-    return converged, crystal.get_potential_energy(), reference.get_potential_energy()
 
 
 @pytest.mark.parametrize('cell_filter', [StrainFilter, UnitCellFilter, FrechetCellFilter])

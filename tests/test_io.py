@@ -10,6 +10,7 @@ import pytest
 from ase.constraints import FixAtoms
 
 from ase_maud import Maud, MaudCalculator
+from ase_maud.bench.hard_inputs import BROKEN
 from ase_maud.io.nets import (
     A_PER_MEAN_SPRING,
     MERGE_TOLERANCE,
@@ -232,47 +233,6 @@ def test_trajectory_keeps_springs_a_q_dim_and_fixed(tmp_path):
     assert first.calc.parameters['Q'] == 1.0 and first.calc.parameters['a'] == 0.7
     write_net(tmp_path / 'one.traj', atoms)
     assert read_net(tmp_path / 'one.traj').calc.parameters['Q'] == 2.5
-
-
-BROKEN = [
-    ('net.obj', 'v 0 0 0\nv 1 0\n', r'net\.obj line 2: expected .v x y z., got 2'),
-    ('net.obj', 'v 0 0 0\nv 1 a 0\n', r'net\.obj line 2: expected .v x y z. with numbers'),
-    ('net.obj', '# c\nv 0 0 0\nv 1 0 0\nv 0 1 0\n\nf 1 2 12\n',
-     r'net\.obj line 6: face index 12 out of range \(3 vertices\)'),
-    ('net.obj', 'v 0 0 0\nv 1 0 0\nl 1 -3\n', r'net\.obj line 3: line index -3 out of range'),
-    ('net.obj', 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n', r'net\.obj line 4: expected integer'),
-    ('net.obj', 'v 0 0 0\nv 1 0 0\nf 1 2\n', r'net\.obj line 3: a .f. needs at least 3'),
-    ('net.obj', 'v 0 0 0\nv 1 0 0\nl 0 1\n', r'net\.obj line 3: vertex index 0'),
-    ('net.obj', 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 2\n', r'net\.obj line 4: vertex 2 repeats'),
-    ('net.obj', '# nothing\n', r'no vertices'),
-    ('net.json', '{"vertex": {"0": {"x": 0}},\n "face": {}\n', r'net\.json line 3: not valid JSON'),
-    ('net.json', '{"node": {"0": {"x": 0, "y": 0}}, "edge": {}}',
-     r'net\.json: vertex 0 has no number z'),
-    ('net.json', '{"node": {"0": {"x": 0, "y": 0, "z": 0}}, "edge": {"0": {"7": {}}}}',
-     r"net\.json: edge 0-7 names vertex '7'"),
-    ('net.json', '{"dtype": "compas.geometry/Point", "data": [0, 0, 0]}',
-     r'expected COMPAS mesh data'),
-    ('net.obj', 'v 0 0 0\nv nan 0 0\n', r'net\.obj line 2: coordinates must be finite'),
-    ('net.obj', 'v 0 0 0\nv 1 1e400 0\n', r'net\.obj line 2: coordinates must be finite'),
-    ('net.json', '{"node": {"0": {"x": NaN, "y": 0, "z": 0}}, "edge": {}}',
-     r'net\.json vertex 0: coordinates must be finite'),
-    ('net.json', '{"node": {"0": {"x": 0, "y": 0, "z": 0}, "0": {"x": 1, "y": 0, "z": 0}},'
-     ' "edge": {}}', r"net\.json: key '0' appears twice"),
-    ('net.json', '{"node": {"0": {"x": 0, "y": 0, "z": 0, "is_anchor": "false"}}, "edge": {}}',
-     r"net\.json: vertex 0 has is_anchor = 'false'; expected true or false"),
-    ('net.json', '{"node": {"0": [0, 0, 0]}, "edge": {}}',
-     r'net\.json: vertex 0 is \[0, 0, 0\], not an object'),
-    ('net.json', '{"node": {"0": {"x": 0, "y": 0, "z": 0}}, "edge": [1, 2]}',
-     r'net\.json: "edge" must be an object, got list'),
-    ('net.json', '{"vertex": {"0": {"x": 0, "y": 0, "z": 0}}, "face": {"0": 7}}',
-     r'net\.json: "face" entry \'0\' must be a list, got 7'),
-    ('net.json', '{"node": {"0": {"x": 1' + '0' * 5000 + ', "y": 0, "z": 0}}, "edge": {}}',
-     r'net\.json: Exceeds the limit \(4300 digits\)'),
-    ('net.json', '[' * 100000 + ']' * 100000, r'net\.json: nested too deeply'),
-    ('net.obj', 'v 0 0 0\nv 1 0 0\nl 1 ' + '9' * 5000 + '\n',
-     r'net\.obj line 3: expected integer vertex indices'),
-    ('net.obj', 'v 0 0 ' + '1' * 1_100_000, r'net\.obj line 1: longer than 1000000 characters'),
-]
 
 
 @pytest.mark.parametrize('name, text, message', BROKEN)

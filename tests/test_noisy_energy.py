@@ -3,14 +3,14 @@ scene on the FMM, whose energy's error is relative to an energy of 1e8) still
 converge: where two energies differ by less than their errors the step is
 judged by the forces (ase_maud.optimize.step_length.merit_change). The scene here is small,
 its noise large: a calculator that adds seeded noise of 1 % to each energy
-and declares it (tests/doubles.py, NoisyEnergy)."""
+and declares it (ase_maud/bench/doubles.py, NoisyEnergy)."""
 
 import numpy as np
 import pytest
-from doubles import NoisyEnergy
 
 from ase_maud import Maud, MaudCalculator
 from ase_maud.analysis.stationary import classify
+from ase_maud.bench.doubles import NoisyEnergy
 from ase_maud.bench.optimizers import ScipyLBFGSB
 from ase_maud.errors import StagnationError
 from ase_maud.scenes.catalogue import build

@@ -1,12 +1,10 @@
-"""benchmarks/repulsion_models.py's factorised near-field prototype (the springs'
+"""The factorised near-field model (ase_maud.optimize.models.near_lu: the springs'
 Hessian plus the repulsion's near pair blocks, signed, factorised) against
 the dense Hessian and finite differences of the forces on small scenes, and
 runs of it to L-BFGS-B's minimum; the package's matrix-free model
 (``model='near'``) is tested in test_nearfield.py."""
 
 import itertools
-import runpy
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,13 +13,11 @@ from ase_maud import Maud
 from ase_maud.analysis.stationary import same_point
 from ase_maud.bench.optimizers import OPTIMIZERS
 from ase_maud.counting import fresh_copy
+from ase_maud.optimize.models.near_lu import NearLUModel
 from ase_maud.optimize.models.springs import SpringsModel
 from ase_maud.physics import pair_law as physics
 from ase_maud.physics.dofs import free_dofs, rigid_body_modes
 from ase_maud.scenes.catalogue import build
-
-TOOL = runpy.run_path(str(Path(__file__).parent.parent / 'benchmarks' / 'repulsion_models.py'))
-NearFieldModel = TOOL['NearFieldModel']
 
 
 def relaxed(name, size, seed, fmax=1e-7):
@@ -50,7 +46,7 @@ def test_without_a_cutoff_p_is_the_dense_hessian_and_solves_newton(scene, seed):
     atoms = relaxed(scene, 5, seed)
     dim = atoms.calc.potential.dim
     hessian, keep = dense_hessian(atoms)
-    model = NearFieldModel(cutoff=1e9)
+    model = NearLUModel(cutoff=1e9)
     np.testing.assert_allclose(model.matrix(atoms).toarray(), hessian,
                                rtol=1e-10, atol=1e-12 * np.abs(hessian).max())
     solver = model.factor(atoms)
@@ -76,7 +72,7 @@ def test_without_a_cutoff_p_is_the_dense_hessian_and_solves_newton(scene, seed):
 def test_p_is_the_hessian_less_the_far_pairs_and_matches_finite_differences(seed):
     atoms = relaxed('hanging_net', 5, seed)
     hessian, keep = dense_hessian(atoms)
-    model = NearFieldModel(cutoff=1.5)
+    model = NearLUModel(cutoff=1.5)
     matrix = model.matrix(atoms).toarray()
     x = atoms.positions
     spacing = np.median(np.sort(np.linalg.norm(x[:, None] - x[None], axis=2), axis=1)[:, 1])
@@ -109,7 +105,7 @@ def test_p_is_the_hessian_less_the_far_pairs_and_matches_finite_differences(seed
 @pytest.mark.parametrize('seed', [2, 9])
 def test_a_free_scene_moves_without_rigid_motion(seed):
     atoms = relaxed('neighbour_graph', 30, seed, fmax=1e-6)
-    solver = NearFieldModel().factor(atoms)
+    solver = NearLUModel().factor(atoms)
     assert solver is not None
     forces = atoms.get_forces() + np.random.default_rng(seed).normal(0, 1e-3, (30, 3))
     move = solver.solve(forces)
@@ -121,7 +117,7 @@ def test_a_free_scene_moves_without_rigid_motion(seed):
 @pytest.mark.parametrize('seed', [4, 6])
 def test_where_p_is_indefinite_the_springs_model_steps(seed):
     atoms = build('neighbour_graph', 40, seed=seed)   # a packed ball: repulsion pushes out
-    model = NearFieldModel()
+    model = NearLUModel()
     hessian, _ = dense_hessian(atoms)
     assert np.linalg.eigvalsh(model.matrix(atoms).toarray()).min() < 0
     assert np.linalg.eigvalsh(hessian).min() < 0
@@ -137,7 +133,7 @@ def test_a_run_reaches_lbfgsb_minimum(seed):
     start.positions[:, 2] += np.where(free_dofs(start, 3)[:, 2], np.random.default_rng(
         seed).uniform(-0.5, 0.5, len(start)), 0.0)
     atoms, peer = fresh_copy(start), fresh_copy(start)
-    model = NearFieldModel()
+    model = NearLUModel()
     assert Maud(atoms, model=model, logfile=None).run(fmax=1e-6, steps=500)
     assert model.definite > 0   # P, not the springs model alone, stepped
     assert OPTIMIZERS['L-BFGS-B'](peer).run(fmax=1e-6, steps=5000)

@@ -24,11 +24,12 @@ from ase.cluster import Icosahedron
 from ase.io import read
 from ase.optimize import BFGS
 from ase.optimize.basin import BasinHopping
-from doubles import PoisonedCalculator
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from ase_maud import Maud, MaudCalculator, MaudError
+from ase_maud.bench.doubles import PoisonedCalculator
+from ase_maud.bench.hard_inputs import DAMAGES
 from ase_maud.checks import RULES
 from ase_maud.files.trajectory import last_frame
 from ase_maud.optimize.restart_file import RestartFile
@@ -190,7 +191,7 @@ def test_hostile_inputs_get_an_answer_or_a_clear_error(seed, scale, fmax, steps,
         fresh.get_potential_energy(atoms.copy()), rel=1e-12, abs=0)
 
 
-# -- 2. non-finite results of any calculator (doubles.PoisonedCalculator) ---------
+# -- 2. non-finite results of any calculator (ase_maud.bench.doubles.PoisonedCalculator) ---------
 
 
 def emt_cluster():
@@ -529,40 +530,6 @@ def test_a_creeping_run_is_stopped_at_any_scale(seed):
         with pytest.raises(MaudError, match='no progress for 300 steps.*creep'):
             opt.run(fmax=1e-3, steps=5000)
     assert opt.nsteps < 5000 and np.isfinite(atoms.positions).all()
-
-
-def _set(key, value):
-    def edit(document):
-        document[key] = value
-    return edit
-
-
-def _monitor(key, value):
-    def edit(document):
-        document['monitor'][key] = value
-    return edit
-
-
-DAMAGES = {
-    'step a string': (_set('step', 'x'), "'step' must be a whole number"),
-    'gamma missing': (lambda d: d.pop('gamma'), "it has no 'gamma'"),
-    'gamma negative': (_set('gamma', -0.5), "'gamma' must be a positive"),
-    'gamma NaN': (_set('gamma', float('nan')), "'gamma' must be a positive"),
-    'rows off by one': (lambda d: d.update(rows=d['rows'] + 1), "'rows' must be a positive"),
-    'rows of fewer points': (lambda d: d.update(rows=d['rows'] - 3),
-                             ': rows .* are not what it wrote'),
-    'slot 2': (_set('slot', 2), "'slot' must be 0 or 1"),
-    'pair -1': (_set('pairs', [-1]), "'pairs' must be"),
-    'pairs and crc disagree': (lambda d: d['crc']['pairs'].append(7), '"crc" names'),
-    'moving a string': (_set('moving', 'yes'), "'moving' must be true or false"),
-    'merit null': (_set('merit', None), "'merit' must be a finite number"),
-    'model negative': (_set('model', {'kappa': -1.0}), "'model' must be an object"),
-    'only its format': (lambda d: [d.pop(k) for k in list(d) if k != 'format'],
-                        "it has no 'rows'"),
-    'monitor empty': (_set('monitor', {}), "the monitor's state has no 'size0'"),
-    'monitor best': (_monitor('best', ['x', 0]), r"the monitor's 'best' must be \[fmax, step\]"),
-    'monitor size0': (_monitor('size0', -1.0), "the monitor's 'size0' must be a positive"),
-}
 
 
 @pytest.mark.parametrize('damage', sorted(DAMAGES))

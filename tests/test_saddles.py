@@ -20,6 +20,7 @@ from ase_maud.optimize.models.exact import ExactModel
 from ase_maud.optimize.restart_file import FORMAT, STATE_ROWS, RestartFile
 from ase_maud.optimize.step_rules import LOWEST_MODES
 from ase_maud.scenes.catalogue import build
+from ase_maud.scenes.saddle_scenes import chords
 
 pytest.importorskip('sella')
 
@@ -328,7 +329,7 @@ def test_first_index_check_starts_from_the_mode_given(seed):
     """At a converged minimum the index test runs before any move; its LOBPCG
     starts from the move given as ``mode``: at most half the products of a
     cold start (measured 2026-12-04: 25 against 105-111)."""
-    atoms = saddles.OWN_SCENES['chords'](40, seed)
+    atoms = chords(40, seed)
     assert Maud(atoms, logfile=None).run(fmax=1e-9, steps=5000)
     lowest = classify(atoms).modes[0]
     vectors = []

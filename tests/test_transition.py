@@ -3,9 +3,7 @@ saddle of a small dome with its rim fixed, between it and its mirror image,
 verified index 1 from a fresh calculator and met by NEB's climbing image; Maud
 relaxing a band of images where FIRE does."""
 
-import runpy
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,9 +18,9 @@ from ase_maud.saddles.between_minima import mirrored, saddle_between
 from ase_maud.saddles.landscape import landscape
 from ase_maud.saddles.search import search_saddles
 from ase_maud.scenes.catalogue import build
+from ase_maud.scenes.saddle_scenes import SADDLE_SCENES, rim
 
-DOMES = runpy.run_path(str(Path(__file__).parent.parent / 'benchmarks' / 'saddles_vs_sella.py'))[
-    'OWN_SCENES']['rim']
+DOMES = rim   # ase_maud.scenes.saddle_scenes.rim: a net with its whole rim fixed, a dome
 
 
 def dome(size: int, seed: int):
@@ -178,8 +176,7 @@ def test_the_mirror_gives_a_verified_saddle_on_nets_above_the_exact_models_size(
     to the mirror image (the springs model's refinement) ends on a verified
     index-1 saddle from at least 3 of 4 seeds (measured 2026-12-03: 4 of 4
     each, 0.4-13 CPU s a search)."""
-    nets = runpy.run_path(str(Path(__file__).parent.parent / 'benchmarks' / 'saddles_vs_sella.py'))[
-        'OWN_SCENES'][scene]
+    nets = SADDLE_SCENES[scene]
     found = 0
     for seed in range(4):
         net = nets(10, seed)

@@ -1,4 +1,12 @@
-"""Test doubles shared by the tests and dev/hostile_sweep.py."""
+"""Calculator doubles: an ASE calculator that fails at a chosen call
+(:class:`PoisonedCalculator`) and a MaudCalculator whose energy carries a
+declared noise (:class:`NoisyEnergy`).
+
+They are the hard inputs the tests give Maud, and the ones
+``benchmarks/noisy_energy.py`` and ``dev/hostile_sweep.py`` measure it on: they
+live in the package so that tests and scripts import the same classes (no
+script reaches into ``tests/``). Nothing else in the package uses them.
+"""
 
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes

@@ -69,15 +69,12 @@ import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms
 from ase.optimize.optimize import Optimizer
-from scipy.spatial import cKDTree
 
 from ase_maud import Maud
 from ase_maud.analysis.stationary import StationaryPoint, classify
 from ase_maud.counting import CallRecorder, Work, fresh_copy
 from ase_maud.saddles.landscape import same_point
-from ase_maud.scenes.builders import keep_on_plane
-from ase_maud.scenes.catalogue import build
-from ase_maud.scenes.saddle_scenes import SADDLE_SCENES
+from ase_maud.saddles.starts import DISPLACEMENTS, displaced_minimum, saddle_start
 
 EXAMPLE = Path(__file__).resolve().parent.parent / 'examples' / 'saddle_and_minima.py'
 
@@ -129,44 +126,14 @@ OPTIMIZERS: dict[str, Callable[[Atoms], Optimizer]] = {
     'Sella-H': _sella(hessian=True)}
 
 
-#: The saddle scenes beside :func:`ase_maud.scenes.catalogue.build`'s
-#: (:mod:`ase_maud.scenes.saddle_scenes`).
-OWN_SCENES = SADDLE_SCENES
-
-#: Displacements of a minimum by a fraction :data:`SHIFT` of the mean
-#: nearest-neighbour distance (module docstring).
-SHIFT = 0.1
-DISPLACEMENTS = ('up', 'down', 'random')
-
-
 def make_start(scene: str, size: int, seed: int, amp: float | str) -> Atoms:
     """The start ``scene:size:amp`` (see the module docstring); ``seed`` seeds the scene
-    and the random displacement."""
+    and the random displacement (:func:`ase_maud.saddles.starts.saddle_start`; ``six``:
+    the example's guess)."""
     if scene == 'six':
-        atoms = runpy.run_path(str(EXAMPLE))['guess']()
-    elif scene in OWN_SCENES:
-        atoms = OWN_SCENES[scene](size, seed)
-    else:
-        atoms = build(scene, size, seed=seed)
-    if atoms.calc.parameters['dim'] == 2:
-        keep_on_plane(atoms)
-    if amp in (0, '0'):
-        return atoms
-    Maud(atoms, logfile=None).run(fmax=1e-9, steps=5000)
-    point = classify(atoms)
-    if point.verdict != 'minimum':
-        raise ValueError(f'{scene} {size} seed {seed} relaxed to a {point.verdict}, '
-                         'not a minimum: no lowest mode to leave it along')
-    mode = point.modes[0]
-    if amp in DISPLACEMENTS:
-        if amp == 'random':
-            weights = np.random.default_rng(seed).normal(size=len(point.modes))
-            mode = np.einsum('k,kij->ij', weights, point.modes)
-        spacing = np.mean(cKDTree(atoms.positions).query(atoms.positions, k=2)[0][:, 1])
-        amp = SHIFT * spacing * (-1 if amp == 'down' else 1)
-    start = fresh_copy(atoms)
-    start.positions += float(amp) * mode / np.linalg.norm(mode, axis=1).max()
-    return start
+        return displaced_minimum(runpy.run_path(str(EXAMPLE))['guess'](), seed, amp,
+                                 f'{scene} {size} seed {seed}')
+    return saddle_start(scene, size, seed, amp)
 
 
 def search(start: Atoms, optimiser: str, fmax: float, steps: int

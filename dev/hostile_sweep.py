@@ -7,7 +7,7 @@ result). Run with the threads pinned::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python dev/hostile_sweep.py
 
-The SIGKILL class is tests/test_restart_kill.py (5 kills at seeded moments).
+The SIGKILL class is tests/optimize/test_resume.py (5 kills at seeded moments).
 """
 
 from __future__ import annotations

@@ -3,9 +3,10 @@
 Tests of whole workflows (a command line, a relaxation compared with other
 optimisers over a suite, a killed run resumed, a benchmark) are marked
 ``integration``: every test of the files in :data:`INTEGRATION_MODULES`, and
-any test marked so by hand. ``pytest -m "not integration"`` is the unit
-tier (README.md gives its time); ``pytest`` runs both. Helpers that test
-files share are in ``tests/helpers.py``.
+any test marked so by hand; a test that took over 5 s is marked ``slow``.
+``pytest -q`` is the fast tier (pyproject's addopts leave both out; README.md
+gives its time), ``pytest -q -m "slow or integration"`` the rest. Helpers that
+test files share are in ``tests/helpers.py``.
 """
 
 from pathlib import Path

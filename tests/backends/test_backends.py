@@ -74,9 +74,12 @@ def test_reference_chunks_sum_the_same(random_points, chunk_pairs):
     assert_close(block6, ref_block6)
 
 
-@pytest.mark.parametrize('nchunks', [1, 2, 3, 7])
-@pytest.mark.parametrize('n', [3, 50, direct.TILE, direct.TILE + 1, 2 * direct.TILE + 3,
-                               4 * direct.TILE - 5])
+@pytest.mark.parametrize('n, nchunks', [
+    # measured 12 s and 17 s in full runs on a loaded machine (0.5 s alone)
+    pytest.param(n, nchunks, marks=pytest.mark.slow)
+    if (n, nchunks) in ((2 * direct.TILE + 3, 2), (2 * direct.TILE + 3, 3)) else (n, nchunks)
+    for n in [3, 50, direct.TILE, direct.TILE + 1, 2 * direct.TILE + 3, 4 * direct.TILE - 5]
+    for nchunks in [1, 2, 3, 7]])
 def test_chunks_share_rows(random_points, n, nchunks):
     """Tile rows k and T-1-k go to chunk k % nchunks; every split sums the same.
 

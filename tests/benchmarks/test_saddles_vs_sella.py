@@ -128,6 +128,7 @@ def test_every_hessian_vector_product_and_hessian_is_counted(monkeypatch, model,
     assert row['hessians'] >= row['calls'] - 1 > 0
 
 
+@pytest.mark.slow   # 14 s
 def test_sella_finds_the_same_saddle_from_most_starts():
     """Sella (order 1) from the same starts (2D and 3D trap clusters of 8 and
     12 points, moved along their lowest mode both ways, seeds 0 and 1) ends

@@ -292,7 +292,7 @@ def test_calc_set_by_an_observer_is_seen(seed):
     assert np.linalg.norm(check.get_forces(), axis=1).max() <= 1e-6
 
 
-@pytest.mark.parametrize('n, seed', [(13, 3), (38, 4)])
+@pytest.mark.parametrize('n, seed', [(13, 3), pytest.param(38, 4, marks=pytest.mark.slow)])  # 5.5 s
 def test_a_calculator_without_stiffness_gets_bfgs_and_converges_like_bfgs(n, seed):
     """EMT or Lennard-Jones: the 'bfgs' model (the secant model alone took
     810 to more than 2000 steps on LJ38 from random starts, BFGS 197-239)."""

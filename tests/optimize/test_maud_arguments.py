@@ -125,6 +125,7 @@ def test_bad_file_arguments_are_refused(tmp_path, monkeypatch, name, value, matc
         Maud(build('ring', 8, seed=1), **{'logfile': None, name: value})
 
 
+@pytest.mark.slow   # 7 s
 @settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2), scale=st.tuples(st.floats(-12, 12), st.floats(-12, 12)),

@@ -71,6 +71,7 @@ def test_ring_buckles_through_an_index_two_saddle(seed):
     assert _verified_index(atoms) == (2, True)
 
 
+@pytest.mark.slow   # 6 s
 def test_ring_triangular_buckling_is_a_saddle_or_says_it_is_not():
     """Climbing a ring's minimum along the triangular buckling (radial
     ``cos 3 theta``) reaches a verified index-1 saddle from some seeds

@@ -215,6 +215,7 @@ def test_default_maud_in_multi_basin_clusters(name):
     assert hits['Maud'] >= hits['BFGS'], hits
 
 
+@pytest.mark.slow   # 17 s
 def test_global_model_with_memory_relaxes_a_large_net_like_bfgs():
     atoms, reference = build('hanging_net', 12, seed=4), build('hanging_net', 12, seed=4)
     with Maud(atoms, model='global', logfile=None) as opt:

@@ -1,12 +1,13 @@
 """Calls of Maud on scenes whose energies carry noise, to compare two versions.
 
 Each scene of :data:`SCENES`, seeds 0-2, relaxed with ``Maud(atoms)`` (the
-default model) to ``--fmax`` on the tests' :class:`NoisyEnergy` calculator
+default model) to ``--fmax`` on the :class:`ase_maud.bench.doubles.NoisyEnergy` calculator
 (the exact direct sum, its energy off by a seeded uniform noise of relative
 size ``noise`` that it declares as its error), for each ``--noise``: a
 markdown table of the steps to converge per seed (or the error that stopped
-the run). It uses the public API and the tests' double only, so the same
-script measures an older checkout (``PYTHONPATH=OLD_CHECKOUT``)::
+the run). It uses the public API and that double only, so the same
+script measures an older checkout (``PYTHONPATH=OLD_CHECKOUT``; one older than
+``ase_maud/bench/doubles.py`` needs that file copied in)::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
         python benchmarks/noisy_energy.py --noise 0 1e-3 1e-2
@@ -15,14 +16,10 @@ script measures an older checkout (``PYTHONPATH=OLD_CHECKOUT``)::
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
 from ase_maud import Maud
+from ase_maud.bench.doubles import NoisyEnergy
 from ase_maud.scenes.catalogue import build
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'tests'))
-from doubles import NoisyEnergy  # noqa: E402  (the tests' own double)
 
 SCENES = [('hanging_net', 20), ('hub_net', 48), ('disc', 400), ('neighbour_graph', 300),
           ('tree', 200)]

@@ -3,7 +3,7 @@ climbs along the lowest modes, then local activations), in force-call equivalent
 
 Each start is a scene relaxed with Maud to fmax 1e-9 and checked to be a minimum
 (:func:`ase_maud.analysis.stationary.classify`), named ``scene:size``; the scenes are
-:func:`ase_maud.scenes.catalogue.build`'s and those of ``benchmarks/saddles_vs_sella.py``
+:func:`ase_maud.scenes.catalogue.build`'s and those of :mod:`ase_maud.scenes.saddle_scenes`
 (``chords``: a ring with a chord
 from each point to the one a third of the way round, 2D; ``corners``: a free net with its four
 corners fixed; ``rim``: the net with its whole rim fixed, which buckles into a dome; ``tube``: a
@@ -43,9 +43,7 @@ from ase_maud.analysis.stationary import classify
 from ase_maud.counting import fresh_copy
 from ase_maud.saddles.search import search_saddles
 from ase_maud.scenes.catalogue import build
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from saddles_vs_sella import OWN_SCENES  # noqa: E402  (the benchmark's own scenes)
+from ase_maud.scenes.saddle_scenes import SADDLE_SCENES
 
 #: The scenes with fixed points to fit a plane to (the tube's two end rings too): ``--mirror``
 #: gives their searches the path to the mirror image through that plane where the climbs and
@@ -56,7 +54,7 @@ MIRRORED = ('rim', 'corners', 'tube')
 def minimum(scene: str, size: int, seed: int):
     """The scene relaxed to fmax 1e-9 (a ValueError if that is not a minimum) and its
     classification."""
-    atoms = OWN_SCENES[scene](size, seed) if scene in OWN_SCENES else build(scene, size, seed)
+    atoms = SADDLE_SCENES[scene](size, seed) if scene in SADDLE_SCENES else build(scene, size, seed)
     Maud(atoms, logfile=None).run(fmax=1e-9, steps=5000)
     point = classify(atoms)
     if point.verdict != 'minimum':

@@ -13,8 +13,9 @@ Starts (seeded), named ``scene:size:amp``:
   the mean nearest-neighbour distance, along the lowest mode either way, ``random``: along a
   seeded random combination of the modes. 2D scenes hold z (``keep_on_plane``: Maud never
   moves z in 2D; Sella would otherwise see z as a free, flat direction). Scenes are those of
-  :func:`ase_maud.scenes.catalogue.build` and the tool's own: ``chords`` (``ring`` with a chord
-  from each point to the one a third of the way round), ``corners`` (``net3d`` with its
+  :func:`ase_maud.scenes.catalogue.build` and :mod:`ase_maud.scenes.saddle_scenes`:
+  ``chords`` (``ring`` with a chord from each point to the one a third of the way round),
+  ``corners`` (``net3d`` with its
   four corners fixed), ``rim`` (``net3d`` with its whole rim fixed: a dome) and ``tube``
   (``size`` rings of ``size`` points, both end rings fixed).
 
@@ -68,14 +69,12 @@ import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms
 from ase.optimize.optimize import Optimizer
-from scipy.spatial import cKDTree
 
-from ase_maud import Maud, MaudCalculator
+from ase_maud import Maud
 from ase_maud.analysis.stationary import StationaryPoint, classify
 from ase_maud.counting import CallRecorder, Work, fresh_copy
 from ase_maud.saddles.landscape import same_point
-from ase_maud.scenes.builders import keep_on_plane
-from ase_maud.scenes.catalogue import build
+from ase_maud.saddles.starts import DISPLACEMENTS, displaced_minimum, saddle_start
 
 EXAMPLE = Path(__file__).resolve().parent.parent / 'examples' / 'saddle_and_minima.py'
 
@@ -127,93 +126,14 @@ OPTIMIZERS: dict[str, Callable[[Atoms], Optimizer]] = {
     'Sella-H': _sella(hessian=True)}
 
 
-def _chords(size: int, seed: int) -> Atoms:
-    """``ring`` with a chord from each point to the one a third of the way round."""
-    atoms = build('ring', size, seed=seed)
-    n = len(atoms)
-    chords = np.column_stack([np.arange(n), (np.arange(n) + n // 3) % n])
-    atoms.calc = type(atoms.calc)(**{**atoms.calc.parameters, 'springs': np.vstack(
-        [atoms.calc.parameters['springs'], chords])})
-    return atoms
-
-
-def _corners(size: int, seed: int) -> Atoms:
-    """``net3d`` with its four corners fixed."""
-    atoms = build('net3d', size, seed=seed)
-    side = int(round(np.sqrt(len(atoms))))
-    atoms.set_constraint(FixAtoms([0, side - 1, side * (side - 1), side * side - 1]))
-    return atoms
-
-
-def _rim(size: int, seed: int) -> Atoms:
-    """``net3d`` with its whole rim fixed: the repulsion buckles it into a dome."""
-    atoms = build('net3d', size, seed=seed)
-    side = int(round(np.sqrt(len(atoms))))
-    edge = np.zeros((side, side), dtype=bool)
-    edge[[0, -1], :] = edge[:, [0, -1]] = True
-    atoms.set_constraint(FixAtoms(np.flatnonzero(edge.ravel())))
-    return atoms
-
-
-def _tube(size: int, seed: int) -> Atoms:
-    """A tube of ``size`` rings of ``size`` points (spacing a round and along), springs
-    round each ring and between rings, both end rings fixed; every free coordinate moved
-    by up to 0.2 a (seeded)."""
-    rng = np.random.default_rng(seed)
-    phi = 2 * np.pi * np.arange(size) / size
-    radius = size / (2 * np.pi)
-    positions = np.concatenate([np.column_stack([radius * np.cos(phi), radius * np.sin(phi),
-                                                 np.full(size, k)]) for k in range(size)])
-    index = np.arange(size * size).reshape(size, size)
-    springs = np.concatenate([
-        np.column_stack([index.ravel(), np.roll(index, -1, axis=1).ravel()]),
-        np.column_stack([index[:-1].ravel(), index[1:].ravel()])])
-    fixed = np.concatenate([index[0], index[-1]])
-    free = np.setdiff1d(np.arange(len(positions)), fixed)
-    positions[free] += rng.uniform(-0.2, 0.2, (len(free), 3))
-    atoms = Atoms(positions=positions, pbc=False)
-    atoms.calc = MaudCalculator(springs)
-    atoms.set_constraint(FixAtoms(fixed))
-    return atoms
-
-
-#: Scenes of the benchmark's own (beside :func:`ase_maud.scenes.catalogue.build`'s).
-OWN_SCENES = {'chords': _chords, 'corners': _corners, 'rim': _rim, 'tube': _tube}
-
-#: Displacements of a minimum by a fraction :data:`SHIFT` of the mean
-#: nearest-neighbour distance (module docstring).
-SHIFT = 0.1
-DISPLACEMENTS = ('up', 'down', 'random')
-
-
 def make_start(scene: str, size: int, seed: int, amp: float | str) -> Atoms:
     """The start ``scene:size:amp`` (see the module docstring); ``seed`` seeds the scene
-    and the random displacement."""
+    and the random displacement (:func:`ase_maud.saddles.starts.saddle_start`; ``six``:
+    the example's guess)."""
     if scene == 'six':
-        atoms = runpy.run_path(str(EXAMPLE))['guess']()
-    elif scene in OWN_SCENES:
-        atoms = OWN_SCENES[scene](size, seed)
-    else:
-        atoms = build(scene, size, seed=seed)
-    if atoms.calc.parameters['dim'] == 2:
-        keep_on_plane(atoms)
-    if amp in (0, '0'):
-        return atoms
-    Maud(atoms, logfile=None).run(fmax=1e-9, steps=5000)
-    point = classify(atoms)
-    if point.verdict != 'minimum':
-        raise ValueError(f'{scene} {size} seed {seed} relaxed to a {point.verdict}, '
-                         'not a minimum: no lowest mode to leave it along')
-    mode = point.modes[0]
-    if amp in DISPLACEMENTS:
-        if amp == 'random':
-            weights = np.random.default_rng(seed).normal(size=len(point.modes))
-            mode = np.einsum('k,kij->ij', weights, point.modes)
-        spacing = np.mean(cKDTree(atoms.positions).query(atoms.positions, k=2)[0][:, 1])
-        amp = SHIFT * spacing * (-1 if amp == 'down' else 1)
-    start = fresh_copy(atoms)
-    start.positions += float(amp) * mode / np.linalg.norm(mode, axis=1).max()
-    return start
+        return displaced_minimum(runpy.run_path(str(EXAMPLE))['guess'](), seed, amp,
+                                 f'{scene} {size} seed {seed}')
+    return saddle_start(scene, size, seed, amp)
 
 
 def search(start: Atoms, optimiser: str, fmax: float, steps: int

@@ -1,6 +1,6 @@
 """The snap-through saddle of a dome:
 :func:`ase_maud.saddles.between_minima.saddle_between` from a net
-with its whole rim fixed (``rim`` of ``benchmarks/saddles_vs_sella.py``: ``net3d`` of
+with its whole rim fixed (:func:`ase_maud.scenes.saddle_scenes.rim`: ``net3d`` of
 ``size`` x ``size``
 points, every coordinate moved by up to 0.25 a, seeded), relaxed to a dome, to its mirror
 image (:func:`ase_maud.saddles.between_minima.mirrored`).
@@ -30,9 +30,7 @@ from ase_maud import Maud
 from ase_maud.analysis.stationary import classify
 from ase_maud.counting import fresh_copy
 from ase_maud.saddles.between_minima import mirrored, saddle_between
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from saddles_vs_sella import OWN_SCENES  # noqa: E402  (the benchmark's own scenes)
+from ase_maud.scenes.saddle_scenes import SADDLE_SCENES
 
 COLUMNS = ('size', 'natoms', 'seed', 'threads', 'ends_cpu_s', 'cpu_s', 'wall_s', 'band_calls',
            'band_steps', 'saddle_calls', 'hvp_vectors', 'hessians', 'cost', 'barrier',
@@ -42,7 +40,7 @@ COLUMNS = ('size', 'natoms', 'seed', 'threads', 'ends_cpu_s', 'cpu_s', 'wall_s',
 def one(size: int, seed: int, fmax: float) -> dict:
     """The row of one dome of ``size`` x ``size`` points and ``seed``."""
     cpu = time.process_time()
-    first = OWN_SCENES['rim'](size, seed)
+    first = SADDLE_SCENES['rim'](size, seed)
     if not Maud(first, logfile=None).run(fmax=1e-9, steps=5000):
         raise ValueError(f'rim {size} seed {seed} did not relax')
     second = mirrored(first, fmax=1e-9)

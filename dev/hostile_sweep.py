@@ -7,7 +7,7 @@ result). Run with the threads pinned::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python dev/hostile_sweep.py
 
-The SIGKILL class is tests/test_restart_kill.py (5 kills at seeded moments).
+The SIGKILL class is tests/optimize/test_resume.py (5 kills at seeded moments).
 """
 
 from __future__ import annotations
@@ -36,19 +36,19 @@ from ase.optimize import BFGS
 from ase.optimize.basin import BasinHopping
 
 from ase_maud import Maud, MaudCalculator, MaudError
+from ase_maud.bench.doubles import PoisonedCalculator
+from ase_maud.bench.hard_inputs import (  # the tests' own cases
+    BROKEN,
+    DAMAGES,
+    relaxed_in_a_cell_filter,
+    wrong_results_of_threads,
+)
 from ase_maud.checks import RULES
 from ase_maud.cli.command import main as main_cli
 from ase_maud.files.atomic_replace import LEFTOVER_SECONDS
 from ase_maud.io.nets import read_net, write_net
 from ase_maud.physics.topology import fixed_atoms
 from ase_maud.scenes.catalogue import build
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'tests'))
-from doubles import PoisonedCalculator  # noqa: E402  (the tests' own double)
-from test_calculator import wrong_results_of_threads  # noqa: E402
-from test_filters import relaxed_in_a_cell_filter  # noqa: E402
-from test_io import BROKEN  # noqa: E402  (the tests' malformed files)
-from test_robustness import DAMAGES  # noqa: E402  (the tests' damaged restart values)
 
 #: Maud's numeric keywords (RULES holds the rule of each).
 KEYWORDS = [name for name in inspect.signature(Maud).parameters

@@ -1,6 +1,6 @@
 """ASE's NEB tutorial (Au hopping between hollow sites of Al(100), EMT, three
 moving images) relaxed by FIRE, BFGS and Maud: steps to fmax 0.05 eV/A and the
-barrier. docs/optimizer.md quotes the output; tests/test_drivers.py uses
+barrier. docs/optimizer.md quotes the output; tests/workflows/test_ase_drivers.py uses
 :func:`tutorial_band` and :func:`relax_band`::
 
     python dev/neb_tutorial.py --seeds 0 1

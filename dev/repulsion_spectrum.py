@@ -1,5 +1,5 @@
-"""How well the springs model and the near-field prototype
-(benchmarks/repulsion_models.py) match the Hessian, on small repulsion-dominated
+"""How well the springs model and the factorised near-field model
+(:mod:`ase_maud.optimize.models.near_lu`) match the Hessian, on small repulsion-dominated
 scenes: the generalised eigenvalues of ``H v = lambda P v`` on the internal
 moves (free degrees of freedom, rigid motions projected out), at the start
 and at a minimum (relaxed by Maud to ``--fmax``). Their spread (condition
@@ -23,9 +23,12 @@ import numpy as np
 import scipy.linalg
 
 from ase_maud import Maud
+from ase_maud.optimize.models.near_lu import NearLUModel
 from ase_maud.physics.dofs import free_dofs, rigid_body_modes
 
-TOOL = runpy.run_path(str(Path(__file__).parent / 'repulsion_models.py'))
+#: benchmarks/repulsion_models.py, for its scenes (``scene``: a catalogue scene or a compas net).
+TOOL = runpy.run_path(str(Path(__file__).resolve().parents[1] / 'benchmarks'
+                          / 'repulsion_models.py'))
 
 
 def springs_matrix(atoms) -> np.ndarray:
@@ -45,7 +48,7 @@ def row(spec: str, where: str, atoms, cutoffs: list[float]) -> tuple[str, list[s
     negative = int((np.linalg.eigvalsh(hessian) < 0).sum())
     models = {'springs': springs_matrix(atoms)}
     for cutoff in cutoffs:
-        models[f'near {cutoff:g}'] = TOOL['NearFieldModel'](cutoff=cutoff).matrix(atoms).toarray()
+        models[f'near {cutoff:g}'] = NearLUModel(cutoff=cutoff).matrix(atoms).toarray()
     cells = []
     for matrix in models.values():
         inner = basis.T @ matrix @ basis

@@ -1,46 +1,59 @@
-"""Shared test helpers, and the two test tiers.
+"""Shared fixtures, and the two test tiers.
 
 Tests of whole workflows (a command line, a relaxation compared with other
 optimisers over a suite, a killed run resumed, a benchmark) are marked
-``integration``: every test of the modules in :data:`INTEGRATION_MODULES`,
-and any test marked so by hand. ``pytest -m "not integration"`` is the unit
-tier (README.md gives its time); ``pytest`` runs both.
+``integration``: every test of the files in :data:`INTEGRATION_MODULES`, and
+any test marked so by hand; a test that took over 5 s is marked ``slow``.
+``pytest -q`` is the fast tier (pyproject's addopts leave both out; README.md
+gives its time), ``pytest -q -m "slow or integration"`` the rest. Helpers that
+test files share are in ``tests/helpers.py``.
 """
 
-import numpy as np
-import pytest
+from pathlib import Path
 
-#: Test modules whose every test is an integration test.
-INTEGRATION_MODULES = {'test_accuracy', 'test_bench', 'test_cli', 'test_drivers',
-                       'test_examples', 'test_filters', 'test_landscape',
-                       'test_restart_kill', 'test_run_files', 'test_ase_restart'}
+import pytest
+from ase.io import Trajectory, write
+
+from ase_maud.io.nets import read_frames, write_net
+from ase_maud.scenes.catalogue import build
+
+import helpers
+
+#: Test files (paths under tests/) whose every test is an integration test.
+INTEGRATION_MODULES = {
+    'bench/test_bench.py', 'calculator/test_accuracy.py', 'cli/test_command.py',
+    'optimize/test_resume.py', 'optimize/test_run_files.py', 'saddles/test_landscape.py',
+    'workflows/test_ase_drivers.py', 'workflows/test_ase_filters.py',
+    'workflows/test_examples.py', 'test_kernel_cache.py', 'benchmarks/test_ase_systems.py',
+    'benchmarks/test_basin_hopping.py', 'benchmarks/test_kernel_throughput.py',
+    'ase_suite/test_ase_restart.py'}
+
+TESTS = Path(__file__).resolve().parent
 
 
 def pytest_collection_modifyitems(config, items):
     """Mark every test of :data:`INTEGRATION_MODULES` ``integration``."""
     for item in items:
-        if item.module.__name__.rpartition('.')[2] in INTEGRATION_MODULES:
+        if item.path.resolve().relative_to(TESTS).as_posix() in INTEGRATION_MODULES:
             item.add_marker(pytest.mark.integration)
-
-
-def _random_points(n, dim=3, seed=0, spacing=1.0):
-    """``n`` random points, shape (n, 3), about ``spacing`` apart.
-
-    The points are a random subset of a grid twice as large, each moved by up
-    to ``0.3 * spacing`` per axis, so no two are closer than ``0.4 * spacing``
-    and finite differences stay well conditioned. ``dim=2`` puts every point
-    on the plane ``z = 0``.
-    """
-    rng = np.random.default_rng(seed)
-    side = int(np.ceil((2 * n) ** (1.0 / dim)))
-    grid = np.stack(np.meshgrid(*[np.arange(side)] * dim), -1).reshape(-1, dim)
-    points = np.zeros((n, 3))
-    points[:, :dim] = rng.permutation(grid)[:n]
-    points[:, :dim] += rng.uniform(-0.3, 0.3, size=(n, dim))
-    return spacing * points
 
 
 @pytest.fixture
 def random_points():
-    """The factory ``random_points(n, dim=3, seed=0, spacing=1.0)``."""
-    return _random_points
+    """The factory :func:`helpers.random_points`, ``(n, dim=3, seed=0, spacing=1.0)``."""
+    return helpers.random_points
+
+
+@pytest.fixture(params=[0, 1])
+def four_frames(tmp_path, request):
+    """A ring of random size relaxed for four frames, as .traj and .xyz."""
+    atoms = build('ring', 5 + 3 * request.param, seed=request.param)
+    atoms.get_potential_energy()
+    with Trajectory(tmp_path / 'f.traj', 'w') as trajectory:
+        for _ in range(4):
+            atoms.positions[0, 0] += 0.01
+            trajectory.write(atoms)
+    frames = read_frames(tmp_path / 'f.traj')
+    write_net(tmp_path / 'f.xyz', frames[0])   # and its edge list, f.edges.txt
+    write(tmp_path / 'f.xyz', frames)
+    return tmp_path / 'f.traj', tmp_path / 'f.xyz'

@@ -4,7 +4,7 @@ Every builder is ``builder(size=<default>, seed=0, a=1.0, Q=1.0)`` like those
 of :mod:`ase_maud.scenes`, and returns an :class:`ase.Atoms` with a
 :class:`MaudCalculator` attached and its constraints set. Several of these
 scenes have no finite minimum on purpose. docs/hard_cases.md gives, for each,
-what a run does and why; tests/test_hard_cases.py asserts it. Hard cases that
+what a run does and why; tests/optimize/test_hard_cases.py asserts it. Hard cases that
 are plain scenes at extreme sizes or scales (long chains, large all-pairs
 clusters, ``a`` and ``Q`` far from 1) are built with :func:`scenes.build`.
 """

@@ -135,7 +135,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--q', metavar='Q_CSV',
                    help='per-edge force densities from a CSV table with the header i,j,q '
                    '(the two points of a spring, its multiplier of Q; edges not listed '
-                   'keep theirs)')
+                   'keep theirs), or one number for every edge; negative: compression '
+                   '(an arch or gridshell, e.g. --q -1 with --load 0 0 -0.1; with --a > 0 '
+                   'the equilibrium found is a stationary point, not a minimum)')
     p.add_argument('--out', metavar='RELAXED_FILE',
                    help='write the relaxed net here, in the format of its suffix '
                    '(.obj, .json, .traj, .xyz plus NAME.edges.txt, ...)')

@@ -101,7 +101,7 @@ def relax_command(args: argparse.Namespace) -> int:
           f'{len(atoms)} points, {opt.nsteps} steps, '
           f'{len(recorder.samples)} force calls, energy '
           f'{atoms.get_potential_energy():.12g}, fmax {fmax:.3g}, a {a:.4g}{share}; '
-          f'{describe_result(result)}; {written}')
+          f'{describe_result(result, repulsion=a > 0)}; {written}')
     for warning in form_warnings(atoms, start, result) if args.net is not None else ():
         print(f'ase-maud: warning: {warning}', file=sys.stderr)
     return 0 if converged else 1

@@ -68,7 +68,7 @@ from ase import Atoms
 from ase.constraints import FixAtoms
 
 from ase_maud.calculator.maud_calculator import CALC_NAME, MaudCalculator, stored_parameters
-from ase_maud.checks import as_whole, check_writable
+from ase_maud.checks import as_whole, check, check_writable
 from ase_maud.files.atomic_replace import replace_text, replace_with
 from ase_maud.io.compas import compas_text, read_compas, read_compas_forces
 from ase_maud.io.mesh import MESH_FORMATS, read_mesh
@@ -315,13 +315,27 @@ def set_tables(atoms: Atoms, loads: PathLike | None = None,
     """Set the loads and force densities of the net ``atoms`` (with a
     MaudCalculator) from CSV tables (:mod:`ase_maud.io.tables`): the
     loads replace the calculator's, the force densities replace those of
-    the edges listed. None leaves either as it is."""
+    the edges listed. ``q`` may also be one number, every spring's (a
+    negative one: every member in compression, an arch or a gridshell). None
+    leaves either as it is."""
     if loads is not None:
         atoms.calc.set(loads=read_loads_csv(loads, len(atoms)))
-    if q is not None:
+    if q is not None and (every := _one_number(q)) is not None:
+        atoms.calc.set(q=np.full(len(atoms.calc.potential.springs), check('q', every)))
+    elif q is not None:
         potential = atoms.calc.potential
         current = np.broadcast_to(potential.stiffnesses, len(potential.springs))
         atoms.calc.set(q=read_q_csv(q, potential.springs, current, len(atoms)))
+
+
+def _one_number(text) -> float | None:
+    """``text`` as a float if it is one number (not a path), else None."""
+    if not isinstance(text, str) or Path(text).exists():
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        return None
 
 
 def _whole_index(index):

@@ -58,6 +58,7 @@ def relax_command(args: argparse.Namespace) -> int:
         atoms = read_net(args.net, load=args.load, **net_options(args))
         label = Path(args.net).name
     set_tables(atoms, loads=args.loads, q=args.q)
+    faces = atoms.info.pop('faces', None)   # for --out, not in every trajectory frame
     a, springs = atoms.calc.parameters['a'], atoms.calc.parameters.get('springs', ())
     share = (f' ({a / mean_spring_length(atoms.positions, springs):.3g} x the mean spring '
              'length at the start)' if a else ' (the force-density equilibrium: no '
@@ -91,6 +92,8 @@ def relax_command(args: argparse.Namespace) -> int:
     fmax = (atoms.get_forces()**2).sum(axis=1).max() ** 0.5
     result = form_result(atoms)
     written = f'trajectory {args.traj}'
+    if faces is not None:
+        atoms.info['faces'] = faces
     if args.out:
         like = args.net if args.net and net_format(args.net) == net_format(args.out) else None
         written += ', relaxed net ' + ' '.join(map(str, write_net(args.out, atoms, like=like,

@@ -18,7 +18,8 @@ from ase import Atoms
 from ase_maud.calculator.maud_calculator import MaudCalculator
 from ase_maud.physics.topology import held_directions, unsupported
 
-__all__ = ['force_density_positions', 'free_factors', 'solve_force_density', 'unsupported']
+__all__ = ['force_density_positions', 'free_factors', 'solve_force_density',
+           'supported_net', 'unsupported']
 
 
 def solve_force_density(atoms: Atoms) -> None:
@@ -43,16 +44,8 @@ def force_density_positions(atoms: Atoms) -> np.ndarray:
     unique (a point held in some directions only: relax with
     :class:`~ase_maud.Maud` instead). A ``dim=2`` net stays on its plane.
     """
-    calc = atoms.calc
-    if not isinstance(calc, MaudCalculator):
-        raise ValueError('the force-density solve needs a net with a MaudCalculator '
-                         f'attached, got {type(calc).__name__}')
-    potential = calc.potential
-    why = unsupported(atoms, potential.springs, potential.dim)
-    if why is not None:
-        raise ValueError(why)
+    potential, held = supported_net(atoms, 'the force-density solve')
     natoms = len(atoms)
-    held = held_directions(atoms)[:, :potential.dim].all(axis=1)
     positions = atoms.get_positions()
     free = np.flatnonzero(~held)
     if not free.size:
@@ -65,6 +58,22 @@ def force_density_positions(atoms: Atoms) -> np.ndarray:
     if not np.isfinite(positions).all():
         raise ValueError(_SINGULAR)
     return positions
+
+
+def supported_net(atoms: Atoms, what: str):
+    """The MaudPotential of the net ``atoms`` and its supports (a boolean
+    (N,) mask: held in every direction of its plane or space), or a
+    ValueError saying why ``what`` cannot be made on it (no MaudCalculator;
+    supports that leave the equilibrium not unique, :func:`unsupported`)."""
+    calc = atoms.calc
+    if not isinstance(calc, MaudCalculator):
+        raise ValueError(f'{what} needs a net with a MaudCalculator attached, got '
+                         f'{type(calc).__name__}')
+    potential = calc.potential
+    why = unsupported(atoms, potential.springs, potential.dim)
+    if why is not None:
+        raise ValueError(why)
+    return potential, held_directions(atoms)[:, :potential.dim].all(axis=1)
 
 
 _SINGULAR = ('the force densities make the free points\' matrix singular (members in '

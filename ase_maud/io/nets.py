@@ -307,7 +307,7 @@ def _fixed_points(path, fixed, positions, springs, faces):
         return indices.tolist()
     if isinstance(fixed, str) and not Path(fixed).exists():
         raise ValueError(f'fixed={fixed!r} is neither a rule ({", ".join(FIX_RULES)}) '
-                         'nor a file')
+                         'nor a file' + did_you_mean(fixed, FIX_RULES))
     if isinstance(fixed, (str, os.PathLike)):
         return read_indices(fixed, natoms)
     return _fixed_indices(fixed, natoms)
@@ -339,6 +339,15 @@ def _one_number(text) -> float | None:
         return float(text)
     except ValueError:
         return None
+
+
+def did_you_mean(word: str, choices) -> str:
+    """'; did you mean X?' for the choice closest to a mistyped ``word``
+    (difflib's ratio at least 0.6), else ''."""
+    import difflib
+
+    close = difflib.get_close_matches(word, [str(c) for c in choices], n=1)
+    return f'; did you mean {close[0]!r}?' if close else ''
 
 
 def _whole_index(index):

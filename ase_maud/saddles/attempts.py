@@ -100,7 +100,9 @@ class Attempt:
         """One line: what was tried, how it ended and what it cost."""
         what = {'mode': f"mode {self.where} {'+' if self.sign > 0 else '-'}",
                 'path': 'path to the second minimum'}.get(
-                    self.kind, f'local at point {self.where} ({self.region} points)')
+                    self.kind, f'local at point {self.where} ' + (
+                        f'({self.region} points)' if self.region else
+                        '(no region smaller than the net: the whole net climbed)'))
         return (f'{what}: {self.outcome}, {self.calls} calls + {self.hvp_vectors} HVP '
                 f'vectors + {self.hessians} Hessians = {self.cost}, {self.cpu_s:.2f} CPU s')
 

@@ -74,6 +74,7 @@ from ase.constraints import FixAtoms
 from ase_maud.calculator.maud_calculator import CALC_NAME, MaudCalculator, stored_parameters
 from ase_maud.checks import as_whole, check, check_writable
 from ase_maud.files.atomic_replace import replace_text, replace_with
+from ase_maud.files.trajectory import first_frame_parameters
 from ase_maud.io.compas import compas_text, read_compas, read_compas_forces
 from ase_maud.io.mesh import MESH_FORMATS, read_mesh, write_mesh
 from ase_maud.io.net_data import NetData, PathLike
@@ -397,6 +398,9 @@ def _read_ase(path, index):
     if not frames:
         raise ValueError(f'{path}: no frame at index {index}')
     stored = stored_parameters(frames[0])
+    if not stored and net_format(path) == 'traj' and getattr(
+            frames[0].calc, 'name', '') == CALC_NAME:   # a run's: with its first frame only
+        stored = first_frame_parameters(path)
     if stored:   # a calculator stored without a has the default a
         stored.setdefault('a', MaudCalculator.default_parameters['a'])
     for atoms in frames:

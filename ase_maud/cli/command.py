@@ -17,9 +17,9 @@
   backends (:mod:`ase_maud.backends`).
 
 ``--threads N`` pins OpenMP, BLAS and numba to N threads
-(:func:`ase_maud.threads.pin_threads`); if BLAS may already run with another
-count, the command starts itself again with them set (or, when
-``main(argv)`` is called from Python, warns). This module only parses
+(:func:`ase_maud.threads.pin_threads`: the loaded pools limited in place by
+threadpoolctl); if numba's pool is smaller than N, the command starts itself
+again with them set (or, when ``main(argv)`` is called from Python, warns). This module only parses
 arguments and calls the library; each command imports what it needs when it
 runs (relax needs no matplotlib).
 

@@ -121,6 +121,11 @@ def relax_command(args: argparse.Namespace) -> int:
           f'{len(recorder.samples)} force calls, energy '
           f'{atoms.get_potential_energy():.12g}, fmax {fmax:.3g}, a {a:.4g}{share}; '
           f'{describe_result(result, repulsion=a > 0)}; {written}')
+    struts = len(atoms.calc.potential.compressed)
+    if struts and a > 0:
+        print(f'ase-maud: note: {struts} members are in compression (q < 0), so the energy '
+              'is not convex: the form found is an equilibrium (a stationary point of the '
+              'energy), not a minimum', file=sys.stderr)
     for warning in form_warnings(atoms, start, result) if args.net is not None else ():
         print(f'ase-maud: warning: {warning}', file=sys.stderr)
     return 0 if converged else 1

@@ -154,3 +154,16 @@ def test_write_and_read_keep_the_load_free_obj(tmp_path):
     atoms = read_net(out)
     write_net(tmp_path / 'again.obj', atoms)
     assert (tmp_path / 'again.obj').read_text().count('\nf ') == 25
+
+
+def test_a_compressed_net_relaxed_with_repulsion_is_said_to_be_a_stationary_point(tmp_path,
+                                                                                  capsys):
+    out, load = loaded_grid(tmp_path, np.random.default_rng(7))
+    assert main(['relax', str(out), '--fix', 'boundary', '--a', '0.2', '--q', '-1', '--load',
+                 *load, '--quiet', '--traj', str(tmp_path / 's.traj')]) == 0
+    captured = capsys.readouterr()
+    assert '(compression)' in captured.out
+    assert 'a stationary point of the energy), not a minimum' in captured.err
+    assert main(['relax', str(out), '--fix', 'boundary', '--a', '0', '--q', '-1', '--load',
+                 *load, '--quiet', '--traj', str(tmp_path / 't.traj')]) == 0
+    assert 'not a minimum' not in capsys.readouterr().err   # a = 0: the solve says it all

@@ -112,8 +112,8 @@ RULES: dict[str, Rule] = {
     'Q': Rule('a positive finite number', lambda v: v > 0),
     'dim': Rule('2 or 3', choices=(2, 3)),
     # the calculator's arrays, each entry (check_each)
-    'q': Rule('a positive finite number (the force density multiplier of Q)',
-              lambda v: v > 0),
+    'q': Rule('a finite nonzero number (the force density multiplier of Q; '
+              'negative: a member in compression, as in compas_fd)', lambda v: v != 0),
     'loads': Rule('a finite number (force units)', lambda v: abs(v) < math.inf),
     # the backends
     'tol': Rule('a number in [0, 1), the force error allowed relative to the '

@@ -51,3 +51,43 @@ def kernels_cached() -> bool:
         return any(cache._cache_file._load_index() for cache in caches)
     except AttributeError:
         return True
+
+
+#: What :func:`compile_notice` says, once, when a kernel starts compiling.
+COMPILE_NOTICE = ('ase-maud: compiling the kernels (on the first run, and after an '
+                  'upgrade; cached for later runs, 10-30 s)...')
+
+
+class compile_notice:
+    """A context in which the first compilation of an ase_maud kernel (a
+    numba cache miss: numba's ``numba:compile`` event, which a kernel
+    loaded from the cache does not fire) prints :data:`COMPILE_NOTICE` to
+    ``stream`` (default stderr), once. Whatever the cache's index says:
+    the notice comes when, and only when, a kernel compiles."""
+
+    def __init__(self, stream=None):
+        self.stream = stream
+        self.said = False
+
+    def __enter__(self):
+        from numba.core import event
+
+        notice = self
+
+        class Listener(event.Listener):
+            def on_start(self, ev):
+                function = getattr(ev.data.get('dispatcher'), 'py_func', None)
+                module = getattr(function, '__module__', '') or ''
+                if not notice.said and module.startswith('ase_maud'):
+                    notice.said = True
+                    print(COMPILE_NOTICE, file=notice.stream or sys.stderr, flush=True)
+
+            def on_end(self, ev):
+                pass
+
+        self._installed = event.install_listener('numba:compile', Listener())
+        self._installed.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        return self._installed.__exit__(*exc)

@@ -1,10 +1,13 @@
 """Pin every thread pool (OpenMP, BLAS, numba) to one count.
 
 OpenMP and BLAS read their variables (:data:`STARTUP_VARIABLES`) when they
-are loaded, which importing ase_maud already does (numpy); so
-:func:`pin_threads` can pin them only by starting the program again with
-them set (or, called from Python, it warns). numba is pinned in the running
-process with ``numba.set_num_threads``, up to the size of its pool.
+are loaded, which importing ase_maud already does (numpy); threadpoolctl
+limits the pools already loaded in place (it calls each library's own
+``set_num_threads``), and the variables are set for pools loaded later and
+for child processes. numba is pinned in the running process with
+``numba.set_num_threads``, up to the size of its pool: only a pool smaller
+than asked for needs the program started again (or, called from Python, a
+warning).
 
 ``NUMBA_NUM_THREADS`` is never written into the environment of a running
 process: numba reads it again before every compilation and refuses any
@@ -28,28 +31,25 @@ THREAD_VARIABLES = (*STARTUP_VARIABLES, 'NUMBA_NUM_THREADS')
 def pin_threads(n: int, restart: bool) -> None:
     """Run OpenMP, BLAS and numba on ``n`` threads.
 
-    Sets :data:`STARTUP_VARIABLES` to ``n`` and calls
-    ``numba.set_num_threads(n)`` (at most numba's pool size). If numpy was
-    loaded with another count in one of them, or numba's pool is smaller
-    than ``n``: with ``restart``, re-execute ``python -m ase_maud
-    <sys.argv[1:]>`` with every :data:`THREAD_VARIABLES` at ``n`` (right
-    only when run as a program), else warn.
+    Limits the OpenMP and BLAS pools loaded so far to ``n`` in place
+    (threadpoolctl), sets :data:`STARTUP_VARIABLES` to ``n`` for those loaded
+    later, and calls ``numba.set_num_threads(n)`` (at most numba's pool
+    size). If numba's pool is smaller than ``n``: with ``restart``,
+    re-execute ``python -m ase_maud <sys.argv[1:]>`` with every
+    :data:`THREAD_VARIABLES` at ``n`` (right only when run as a program),
+    else warn.
     """
     import numba
+    from threadpoolctl import threadpool_limits
 
     value = str(n)
-    late = [v for v in STARTUP_VARIABLES if os.environ.get(v) != value] \
-        if 'numpy' in sys.modules else []
-    pool = numba.config.NUMBA_NUM_THREADS
     os.environ.update(dict.fromkeys(STARTUP_VARIABLES, value))
-    if late or pool < n:
+    threadpool_limits(limits=n)   # for the rest of the process
+    pool = numba.config.NUMBA_NUM_THREADS
+    if pool < n:
         if restart:
             os.execve(sys.executable, [sys.executable, '-m', 'ase_maud', *sys.argv[1:]],
                       {**os.environ, 'NUMBA_NUM_THREADS': value})
-        warnings.warn(f'--threads {n}: '
-                      + (f'{", ".join(late)} took effect when numpy was imported, so BLAS '
-                         'may use another count; ' if late else '')
-                      + (f"numba's pool has {pool} threads; " if pool < n else '')
-                      + 'set the thread variables in the environment to pin them',
-                      stacklevel=2)
+        warnings.warn(f"--threads {n}: numba's pool has {pool} threads; set "
+                      'NUMBA_NUM_THREADS in the environment to pin it', stacklevel=2)
     numba.set_num_threads(min(n, pool))

@@ -1,15 +1,14 @@
-"""Pinning the thread pools: a restart with every variable set, a warning
-from Python, and numba still compiling afterwards whatever the environment."""
+"""Pinning the thread pools: numba still compiling afterwards whatever the
+environment (the pools limited in place: tests/cli/test_threads_in_place.py)."""
 
 import os
-import sys
 import warnings
 
 import numba
 import numpy as np
 import pytest
 
-from ase_maud.threads import STARTUP_VARIABLES, THREAD_VARIABLES, pin_threads
+from ase_maud.threads import STARTUP_VARIABLES, pin_threads
 
 
 @pytest.fixture
@@ -36,42 +35,6 @@ def launch_pool():
         return s
 
     assert total(np.ones(100)) == 100
-
-
-@pytest.mark.parametrize('threads', [1, 2])
-def test_restart_passes_every_variable(environment, threads):
-    numba_variable = os.environ.get('NUMBA_NUM_THREADS')
-    restarts = []
-
-    def execve(path, args, env):
-        restarts.append((args, env))
-        raise SystemExit
-
-    environment.setattr(os, 'execve', execve)
-    with pytest.raises(SystemExit):   # numpy is loaded: start again
-        pin_threads(threads, restart=True)
-    args, env = restarts[0]
-    assert args == [sys.executable, '-m', 'ase_maud', *sys.argv[1:]]
-    assert all(env[v] == str(threads) for v in THREAD_VARIABLES)
-    assert os.environ.get('NUMBA_NUM_THREADS') == numba_variable
-    pool = numba.config.NUMBA_NUM_THREADS
-    if pool < threads:   # only a new process has a larger pool
-        with pytest.raises(SystemExit):
-            pin_threads(threads, restart=True)
-    else:
-        pin_threads(threads, restart=True)   # now in force: no restart
-        assert len(restarts) == 1
-    assert numba.get_num_threads() == min(threads, pool)
-
-
-@pytest.mark.parametrize('threads', [1, 2])
-def test_warns_from_python(environment, threads):
-    for variable in STARTUP_VARIABLES:
-        environment.setenv(variable, str(threads))
-    environment.delenv('OPENBLAS_NUM_THREADS')
-    with pytest.warns(UserWarning, match='BLAS may use another count'):
-        pin_threads(threads, restart=False)
-    assert os.environ['OPENBLAS_NUM_THREADS'] == str(threads)
 
 
 @pytest.mark.parametrize('threads', [1, 2])

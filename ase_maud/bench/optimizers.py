@@ -111,7 +111,7 @@ SCIPY_BASELINE = 'L-BFGS-B'
 
 #: Largest scene (points) each optimiser is run on. ASE's BFGS keeps a dense
 #: (3N)^2 Hessian and eigen-decomposes it at every step, O(N^3) per step
-#: (docs/benchmarks.md has its seconds on a net of 400 points).
+#: (docs/dev/benchmarks.md has its seconds on a net of 400 points).
 MAX_ATOMS = {'BFGS': 500, 'Maud-exact': 200}
 
 

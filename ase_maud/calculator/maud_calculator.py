@@ -61,10 +61,12 @@ class MaudCalculator(Calculator):
     Q : float
         Spring constant, force per length (default 1).
     q : array-like of shape (K,), optional
-        Each spring's force density multiplier of ``Q``, positive and finite,
+        Each spring's force density multiplier of ``Q``, finite and nonzero,
         in the order of ``springs``: spring ``s`` has energy ``Q q_s L**2 /
         2`` and pulls with ``Q q_s L`` (the force density of compas_fd is
-        ``Q q_s``). Default None: every ``q_s = 1``. The springs' Hessian
+        ``Q q_s``); a negative ``q_s`` pushes (compression), and a net with
+        one has equilibria that are stationary points, not minima (Maud then
+        takes ``target='stationary'``). Default None: every ``q_s = 1``. The springs' Hessian
         stays constant, ``Q`` times the ``q``-weighted Laplacian.
     loads : array-like of shape (N, 3), optional
         Constant nodal loads ``F_i`` in force units (self-weight, say): the

@@ -37,7 +37,8 @@ class MaudPotential:
     ``springs``: (K, 2) atom index pairs (checked: :func:`.springs.check_springs`);
     ``a``: a length; ``Q``: a force per length; ``dim``: 2 (points on a plane
     ``z = const``, 2x2 blocks) or 3; ``q``: each spring's force density
-    multiplier of ``Q``, (K,) positive (None: every ``q_s = 1``); ``loads``:
+    multiplier of ``Q``, (K,) nonzero, negative for a member in compression
+    (:attr:`compressed`; None: every ``q_s = 1``); ``loads``:
     constant nodal loads ``F``, (N, 3) or, for ``dim=2``, (N, 2), force units
     (None: none; in 2D their z must be 0). Loads change the energy and
     forces, never a Hessian. ``a = 0`` switches the repulsion off: springs
@@ -118,6 +119,16 @@ class MaudPotential:
         """Whether the points repel: ``a > 0``. At ``a = 0`` nothing is
         computed in reduced units (there are none) and no backend is called."""
         return self.a > 0
+
+    @property
+    def compressed(self) -> np.ndarray:
+        """The indices of the springs with ``q_s < 0`` (members in compression,
+        compas_fd's negative force densities). Where there are any, the energy
+        is no longer convex in the springs: its equilibria are stationary
+        points (an arch's is a maximum at ``a = 0``), not minima."""
+        if self.q is None:
+            return np.zeros(0, dtype=int)
+        return np.flatnonzero(self.q < 0)
 
     @property
     def stiffnesses(self) -> float | np.ndarray:

@@ -8,7 +8,7 @@ import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ase_maud.cli.options import judging_fmax, net_options
+from ase_maud.cli.options import judging_fmax, net_options, set_net_tables
 
 if TYPE_CHECKING:
     pass
@@ -35,6 +35,7 @@ def classify_command(args: argparse.Namespace) -> int:
     from ase_maud.io.nets import read_net
 
     atoms = read_net(args.file, index=args.frame, **net_options(args))
+    set_net_tables(atoms, args)
     ftol, why = judging_fmax(args)
     with warnings.catch_warnings():   # "not stationary" is said below
         warnings.simplefilter('ignore', UserWarning)

@@ -17,9 +17,9 @@
   backends (:mod:`ase_maud.backends`).
 
 ``--threads N`` pins OpenMP, BLAS and numba to N threads
-(:func:`ase_maud.threads.pin_threads`); if BLAS may already run with another
-count, the command starts itself again with them set (or, when
-``main(argv)`` is called from Python, warns). This module only parses
+(:func:`ase_maud.threads.pin_threads`: the loaded pools limited in place by
+threadpoolctl); if numba's pool is smaller than N, the command starts itself
+again with them set (or, when ``main(argv)`` is called from Python, warns). This module only parses
 arguments and calls the library; each command imports what it needs when it
 runs (relax needs no matplotlib).
 
@@ -36,6 +36,7 @@ an output that names an input or another output refused
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
@@ -46,6 +47,7 @@ from ase_maud.cli.options import (
     add_command,
     add_file,
     add_fmax,
+    add_loads,
     add_net_options,
     add_threads,
     check_outputs,
@@ -75,6 +77,11 @@ class _Parser(argparse.ArgumentParser):
     --help``), status 2."""
 
     def error(self, message: str):
+        invalid = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if invalid:   # argparse of Python < 3.14 suggests nothing
+            from ase_maud.io.nets import did_you_mean
+
+            message += did_you_mean(invalid[1], re.findall(r"'([^']*)'", invalid[2]))
         self.exit(2, f'{self.prog}: error: {message}; see {self.prog} --help\n')
 
 
@@ -89,6 +96,9 @@ def _top_parser() -> tuple[argparse.ArgumentParser, Any]:
         '  ase-maud relax net.obj --fix boundary --out relaxed.obj\n'
         '  ase-maud show maud.traj --gif\n  ase-maud classify maud.traj\n'
         'Each command has its own --help.')
+    from ase_maud import __version__
+
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     return parser, parser.add_subparsers(dest='command', metavar='COMMAND')
 
 
@@ -123,20 +133,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('net', nargs='?', metavar='NET_FILE',
                    help='the net to relax (default: the built-in --scene)')
     add_net_options(p)
-    loads = p.add_mutually_exclusive_group()
-    loads.add_argument('--load', nargs=3, type=ruled('loads'), metavar=('X', 'Y', 'Z'),
-                       help='a constant load (force units) on every free point, e.g. '
-                       "self-weight --load 0 0 -0.1; replaces the file's or scene's loads "
-                       '(default: those of NET_FILE: COMPAS px, py, pz, or a trajectory\'s; '
-                       'the scene\'s)')
-    loads.add_argument('--loads', metavar='LOADS_CSV',
-                       help='per-point loads from a CSV table with the header i,px,py,pz '
-                       '(0-based point index, force units; points not listed: none), '
-                       "replacing the file's or scene's")
-    p.add_argument('--q', metavar='Q_CSV',
-                   help='per-edge force densities from a CSV table with the header i,j,q '
-                   '(the two points of a spring, its multiplier of Q; edges not listed '
-                   'keep theirs)')
+    add_loads(p)
     p.add_argument('--out', metavar='RELAXED_FILE',
                    help='write the relaxed net here, in the format of its suffix '
                    '(.obj, .json, .traj, .xyz plus NAME.edges.txt, ...)')
@@ -213,6 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
                    '(along y), side (along x) or iso (default: %(default)s)')
     add_fmax(p, 'drawn with residual-force arrows')
     add_net_options(p)
+    add_loads(p)
     add_threads(p, None, 'leave the environment alone')
     p.set_defaults(func=show_command)
 
@@ -233,6 +231,7 @@ def build_parser() -> argparse.ArgumentParser:
                    'coordinates) (default: %(default)s)')
     add_fmax(p, 'not stationary')
     add_net_options(p)
+    add_loads(p)
     add_threads(p, None, 'leave the environment alone')
     p.set_defaults(func=classify_command)
 
@@ -384,7 +383,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``ase-maud`` on ``argv`` (default ``sys.argv[1:]``); return the
-    exit status (module docstring). Without a command, print the help.
+    exit status (module docstring). Without a command, print the help on
+    stderr and return 2 (a usage error); ``--version`` prints the version.
     Bad input, files that cannot be read or written and runs that cannot go
     on (ValueError, OSError, :class:`~ase_maud.MaudError`) are said in one
     line on stderr, status 2. Without a command nothing but argparse is
@@ -394,11 +394,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser, commands = _top_parser()
         for name, text in COMMANDS.items():
             commands.add_parser(name, help=text)
-        parser.parse_args(words)   # --help, or an error
-        parser.print_help()
-        return 0
+        parser.parse_args(words)   # --help, --version, or an error
+        parser.print_help(sys.stderr)   # no command: a usage error, as argparse's own
+        return 2
     # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud.errors import MaudError
+    from ase_maud.kernel_cache import compile_notice
     from ase_maud.threads import pin_threads
 
     parser = build_parser()
@@ -413,7 +414,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_outputs(args)
         if args.threads is not None:
             pin_threads(args.threads, restart=argv is None)
-        return args.func(args)
+        with compile_notice():   # whenever a kernel compiles, whatever the command
+            return args.func(args)
     except (ValueError, OSError, MaudError) as error:
         print(f'{parser.prog}: error: {one_line(error)}', file=sys.stderr)
         return 2

@@ -38,9 +38,39 @@ def ruled(name: str, parse=float):
 
 def net_options(args: argparse.Namespace) -> dict:
     """The keywords of :func:`ase_maud.io.nets.read_net` from --edges, --fix,
-    --a, --Q and --dim."""
+    --a, --Q and --dim, and --load where the command takes it."""
     return {'edges': args.edges, 'fixed': args.fixed, 'a': args.a, 'Q': args.Q,
-            'dim': args.dim}
+            'dim': args.dim, 'load': getattr(args, 'load', None)}
+
+
+def set_net_tables(atoms, args: argparse.Namespace) -> None:
+    """The --loads and --q tables (or number) of a command that takes them
+    (:func:`add_loads`), set on the net ``atoms``."""
+    from ase_maud.io.nets import set_tables
+
+    set_tables(atoms, loads=getattr(args, 'loads', None), q=getattr(args, 'q', None))
+
+
+def add_loads(parser, file='NET_FILE'):
+    """--load or --loads, and --q: the loads and force densities of a net
+    (relax, show and classify take them alike)."""
+    loads = parser.add_mutually_exclusive_group()
+    loads.add_argument('--load', nargs=3, type=ruled('loads'), metavar=('X', 'Y', 'Z'),
+                       help='a constant load (force units) on every free point, e.g. '
+                       "self-weight --load 0 0 -0.1; replaces the file's loads "
+                       f"(default: those of {file}: COMPAS px, py, pz, or a trajectory's; "
+                       "a built-in scene's)")
+    loads.add_argument('--loads', metavar='LOADS_CSV',
+                       help='per-point loads from a CSV table with the header i,px,py,pz '
+                       '(0-based point index, force units; points not listed: none), '
+                       "replacing the file's")
+    parser.add_argument('--q', metavar='Q_CSV',
+                        help='per-edge force densities from a CSV table with the header '
+                        'i,j,q (the two points of a spring, its multiplier of Q; edges not '
+                        'listed keep theirs), or one number for every edge; negative: '
+                        'compression (an arch or gridshell, e.g. --q -1 with --load 0 0 '
+                        '-0.1; with --a > 0 the equilibrium found is a stationary point, '
+                        'not a minimum)')
 
 
 def judging_fmax(args: argparse.Namespace) -> tuple[float | None, str]:
@@ -121,8 +151,9 @@ def named_files(args: argparse.Namespace) -> tuple[list, list]:
         ('--edges', args.edges or (edges_path(net) if net_format(net) == 'ase' else None)),
         ('--fix', None if args.fixed in (None, *FIX_RULES) else args.fixed)]
     outputs = []
-    if args.command == 'relax':
+    if args.command in ('relax', 'show', 'classify'):
         inputs += [('--loads', args.loads), ('--q', args.q)]
+    if args.command == 'relax':
         outputs = [('--traj', args.traj), ('--log', None if args.log == '-' else args.log),
                    ('--out', args.out), ('--forces', args.forces)]
         if args.out and net_format(args.out) == 'ase':

@@ -40,15 +40,23 @@ def saddles_command(args: argparse.Namespace) -> int:
     barriers = [s.get_potential_energy() for s in found.saddles]
     for s, ((i, j), (up_i, up_j)) in enumerate(zip(found.joins, found.barriers(),
                                                      strict=True)):
-        print(f'saddle {s}: energy {barriers[s]:.10g}, joins minimum {i} '
-              f'(barrier {up_i:.6g}) and minimum {j} (barrier {up_j:.6g})')
-    print(f'{len(energies)} minima (lowest {min(energies):.10g}), {len(barriers)} saddles, '
-          f'{found.failed} failed attempts or descents; {args.out} and '
-          f'{graph_json(args)}')
+        print(f'saddle {s}: energy {barriers[s]:.10g}, ' + (
+            f'joins minimum {i} (barrier {up_i:.6g}) and minimum {j} (barrier {up_j:.6g})'
+            if i != j else f'both sides descend to minimum {i} (barriers {up_i:.6g} and '
+            f'{up_j:.6g}): a saddle on a path from that minimum back to itself'))
+    print(f'{counted(len(energies), "minimum", "minima")} (lowest {min(energies):.10g}), '
+          f'{counted(len(barriers), "saddle")}, '
+          f'{counted(found.failed, "failed attempt or descent", "failed attempts or descents")}'
+          f'; {args.out} and {graph_json(args)}')
     replace_with(args.out, lambda temporary: save_disconnectivity(
         energies, barriers, found.joins, temporary))
     replace_text(graph_json(args), json.dumps(found.todict()))
     return 1 if found.failed else 0
+
+
+def counted(count: int, one: str, many: str | None = None) -> str:
+    """``count`` and the noun in its number: '1 minimum', '2 minima', '0 saddles'."""
+    return f'{count} {one if count == 1 else many or one + "s"}'
 
 
 def mirror_partner(args: argparse.Namespace, minimum: Atoms) -> Atoms | None:

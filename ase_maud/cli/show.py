@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
-from ase_maud.cli.options import judging_fmax, net_options, picture_path
+from ase_maud.cli.options import judging_fmax, net_options, picture_path, set_net_tables
 
 if TYPE_CHECKING:
     pass
@@ -23,12 +23,15 @@ def show_command(args: argparse.Namespace) -> int:
     style = {'colour': args.color, 'view': args.view, 'ftol': judging_fmax(args)[0]}
     if args.gif:
         frames = read_frames(args.file, **net_options(args))
+        for frame in frames:
+            set_net_tables(frame, args)
         count = []
         replace_with(out, lambda temporary: count.append(
             save_animation(frames, temporary, fps=args.fps, **style)))
         print(f'wrote {out} ({count[0]} of {len(frames)} frames)')
     else:
         atoms = read_net(args.file, index=args.frame, **net_options(args))
+        set_net_tables(atoms, args)
         replace_with(out, lambda temporary: save_picture(atoms, temporary, **style,
                                                          labels=args.labels))
         print(f'wrote {out}')

@@ -97,14 +97,14 @@ class StagedTrajectory:
     """
 
     def __init__(self, path: PathLike):
-        from ase.io.trajectory import Trajectory
+        from ase_maud.files.trajectory import parameters_once_writer
 
         self.path = Path(path)
         RunLock(None, self.path).check()
         self.temporary = temporary_beside(self.path)
         self._locks = [RunLock(None, self.temporary)]
         try:
-            self.trajectory = Trajectory(self.temporary, 'w')
+            self.trajectory = parameters_once_writer(self.temporary)
         except BaseException:
             self.temporary.unlink()
             raise

@@ -9,6 +9,11 @@ runs; a second run, in this process or another, is refused with
 it would overwrite. The operating system drops the locks of a process that
 dies, so a killed run never leaves a stale lock. Where ``fcntl`` is missing
 (Windows) nothing is locked.
+
+Why not filelock: it locks a lock file of its own, opened with ``O_TRUNC``
+(given the trajectory itself, it would empty it), so it would leave a
+``.lock`` file beside every trajectory and restart file; the lock here is on
+the file itself and leaves nothing behind.
 """
 
 from __future__ import annotations

@@ -18,7 +18,8 @@ from ase import Atoms
 from ase_maud.calculator.maud_calculator import MaudCalculator
 from ase_maud.physics.topology import held_directions, unsupported
 
-__all__ = ['force_density_positions', 'solve_force_density', 'unsupported']
+__all__ = ['force_density_positions', 'free_factors', 'solve_force_density',
+           'supported_net', 'unsupported']
 
 
 def solve_force_density(atoms: Atoms) -> None:
@@ -51,6 +52,11 @@ def force_density_positions(atoms: Atoms) -> np.ndarray:
     ``loads``; the repulsion ignored, whatever ``a``), the supports where
     they are; ``atoms`` is not changed.
 
+    Negative force densities (compression) are taken as compas_fd takes
+    them: the equilibrium is then a stationary point of the energy (of an
+    arch: its maximum), still one linear solve; a ValueError where they make
+    the system singular.
+
     Supports are the points held in all three directions; a ValueError
     where :func:`unsupported` says why they do not make the equilibrium
     unique (a point held in some directions only: relax with
@@ -75,16 +81,8 @@ def force_density_positions(atoms: Atoms) -> np.ndarray:
         the equilibrium unique (a spring component with no support, a point
         held in some directions only: the message says which).
     """
-    calc = atoms.calc
-    if not isinstance(calc, MaudCalculator):
-        raise ValueError('the force-density solve needs a net with a MaudCalculator '
-                         f'attached, got {type(calc).__name__}')
-    potential = calc.potential
-    why = unsupported(atoms, potential.springs, potential.dim)
-    if why is not None:
-        raise ValueError(why)
+    potential, held = supported_net(atoms, 'the force-density solve')
     natoms = len(atoms)
-    held = held_directions(atoms)[:, :potential.dim].all(axis=1)
     positions = atoms.get_positions()
     free = np.flatnonzero(~held)
     if not free.size:
@@ -92,8 +90,45 @@ def force_density_positions(atoms: Atoms) -> np.ndarray:
     laplacian = potential.spring_laplacian(natoms).tocsr()
     loads = np.zeros((natoms, 3)) if potential.loads is None else potential.loads
     right = loads[free] / potential.Q - laplacian[free][:, held] @ positions[held]
-    # L_ff is symmetric positive definite: a symmetric ordering, no pivoting
-    factors = spla.splu(laplacian[free][:, free].tocsc(), permc_spec='MMD_AT_PLUS_A',
-                        diag_pivot_thresh=0.0, options={'SymmetricMode': True})
+    factors = free_factors(laplacian[free][:, free], bool(len(potential.compressed)))
     positions[free, :potential.dim] = factors.solve(right[:, :potential.dim])
+    if not np.isfinite(positions).all():
+        raise ValueError(_SINGULAR)
     return positions
+
+
+def supported_net(atoms: Atoms, what: str):
+    """The MaudPotential of the net ``atoms`` and its supports (a boolean
+    (N,) mask: held in every direction of its plane or space), or a
+    ValueError saying why ``what`` cannot be made on it (no MaudCalculator;
+    supports that leave the equilibrium not unique, :func:`unsupported`)."""
+    calc = atoms.calc
+    if not isinstance(calc, MaudCalculator):
+        raise ValueError(f'{what} needs a net with a MaudCalculator attached, got '
+                         f'{type(calc).__name__}')
+    potential = calc.potential
+    why = unsupported(atoms, potential.springs, potential.dim)
+    if why is not None:
+        raise ValueError(why)
+    return potential, held_directions(atoms)[:, :potential.dim].all(axis=1)
+
+
+_SINGULAR = ('the force densities make the free points\' matrix singular (members in '
+             'compression, q < 0, balance those in tension): the net has no unique '
+             'equilibrium; change a q')
+
+
+def free_factors(matrix, compressed: bool):
+    """The sparse LU factors of the free points' block ``L_ff`` of the
+    q-weighted Laplacian. With every ``q > 0`` it is symmetric positive
+    definite: a symmetric ordering, no pivoting. With members in compression
+    (``compressed``) it is symmetric but indefinite or negative definite (an
+    arch): partial pivoting. A ValueError where it is singular."""
+    matrix = matrix.tocsc()
+    try:
+        if not compressed:
+            return spla.splu(matrix, permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
+                             options={'SymmetricMode': True})
+        return spla.splu(matrix)
+    except RuntimeError as error:   # SuperLU: 'Factor is exactly singular'
+        raise ValueError(_SINGULAR) from error

@@ -103,13 +103,27 @@ class FormResult:
 
     @property
     def max_force(self) -> float:
-        """The largest member force (0 without members)."""
+        """The member force of the largest size, with its sign (tension
+        positive, compression negative; 0 without members)."""
+        if not len(self.forces):
+            return 0.0
+        return float(self.forces[np.argmax(np.abs(self.forces))])
+
+    @property
+    def max_tension(self) -> float:
+        """The largest tension (0 without members in tension)."""
         return float(self.forces.max(initial=0.0))
 
     @property
+    def max_compression(self) -> float:
+        """The largest compression, as a negative force (0 without members
+        in compression, ``q < 0``)."""
+        return float(self.forces.min(initial=0.0))
+
+    @property
     def mean_force(self) -> float:
-        """The mean member force (0 without members)."""
-        return float(self.forces.mean()) if len(self.forces) else 0.0
+        """The mean size of the member forces (0 without members)."""
+        return float(np.abs(self.forces).mean()) if len(self.forces) else 0.0
 
     @property
     def max_residual(self) -> float:
@@ -241,31 +255,48 @@ def write_forces_csv(path: str | Path, result: FormResult) -> Path:
     return path
 
 
-def describe_result(result: FormResult) -> str:
-    """The numbers of ``result`` a designer reads first, in one phrase:
-    the largest member force, the sum of the reactions, the largest residual
-    and the members' and loads' out-of-balance (over the mean member force).
+def describe_result(result: FormResult, repulsion: bool = True) -> str:
+    """The numbers of ``result`` a structural engineer reads first, in one
+    phrase.
 
     Parameters
     ----------
     result : FormResult
         What :func:`form_result` gave.
+    repulsion : bool, default True
+        Whether the net was relaxed with the repulsion (``a > 0``): then,
+        where it matters, the phrase ends with the force the repulsion holds
+        that no member or load does.
 
     Returns
     -------
     str
-        One phrase, forces in ``Q a``, for a log or a summary line.
+        The largest member force (the largest tension and compression where
+        there are both), the sum of the support reactions against the sum of
+        the loads and the largest unbalanced force left at a free point;
+        forces in ``Q a``.
 
     Raises
     ------
     None
         It reads the record only.
     """
-    total = ', '.join(f'{value:.4g}' for value in result.reaction_sum.tolist())
-    return (f'largest member force {result.max_force:.4g}, reactions sum to ({total}), '
-            f'residual {result.max_residual:.3g}, out-of-balance {result.max_out_of_balance:.3g}'
-            f' ({result.repulsion_share:.2g} of the mean member force, left to the '
-            'repulsion)')
+    def vector(values):
+        return '(' + ', '.join(f'{v:.4g}' for v in np.asarray(values).tolist()) + ')'
+
+    tension, compression = result.max_tension, result.max_compression
+    members = (f'largest member force {result.max_force:.4g}'
+               + (f' (tension up to {tension:.4g}, compression down to {compression:.4g})'
+                  if tension > 0 and compression < 0 else
+                  ' (compression)' if compression < 0 else ''))
+    words = (f'{members}, support reactions sum to {vector(result.reaction_sum)} '
+             f'against loads of {vector(result.loads.sum(axis=0))}, largest unbalanced '
+             f'force at a free point {result.max_residual:.3g}')
+    held = result.max_out_of_balance
+    if repulsion and held > max(10 * result.max_residual, 1e-9 * result.mean_force):
+        words += (f'; the repulsion holds up to {held:.3g} at a free point '
+                  f'({result.repulsion_share:.2g} x the mean member force)')
+    return words
 
 
 def _moved_by_repulsion(atoms: Atoms) -> tuple[float, float, str] | None:

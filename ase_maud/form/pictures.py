@@ -20,9 +20,12 @@ A net is an :class:`ase.Atoms` with a :class:`~ase_maud.MaudCalculator`
   net is converged (``max |f| <= ftol``, by default
   :func:`ase_maud.analysis.stationary.force_tolerance`).
 
-``dim=2`` nets are drawn in their plane; others in an orthographic 3D view
-from a side of :data:`VIEWS` with equal scales on the three axes, the box
-tight around the net (:data:`MARGIN`, :data:`THINNEST`). Figures are
+``dim=2`` nets are drawn in their plane; others seen from a side of
+:data:`VIEWS`: ``iso`` in an orthographic 3D view with equal scales on the
+three axes, the box tight around the net (:data:`MARGIN`, :data:`THINNEST`);
+``top``, ``front`` and ``side`` look straight along an axis, so they are
+drawn flat, on the two axes seen (:data:`FLAT_VIEWS`): the 3D axes' labels
+and ticks, seen edge-on, would overlap. Figures are
 made without pyplot (:class:`matplotlib.figure.Figure`, rendered by Agg): no
 display needed and no global backend changed.
 """
@@ -78,6 +81,14 @@ VIEWS = {'top': (90.0, -90.0), 'front': (0.0, -90.0), 'side': (0.0, 0.0),
          'iso': (35.264, -45.0)}
 #: The axis a view looks along, drawn without ticks.
 EDGE_ON = {'top': 'z', 'front': 'y', 'side': 'x'}
+#: The coordinates (columns) a view along an axis shows, right and up.
+FLAT_VIEWS = {'top': (0, 1), 'front': (0, 2), 'side': (1, 2)}
+#: Points between a 3D axis's tick labels and its label, and between its
+#: tick marks and tick labels.
+LABEL_PAD, TICK_PAD = 10.0, 4.0
+#: A 3D box's zoom within its axes: below 1, so that tick labels and axis
+#: labels stay inside the axes, clear of the colour bar beside them.
+BOX_ZOOM = 0.75
 
 
 def save_png(fig: Figure, path: str | os.PathLike, dpi: int = 72, colours: int = 64) -> None:
@@ -151,11 +162,18 @@ def _limits(frames: Sequence[Atoms]) -> tuple[np.ndarray, np.ndarray]:
 
 def figure(dim: int, view: str = 'iso') -> tuple[Figure, Axes]:
     """A figure with one 2D axes (``dim`` 2) or an orthographic 3D axes
-    seen from ``view`` (:data:`VIEWS`)."""
+    seen from ``view`` (:data:`VIEWS`), room left below for the legend."""
     if view not in VIEWS:
         raise ValueError(f'view must be one of {", ".join(VIEWS)}, got {view!r}')
     fig = Figure(figsize=(7.2, 5.6))
-    ax = fig.add_subplot(projection='3d' if dim == 3 else None)
+    solid = dim == 3 and view not in FLAT_VIEWS
+    ax = fig.add_subplot(projection='3d' if solid else None)
+    ax.net_columns = (0, 1, 2) if solid else FLAT_VIEWS.get(view, (0, 1)) if dim == 3 \
+        else (0, 1)
+    if solid:
+        fig.subplots_adjust(left=0.02, right=0.98, bottom=0.16, top=0.94)
+    elif dim == 3:   # the legend goes below the axes, inside the figure
+        fig.subplots_adjust(bottom=0.26)
     orient(ax, view)
     return fig, ax
 
@@ -164,7 +182,8 @@ def orient(ax: Axes, view: str) -> None:
     """Axis labels; of a 3D axes also the orthographic projection from
     ``view``, the axis it looks along without ticks."""
     if ax.name != '3d':
-        ax.set(xlabel='x', ylabel='y')
+        right, up = ('xyz'[k] for k in getattr(ax, 'net_columns', (0, 1)))
+        ax.set(xlabel=right, ylabel=up)
         return
     ax.set_proj_type('ortho')
     ax.view_init(*VIEWS[view])
@@ -172,7 +191,11 @@ def orient(ax: Axes, view: str) -> None:
         if axis == EDGE_ON.get(view):
             getattr(ax, f'set_{axis}ticks')([])
         else:
-            getattr(ax, f'set_{axis}label')(axis)
+            # labels clear of the tick labels, and tick labels clear of the tick marks
+            # (which otherwise cross a tick label's minus sign in an edge-on view)
+            edge_on = view in EDGE_ON   # an axis label seen flat needs more room
+            getattr(ax, f'set_{axis}label')(axis, labelpad=LABEL_PAD * (2 if edge_on else 1))
+            getattr(ax, f'{axis}axis').set_tick_params(pad=TICK_PAD)
             # a thin box (a flat net seen from the side) has room for few ticks
             getattr(ax, f'{axis}axis').set_major_locator(MaxNLocator(nbins=4))
 
@@ -191,9 +214,10 @@ def draw(ax: Axes, atoms: Atoms, colour: str = 'force',
     ``ftol`` (force units) is the largest ``|f|`` of a converged net.
     """
     calc = atoms.calc
-    dim = 3 if ax.name == '3d' else 2
-    x = atoms.positions[:, :dim]
-    forces = atoms.get_forces()[:, :dim]
+    columns = list(getattr(ax, 'net_columns', (0, 1, 2) if ax.name == '3d' else (0, 1)))
+    dim = len(columns)
+    x = atoms.positions[:, columns]
+    forces = atoms.get_forces()[:, columns]
     size = np.linalg.norm(forces, axis=1)
     fixed = fixed_atoms(atoms)
     loaded = loaded_points(atoms) & ~fixed
@@ -218,7 +242,7 @@ def draw(ax: Axes, atoms: Atoms, colour: str = 'force',
         ax.scatter(*x[fixed].T, c='k', marker='s', s=24 if small else 4, zorder=3,
                    label='support (fixed)')
     if loaded.any():
-        load = calc.potential.loads[:, :dim]
+        load = calc.potential.loads[:, columns]
         largest_load = np.linalg.norm(load[loaded], axis=1).max()
         _arrows(ax, x, load, loaded, arrow_scale(largest_load, extent * LOAD_ARROW / ARROW),
                 'C1', 'load')
@@ -227,13 +251,25 @@ def draw(ax: Axes, atoms: Atoms, colour: str = 'force',
     if largest > ftol:
         scale = arrow_scale(largest, extent) if scale is None else scale
         _arrows(ax, x, forces, free, scale, 'C3', 'residual force')
+    low, high = low[columns], high[columns]
     if dim == 3:
         ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]), zlim=(low[2], high[2]))
-        ax.set_box_aspect(np.maximum(high - low, THINNEST * extent), zoom=1.1)
+        box = np.maximum(high - low, THINNEST * extent)
+        ax.set_box_aspect(box, zoom=BOX_ZOOM)
+        for k, axis in enumerate('xyz'):   # a thin side of the box: room for 2 ticks only
+            if len(getattr(ax, f'get_{axis}ticks')()):
+                getattr(ax, f'{axis}axis').set_major_locator(
+                    MaxNLocator(nbins=int(np.clip(round(8 * box[k] / box.max()), 1, 4))))
     else:
         ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]), aspect='equal')
-    ax.legend(loc='upper left', bbox_to_anchor=(0.0, -0.15) if dim == 3 else None, fontsize=7,
-              framealpha=0.8)
+    # inside the figure (a GIF frame is the figure, not a tight box around it)
+    handles, names = ax.get_legend_handles_labels()
+    if dim == 3 or tuple(columns) != (0, 1):   # a 3D net: below, inside the figure
+        for old in ax.figure.legends:
+            old.remove()
+        ax.figure.legend(handles, names, loc='lower left', fontsize=7, framealpha=0.8)
+    else:
+        ax.legend(handles, names, loc='upper left', fontsize=7, framealpha=0.8)
     state = 'converged' if largest <= ftol else 'not converged'
     ax.set_title(title if title is not None else
                  f'{len(atoms)} points, {len(calc.springs)} springs, '
@@ -266,9 +302,16 @@ def _arrows(ax: Axes, x: np.ndarray, vectors: np.ndarray, where: np.ndarray, sca
 
 
 def _colour_bar(fig: Figure, ax: Axes, lines: LineCollection, colour: str) -> None:
-    if COLOURS[colour] is not None:
-        fig.colorbar(lines, ax=ax, shrink=0.7, pad=0.15 if ax.name == '3d' else 0.04,
-                     label=COLOURS[colour])
+    """The springs' colour bar: beside a flat picture; below a 3D view, to
+    the right of the legend (beside it, a 3D axis's label or ticks would
+    lie under it)."""
+    if COLOURS[colour] is None:
+        return
+    if ax.name == '3d':
+        fig.colorbar(lines, ax=ax, location='bottom', shrink=0.4, anchor=(0.95, 1.0),
+                     pad=0.0, aspect=30, label=COLOURS[colour])
+    else:
+        fig.colorbar(lines, ax=ax, shrink=0.7, pad=0.04, label=COLOURS[colour])
 
 
 def label_members(ax: Axes, atoms: Atoms, colour: str = 'force') -> None:
@@ -282,8 +325,8 @@ def label_members(ax: Axes, atoms: Atoms, colour: str = 'force') -> None:
     if len(springs) > MAX_LABELS:
         raise ValueError(f'{len(springs)} springs are too many to label (at most '
                          f'{MAX_LABELS}); draw them coloured, without labels')
-    dim = 3 if ax.name == '3d' else 2
-    middles = atoms.positions[springs].mean(axis=1)[:, :dim]
+    columns = list(getattr(ax, 'net_columns', (0, 1, 2) if ax.name == '3d' else (0, 1)))
+    middles = atoms.positions[springs].mean(axis=1)[:, columns]
     for middle, value in zip(middles, values.tolist(), strict=True):
         ax.text(*middle, f'{value:.3g}', fontsize=5, ha='center', va='center', zorder=4,
                 bbox={'boxstyle': 'round,pad=0.1', 'fc': 'white', 'ec': 'none',
@@ -381,5 +424,6 @@ def save_disconnectivity(energies: Sequence[float], saddles: Sequence[float],
     ax.set_xticks([])
     ax.set_xlim(-1, count)
     ax.set_ylabel('energy')
-    ax.set_title(f'{count} minima, {len(saddles)} saddle' + ('' if len(saddles) == 1 else 's'))
-    fig.savefig(path)
+    ax.set_title(f'{count} minim{"um" if count == 1 else "a"}, {len(saddles)} saddle'
+                 + ('' if len(saddles) == 1 else 's'))
+    fig.savefig(path, bbox_inches='tight')   # the y label kept whole

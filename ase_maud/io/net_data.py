@@ -16,5 +16,6 @@ class NetData(NamedTuple):
     """What a mesh or network file holds."""
     positions: np.ndarray     #: (N, 3) points
     springs: np.ndarray       #: (K, 2) 0-based point pairs, each once
-    faces: list[list[int]]    #: rings of point indices; [] for a network
+    faces: list[list[int]] | np.ndarray  #: rings of point indices (an (F, k) array
+    #: where all have k corners); [] for a network
     anchors: list[int]        #: points the file marks fixed

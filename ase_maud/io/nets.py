@@ -30,7 +30,9 @@ Formats, chosen by the file name's suffix:
   where the net's differ from the file's.
 - ``.ply``, ``.stl``, ``.off``, ``.vtk``, ``.vtu``, meshes read through
   meshio (:mod:`ase_maud.io.mesh`): the springs are the faces' edges
-  and the line cells; coincident points merged. Read only.
+  and the line cells; coincident points merged. Written back in the same
+  format with the faces read (``atoms.info['faces']``) and the other
+  springs as lines (STL and OFF: triangles only).
 - ``.traj``, ASE trajectory: the springs, ``a``, ``Q``, ``dim``, ``q`` and
   ``loads`` come back
   from the calculator parameters that ASE's trajectory stores with every
@@ -45,8 +47,10 @@ Written back (``like=``), an OBJ or JSON file keeps its text but for the
 coordinates that moved, each written as the shortest text that reads back as
 its float (``repr``); line endings, comments and every other line as read.
 
-Reader choice: our own OBJ parser. meshio's OBJ reader skips
-``l`` lines and reports no line numbers; trimesh triangulates quads, adding
+Reader choice: our own OBJ parser (numpy on a plain file, several times
+faster than statement by statement and than meshio's reader; statement by
+statement, with line numbers in its errors, on anything else). meshio's OBJ
+reader skips ``l`` lines and reports no line numbers; trimesh triangulates quads, adding
 a diagonal spring to every quad. Neither keeps the rest of the file for
 writing back. COMPAS's JSON is plain JSON: the standard library reads it.
 
@@ -68,10 +72,11 @@ from ase import Atoms
 from ase.constraints import FixAtoms
 
 from ase_maud.calculator.maud_calculator import CALC_NAME, MaudCalculator, stored_parameters
-from ase_maud.checks import as_whole, check_writable
+from ase_maud.checks import as_whole, check, check_writable
 from ase_maud.files.atomic_replace import replace_text, replace_with
+from ase_maud.files.trajectory import first_frame_parameters
 from ase_maud.io.compas import compas_text, read_compas, read_compas_forces
-from ase_maud.io.mesh import MESH_FORMATS, read_mesh
+from ase_maud.io.mesh import MESH_FORMATS, read_mesh, write_mesh
 from ase_maud.io.net_data import NetData, PathLike
 from ase_maud.io.obj import MERGE_TOLERANCE, merge_coincident, obj_text, read_obj
 from ase_maud.io.tables import read_loads_csv, read_q_csv
@@ -145,7 +150,7 @@ def default_a(atoms: Atoms, springs: np.ndarray) -> float:
 
 
 def net_format(path: PathLike) -> str:
-    """'obj', 'json', 'traj', 'mesh' (:data:`MESH_FORMATS`, read only) or
+    """'obj', 'json', 'traj', 'mesh' (:data:`MESH_FORMATS`, through meshio) or
     'ase' (any other file ASE reads), by suffix."""
     suffix = Path(path).suffix.lower()
     if suffix in MESH_FORMATS:
@@ -165,9 +170,6 @@ def check_net_path(name: str, path: PathLike) -> Path:
     suffix names a format (one of :func:`net_format`'s, or one ASE writes);
     else a ValueError naming ``name``, the file and what is accepted."""
     path = check_writable(name, path)
-    if net_format(path) == 'mesh':
-        raise ValueError(f'{name} {str(path)!r}: a net is written as .obj, .json, .traj, '
-                         f'.xyz or another format ASE writes, not {path.suffix}')
     if net_format(path) == 'ase' and path.suffix.lower() not in XYZ_SUFFIXES:
         try:
             known = ase.io.formats.ioformats[ase.io.formats.filetype(path, read=False)]
@@ -303,6 +305,8 @@ def _read(path, edges, fixed, a, Q, dim, index, load=None):
         positions, springs, faces, anchors = {'obj': read_obj, 'json': read_compas,
                                               'mesh': read_mesh}[kind](path)
         frames = [Atoms(positions=positions, pbc=False)]
+        if len(faces):   # written back with the net (write_net)
+            frames[0].info['faces'] = faces
         if len(anchors):
             frames[0].set_constraint(FixAtoms(indices=anchors))
         stored = {'springs': springs} if len(springs) else {}
@@ -346,7 +350,7 @@ def _fixed_points(path, fixed, positions, springs, faces):
     """The indices ``fixed=`` names (:func:`read_net`), checked."""
     natoms = len(positions)
     if isinstance(fixed, str) and fixed in FIX_RULES:
-        if fixed in ('boundary', 'outer') and not faces:
+        if fixed in ('boundary', 'outer') and not len(faces):
             raise ValueError(f"{path}: fixed={fixed!r} needs a mesh's faces and the "
                              "file has none (OBJ 'f' lines, a COMPAS mesh or a mesh "
                              "file); 'leaves' fixes the ends of a network's lines")
@@ -361,7 +365,7 @@ def _fixed_points(path, fixed, positions, springs, faces):
         return indices.tolist()
     if isinstance(fixed, str) and not Path(fixed).exists():
         raise ValueError(f'fixed={fixed!r} is neither a rule ({", ".join(FIX_RULES)}) '
-                         'nor a file')
+                         'nor a file' + did_you_mean(fixed, FIX_RULES))
     if isinstance(fixed, (str, os.PathLike)):
         return read_indices(fixed, natoms)
     return _fixed_indices(fixed, natoms)
@@ -372,13 +376,36 @@ def set_tables(atoms: Atoms, loads: PathLike | None = None,
     """Set the loads and force densities of the net ``atoms`` (with a
     MaudCalculator) from CSV tables (:mod:`ase_maud.io.tables`): the
     loads replace the calculator's, the force densities replace those of
-    the edges listed. None leaves either as it is."""
+    the edges listed. ``q`` may also be one number, every spring's (a
+    negative one: every member in compression, an arch or a gridshell). None
+    leaves either as it is."""
     if loads is not None:
         atoms.calc.set(loads=read_loads_csv(loads, len(atoms)))
-    if q is not None:
+    if q is not None and (every := _one_number(q)) is not None:
+        atoms.calc.set(q=np.full(len(atoms.calc.potential.springs), check('q', every)))
+    elif q is not None:
         potential = atoms.calc.potential
         current = np.broadcast_to(potential.stiffnesses, len(potential.springs))
         atoms.calc.set(q=read_q_csv(q, potential.springs, current, len(atoms)))
+
+
+def _one_number(text) -> float | None:
+    """``text`` as a float if it is one number (not a path), else None."""
+    if not isinstance(text, str) or Path(text).exists():
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        return None
+
+
+def did_you_mean(word: str, choices) -> str:
+    """'; did you mean X?' for the choice closest to a mistyped ``word``
+    (difflib's ratio at least 0.6), else ''."""
+    import difflib
+
+    close = difflib.get_close_matches(word, [str(c) for c in choices], n=1)
+    return f'; did you mean {close[0]!r}?' if close else ''
 
 
 def _whole_index(index):
@@ -428,6 +455,9 @@ def _read_ase(path, index):
     if not frames:
         raise ValueError(f'{path}: no frame at index {index}')
     stored = stored_parameters(frames[0])
+    if not stored and net_format(path) == 'traj' and getattr(
+            frames[0].calc, 'name', '') == CALC_NAME:   # a run's: with its first frame only
+        stored = first_frame_parameters(path)
     if stored:   # a calculator stored without a has the default a
         stored.setdefault('a', MaudCalculator.default_parameters['a'])
     for atoms in frames:
@@ -464,7 +494,10 @@ def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None,
     ``l`` lines, JSON a COMPAS 2.x graph (fixed points ``is_anchor``, loads
     ``px``, ``py``, ``pz``, force densities ``q``). A trajectory stores the
     springs, ``a``, ``Q``, ``dim``, ``q`` and ``loads`` with the frame; OBJ
-    and the other formats hold no ``q`` or loads. ``.xyz``
+    and the other formats hold no ``q`` or loads. The faces a net was read
+    with (``atoms.info['faces']``) are written to OBJ (``f`` lines, the
+    other springs as ``l``) and to the meshes of :data:`MESH_FORMATS`
+    (:func:`~ase_maud.io.mesh.write_mesh`), from whatever file they came. ``.xyz``
     (``.extxyz``) is extended XYZ with every digit of the coordinates
     (ASE's writer keeps 8 decimals) and the fixed points as ``move_mask``;
     any other format is written by ASE. Both get the edge list at
@@ -516,6 +549,8 @@ def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None,
     # replaced, and each file is replaced whole (ase_maud.files.atomic_replace)
     if kind == 'obj':
         replace_text(path, obj_text(atoms, like), newline='')
+    elif kind == 'mesh':
+        write_mesh(path, atoms.positions, atoms.info.get('faces'), atoms.calc.springs)
     elif kind == 'json':
         replace_text(path, compas_text(atoms, like, result), newline='')
     elif kind == 'traj':

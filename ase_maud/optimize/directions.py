@@ -37,7 +37,7 @@ MIN_PAIR_COSINE = 1e-5
 #: Relative residual of the truncated Newton move (:func:`truncated_newton`),
 #: and its most Hessian-vector products per step: a loose inexact Newton
 #: move (0.5 rather than 0.1 took 0.6-0.7x the products of a large saddle
-#: search and no more steps: docs/bench/saddles.md).
+#: search and no more steps: docs/dev/bench/saddles.md).
 NEWTON_RTOL, NEWTON_MAXITER = 0.5, 100
 
 Pair = tuple[np.ndarray, np.ndarray]

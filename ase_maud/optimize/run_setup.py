@@ -67,8 +67,13 @@ def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
     scene = (subset.current() if subset is not None
              else getattr(system, 'atoms', None if images is None else atoms))
     chosen = target is None and not isinstance(model, StiffnessModel)
+    struts = compressed(scene)
     if chosen:   # NEB forces are not the gradient of its energy
-        target = 'minimum' if images is None else 'stationary'
+        target = 'minimum' if images is None and not len(struts) else 'stationary'
+    elif len(struts) and (target or getattr(model, 'target', None)) == 'minimum':
+        raise ValueError(f'{_STRUTS.format(len(struts))}: it has no minimum to find, '
+                         "target='minimum' cannot be met; use target='stationary' (an "
+                         'equilibrium) or, at a = 0, solve_force_density')
     nearest = NearestDistances(images) if subset is None else subset.nearest()
     if isinstance(model, StiffnessModel):
         if target is not None and check('target', target) != model.target:
@@ -80,12 +85,28 @@ def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
         check_free(scene)
     rule = rule_for(model, scene, images, steps, order)
     notes = ((["Maud: target='stationary' (the forces of a band of images are not the "
-               'gradient of its energy)\n'] if chosen and model.target == 'stationary' else [])
+               'gradient of its energy)\n'] if chosen and images is not None else [])
+             + ([f"Maud: target='stationary': {_STRUTS.format(len(struts))}; the point "
+                 'found is an equilibrium (a stationary point), not a minimum\n']
+                if chosen and len(struts) else [])
              + ([f'Maud: the calculator gives no stiffness; it is learnt from the forces '
                  f'({model.name} model)\n'] if isinstance(model, SecantModel) else []))
     points = None if scene is None else len(scene) if subset is None else len(subset.index)
     return Assembly(model, compose(model, rule, nearest, check_mode(mode, points)),
                     subset, scene is not None, tuple(notes))
+
+
+#: What members in compression do to the energy (:func:`compressed`).
+_STRUTS = ('the net has {} members in compression (q < 0): its energy is no longer '
+           'convex and is unbounded below')
+
+
+def compressed(scene) -> np.ndarray:
+    """The springs of ``scene``'s MaudPotential with ``q < 0`` (none for
+    anything else)."""
+    potential = getattr(getattr(scene, 'calc', None), 'potential', None)
+    struts = getattr(potential, 'compressed', None)
+    return np.zeros(0, dtype=int) if struts is None else struts
 
 
 def check_calculator(scene: Atoms | None) -> None:

@@ -29,7 +29,7 @@ from ase_maud.optimize.models.springs import SpringsModel
 #: distance, on atoms), gamma back to 1 after every accepted step
 #: and, on a rise, the pair of the step taken back learnt and the model's new
 #: move cut to the cubic cut's length; chosen by measurement on ASE's
-#: systems (docs/benchmarks.md).
+#: systems (docs/dev/benchmarks.md).
 STEP_DEFAULTS: dict[Any, dict[str, Any]] = {
     'common': {'gamma': 1.0, 'gamma_growth': 1.1, 'overshoot_shrink': 0.6,
                'maxstep_nn': 0.45, 'maxstep': None, 'maxstep_size': None,
@@ -58,7 +58,7 @@ CLIMB_SIDE = 1e-3
 #: (LOBPCG) and steps along one by one: the next lowest, negative or soft,
 #: which the truncated Newton move off them would otherwise meet (chosen by
 #: measurement, docs/optimizer.md; one rather than three: LOBPCG's block of
-#: two converges in far fewer products, docs/bench/saddles.md).
+#: two converges in far fewer products, docs/dev/bench/saddles.md).
 LOWEST_MODES = 1
 
 

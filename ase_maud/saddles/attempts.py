@@ -32,7 +32,7 @@ GROWTH = (2.0, 4.0)
 
 #: Steps of a region's climb (each a call and a Hessian of the region): one
 #: that has not converged by then has no local saddle (a tighter bound, tried:
-#: docs/bench/saddles.md, "A region's first climb bounded, tried").
+#: docs/dev/bench/saddles.md, "A region's first climb bounded, tried").
 REGION_STEPS = 60
 
 
@@ -46,14 +46,14 @@ SETTLE_RATIO, SETTLE_CYCLES, SETTLE_STEPS, SETTLE_GAIN = 0.1, 40, 20, 0.8
 #: The whole scene is released from a region's saddle with the exact model
 #: (a dense Hessian and its eigen-decomposition a step) up to this many free
 #: coordinates, above it with the springs model after settling the
-#: surroundings (the measurements that set it: docs/bench/saddles.md,
+#: surroundings (the measurements that set it: docs/dev/bench/saddles.md,
 #: "Released with the exact model" and "Above 1500 free coordinates").
 RELEASE_EXACT_MAX_DOFS = 3000
 
 
 #: Above this many free coordinates the exact release stops (outcome 'exact
 #: release steps') after this many steps: a step costs seconds there, so one
-#: that wanders would take hundreds within the budget (docs/bench/saddles.md,
+#: that wanders would take hundreds within the budget (docs/dev/bench/saddles.md,
 #: "The exact release capped").
 RELEASE_CAP_DOFS, RELEASE_CAP_STEPS = 1500, 60
 
@@ -101,7 +101,9 @@ class Attempt:
         also in force calls of ``force_call_cpu_s`` CPU seconds, if given)."""
         what = {'mode': f"mode {self.where} {'+' if self.sign > 0 else '-'}",
                 'path': 'path to the second minimum'}.get(
-                    self.kind, f'local at point {self.where} ({self.region} points)')
+                    self.kind, f'local at point {self.where} ' + (
+                        f'({self.region} points)' if self.region else
+                        '(no region smaller than the net: the whole net climbed)'))
         in_calls = ('' if not force_call_cpu_s else
                     f' = {self.cpu_s / force_call_cpu_s:.0f} force calls\' CPU')
         return (f'{what}: {self.outcome}, {self.calls} calls + {self.hvp_vectors} HVP '

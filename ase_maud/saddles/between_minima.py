@@ -49,10 +49,10 @@ BAND_FMAX = 0.1
 #: A refined saddle's barrier within this fraction of the band's highest
 #: image's is the band's saddle (measured: within 0.9 % on 400-point domes,
 #: 4.2 % on 8x8; a refinement that led elsewhere 26-49 % apart:
-#: docs/bench/saddles.md).
+#: docs/dev/bench/saddles.md).
 AGREE = 0.05
 #: The band's largest step factor (the secant model's default, 1.5, let a
-#: climbing image run away on 1 of 8 domes of 6x6 points: docs/bench/saddles.md).
+#: climbing image run away on 1 of 8 domes of 6x6 points: docs/dev/bench/saddles.md).
 BAND_GAMMA_MAX = 1.0
 #: The interpolated images' free coordinates are moved by up to this many
 #: ``a`` (seeded): between two mirror images the band is nearly symmetric,

@@ -90,7 +90,7 @@ from ase_maud.saddles.between_minima import check_same_scene, reflection
 #: Default budget of one attempt, force-call equivalents (calls, Hessians,
 #: Hessian-vector product vectors).
 BUDGET = 500
-#: A mode climb's first part: this share of the budget (docs/bench/saddles.md,
+#: A mode climb's first part: this share of the budget (docs/dev/bench/saddles.md,
 #: "Whole-scene climbs bounded").
 CLIMB_SHARE = 0.2
 

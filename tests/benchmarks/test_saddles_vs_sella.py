@@ -133,7 +133,7 @@ def test_sella_finds_the_same_saddle_from_most_starts():
     """Sella (order 1) from the same starts (2D and 3D trap clusters of 8 and
     12 points, moved along their lowest mode both ways, seeds 0 and 1) ends
     on the same saddle as ``target='saddle'`` from most of them (measured: 14
-    of 16 in docs/bench/saddles.md; 12, then 10 of 16 as the minimisation's
+    of 16 in docs/dev/bench/saddles.md; 12, then 10 of 16 as the minimisation's
     steps changed: the random clusters relax to another of their minima, and
     the starts along its lowest mode change with it; both always end on
     verified index-1 saddles)."""

@@ -216,8 +216,8 @@ def test_loads_and_force_densities_by_formula(scene, dim, seed):
 
 
 @pytest.mark.parametrize('bad, message', [
-    ({'q': [1.0] * 7 + [0.0]}, r'q of spring 7 must be a positive finite number'),
-    ({'q': [1.0, np.nan] + [1.0] * 6}, r'q of spring 1 must be a positive'),
+    ({'q': [1.0] * 7 + [0.0]}, r'q of spring 7 must be a finite nonzero number'),
+    ({'q': [1.0, np.nan] + [1.0] * 6}, r'q of spring 1 must be a finite nonzero'),
     ({'q': [1.0] * 7}, r'q must hold one value per spring, shape \(8,\)'),
     ({'q': [[1.0] * 8]}, r'q must hold one value per spring'),
     ({'q': ['x'] * 8}, r'q must be an array of numbers'),

@@ -22,8 +22,8 @@ from helpers import relaxed_in_python, rule_a, write_quad_net
 
 
 def test_no_command_prints_help(capsys):
-    assert main([]) == 0
-    out = capsys.readouterr().out
+    assert main([]) == 2   # a usage error, the help on stderr
+    out = capsys.readouterr().err
     assert out.startswith('usage: ase-maud')
     assert all(command in out for command in ('relax', 'bench', 'backends'))
 
@@ -46,7 +46,7 @@ def test_threads_defaults():
 
 
 def test_python_m_runs_the_command():
-    done = subprocess.run([sys.executable, '-m', 'ase_maud'],
+    done = subprocess.run([sys.executable, '-m', 'ase_maud', '--help'],
                           capture_output=True, text=True, check=True)
     assert done.stdout.startswith('usage: ase-maud')
 
@@ -197,8 +197,8 @@ def test_relax_progress_bar_and_log_file(tmp_path, capsys):
     captured = capsys.readouterr()
     assert captured.out.startswith('converged: net.obj 16 points')   # only the summary
     steps = int(captured.out.split(' steps,')[0].rsplit(' ', 1)[1])
-    assert f'| {steps}/321 [' in captured.err   # the bar counts steps out of the cap
-    assert 'fmax' in captured.err and '(target 0.0001)' in captured.err
+    assert f'step {steps}/321, fmax' in captured.err   # the bar tracks fmax; steps of the cap
+    assert 'fmax' in captured.err and '(goal 0.0001)' in captured.err
     assert 'energy' in captured.err
     assert 'Maud:' in log.read_text()
 

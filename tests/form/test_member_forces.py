@@ -267,7 +267,7 @@ def test_relax_takes_loads_and_force_densities_from_csv(tmp_path, capsys):
     assert np.abs(read_net(traj).positions - np.asarray(peer.vertices)).max() < 1e-10
     for name, text, message in (
             ('q.csv', 'i,j,q\n0,35,1\n', r'q\.csv line 2: points 0 and 35 are tied by no spring'),
-            ('q.csv', 'i,j,q\n0,1,-1\n', r'q\.csv line 2: q must be a positive'),
+            ('q.csv', 'i,j,q\n0,1,0\n', r'q\.csv line 2: q must be a finite nonzero'),
             ('q.csv', 'i,j,q\n0,1,x\n', r"q\.csv line 2: q must be a number, got 'x'"),
             ('loads.csv', 'i,px,py\n', r'loads\.csv line 1: expected the header i,px,py,pz'),
             ('loads.csv', 'i,px,py,pz\n36,0,0,1\n', r'loads\.csv line 2: point index .36. is '

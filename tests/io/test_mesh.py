@@ -87,9 +87,9 @@ def test_outer_rim_leaves_the_hole_free(tmp_path):
     assert (relaxed.positions[hole, 2] < points[hole, 2] - 0.5).all()   # the hole's rim hangs
 
 
-def test_a_mesh_is_not_written(tmp_path, capsys):
+def test_a_triangle_mesh_is_written_as_stl_with_its_faces(tmp_path, capsys):
     points, triangles, *_ = grid_with_hole(hole=False)
     path = tmp_path / 'net.ply'
-    meshio.write_points_cells(path, points, [('triangle', triangles)])
-    assert main(['relax', str(path), '--quiet', '--out', str(tmp_path / 'out.stl')]) == 2
-    assert 'a net is written as .obj, .json' in capsys.readouterr().err
+    meshio.write_points_cells(path, points, [('triangle', triangles.astype(np.int32))])
+    assert main(['relax', str(path), '--quiet', '--out', str(tmp_path / 'out.stl')]) == 0
+    assert len(meshio.read(tmp_path / 'out.stl').cells_dict['triangle']) == len(triangles)

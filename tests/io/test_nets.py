@@ -367,7 +367,7 @@ def test_a_compas_file_without_forces_leaves_the_defaults(tmp_path):
 
 
 @pytest.mark.parametrize('where, value, message', [
-    ('edge', -1.0, "edge 0-1, attribute q: q must be a positive finite number"),
+    ('edge', 0.0, "edge 0-1, attribute q: q must be a finite nonzero number"),
     ('edge', 'x', "edge 0-1, attribute q: q must be"),
     ('vertex', None, "vertex 3, attribute pz: loads must be a finite number"),
 ])

@@ -80,7 +80,7 @@ def test_local_activation_releases_a_large_ring_with_the_exact_model():
     --modes 0 --local 6 --budget 300: 10 of 10, 78-166 equivalents, each by
     its first attempt; 0 of 10 before, every attempt's budget spent settling
     the surroundings and releasing on the springs model;
-    docs/bench/saddles.md)."""
+    docs/dev/bench/saddles.md)."""
     size = 120
     assert EXACT_MAX_DOFS < 2 * size <= attempts.RELEASE_EXACT_MAX_DOFS   # 2D, none fixed
     reached = 0
@@ -100,7 +100,7 @@ def test_local_activation_on_the_springs_model(monkeypatch):
     these 4, seeds 10 and 13 each with a release, 13's ending on the saddle;
     4 of 4 on seeds 14-17. At 100 points 1 of these 4, in half as long
     again: the springs model's release spends many budgets,
-    docs/bench/saddles.md)."""
+    docs/dev/bench/saddles.md)."""
     size = 80
     assert 2 * size > EXACT_MAX_DOFS   # 2D, nothing fixed
     monkeypatch.setattr(attempts, 'RELEASE_EXACT_MAX_DOFS', EXACT_MAX_DOFS)
@@ -130,7 +130,7 @@ def test_a_large_minimum_s_modes_and_saddles_cost_a_hessian_each(monkeypatch):
     saddle's index come from the lowest eigenpairs of one dense Hessian
     (``classify``'s 'lowest' path), not from LOBPCG's hundreds of products
     (measured on tree:1000: 1840 products for the minimum's modes, about
-    1900 for a saddle's verification; docs/bench/saddles.md)."""
+    1900 for a saddle's verification; docs/dev/bench/saddles.md)."""
     monkeypatch.setattr(analysis, 'DENSE_MAX_DOFS', 10)
     search = search_saddles(relaxed('chords', 30, 40), modes=1, local=6, wanted=1,
                             budget=500, seed=40)

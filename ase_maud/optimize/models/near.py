@@ -60,7 +60,7 @@ from ase_maud.physics.neighbours import NearestDistances
 
 #: Pairs nearer than this many median nearest-neighbour distances get their
 #: repulsion block (about 2 a point in a free graph; the spectra of
-#: docs/benchmarks.md, "Repulsion-dominated scenes").
+#: docs/dev/benchmarks.md, "Repulsion-dominated scenes").
 NEAR_CUTOFF = 1.5
 #: ... and the springs with an end that has at most this many springs:
 #: every spring of a graph of lower degree (nets, meshes, free graphs, a

@@ -4,7 +4,7 @@ by truncated CG.
 
 It is not a ``model=`` name of :class:`ase_maud.Maud` (an instance can be
 passed as ``model``): it measured no CPU win over the springs model
-(docs/benchmarks.md, "repulsion models"), and it is kept as the reference
+(docs/dev/benchmarks.md, "repulsion models"), and it is kept as the reference
 that ``benchmarks/repulsion_models.py`` (variants ``near-lu``, ``near-lu-<k>``)
 and ``dev/repulsion_spectrum.py`` measure ``model='near'`` against.
 """

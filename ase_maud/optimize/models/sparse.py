@@ -14,7 +14,7 @@ from ase_maud.optimize.models.base import DofSolver
 
 #: Sparse symmetric positive-definite matrices of this many rows or more are
 #: solved by algebraic multigrid, smaller ones are factorised
-#: (:func:`spd_inverse`; docs/benchmarks.md has the measurement).
+#: (:func:`spd_inverse`; docs/dev/benchmarks.md has the measurement).
 AMG_MIN_DOFS = 200_000
 
 

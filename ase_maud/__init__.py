@@ -36,7 +36,7 @@ _LAZY = {'MaudCalculator': 'calculator.maud_calculator',
          'MaudPotential': 'calculator.potential',
          'Maud': 'optimize.maud', 'MaudPrecon': 'optimize.precon',
          'search_saddles': 'saddles.search', 'landscape': 'saddles.landscape',
-         'read_net': 'io.nets', 'write_net': 'io.nets', 'form_result': 'form.member_forces',
+         'read_net': 'io.nets', 'write_net': 'io.net_writer', 'form_result': 'form.member_forces',
          'classify': 'analysis.stationary',
          **{error: 'errors' for error in (
              'MaudError', 'DivergenceError', 'NoEquilibriumError', 'StagnationError',
@@ -56,7 +56,8 @@ if TYPE_CHECKING:
         WrongIndexError,
     )
     from ase_maud.form.member_forces import form_result
-    from ase_maud.io.nets import read_net, write_net
+    from ase_maud.io.net_writer import write_net
+    from ase_maud.io.nets import read_net
     from ase_maud.optimize.maud import Maud
     from ase_maud.optimize.precon import MaudPrecon
     from ase_maud.saddles.landscape import landscape

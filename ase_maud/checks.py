@@ -250,3 +250,12 @@ def check_indices(indices: Any, natoms: int) -> np.ndarray:
     if np.unique(index).size != index.size:
         raise ValueError('indices: an atom is given twice')
     return index.astype(np.intp)
+
+
+def did_you_mean(word: str, choices) -> str:
+    """'; did you mean X?' for the choice closest to a mistyped ``word``
+    (difflib's ratio at least 0.6), else ''."""
+    import difflib
+
+    close = difflib.get_close_matches(word, [str(c) for c in choices], n=1)
+    return f'; did you mean {close[0]!r}?' if close else ''

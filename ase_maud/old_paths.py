@@ -97,8 +97,8 @@ CARRIED = {
         'fresh_copy': 'counting',
     },
     'calculator': {
-        'CLOSEST_REDUCED_DISTANCE': 'calculator.potential',
-        'raise_on_closest': 'calculator.potential',
+        'CLOSEST_REDUCED_DISTANCE': 'physics.pair_law',
+        'raise_on_closest': 'physics.pair_law',
     },
     'cli': {
         'backends': 'cli.bench:backends_command',
@@ -110,10 +110,15 @@ CARRIED = {
         'saddles': 'cli.saddles:saddles_command',
         'show': 'cli.show:show_command',
     },
+    'formats.obj': {
+        'MERGE_TOLERANCE': 'io.net_data',
+        'merge_coincident': 'io.net_data',
+    },
     'forcedensity': {
         'unsupported': 'physics.topology',
     },
     'io': {
+        'write_net': 'io.net_writer',
         'CALC_NAME': 'calculator.maud_calculator',
         'stored_parameters': 'calculator.maud_calculator',
     },

@@ -46,7 +46,8 @@ from ase_maud.bench.hard_inputs import (  # the tests' own cases
 from ase_maud.checks import RULES
 from ase_maud.cli.command import main as main_cli
 from ase_maud.files.atomic_replace import LEFTOVER_SECONDS
-from ase_maud.io.nets import read_net, write_net
+from ase_maud.io.net_writer import write_net
+from ase_maud.io.nets import read_net
 from ase_maud.physics.topology import fixed_atoms
 from ase_maud.scenes.catalogue import build
 

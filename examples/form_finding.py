@@ -25,7 +25,8 @@ import numpy as np
 from ase_maud.form.force_density import solve_force_density
 from ase_maud.form.member_forces import describe_result, form_result, write_forces_csv
 from ase_maud.form.pictures import save_picture
-from ase_maud.io.nets import read_net, write_net
+from ase_maud.io.net_writer import write_net
+from ase_maud.io.nets import read_net
 from ase_maud.io.obj import read_obj
 from ase_maud.physics.topology import boundary_vertices, outer_rim
 

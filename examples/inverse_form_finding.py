@@ -24,7 +24,7 @@ from ase_maud import MaudCalculator
 from ase_maud.form.force_density import solve_force_density
 from ase_maud.form.inverse import find_force_densities
 from ase_maud.form.member_forces import describe_result, form_result
-from ase_maud.io.nets import write_net
+from ase_maud.io.net_writer import write_net
 
 
 def hanging_grid(n: int = 30, weight: float = 0.05) -> tuple[Atoms, np.ndarray]:

@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 from ase.io import Trajectory, write
 
-from ase_maud.io.nets import read_frames, write_net
+from ase_maud.io.net_writer import write_net
+from ase_maud.io.nets import read_frames
 from ase_maud.scenes.catalogue import build
 
 import helpers

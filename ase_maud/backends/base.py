@@ -157,3 +157,13 @@ def voigt_to_blocks(block6: np.ndarray, dim: int) -> np.ndarray:
 def blocks_to_voigt(blocks: np.ndarray) -> np.ndarray:
     """The (N, 6) xx, yy, zz, xy, xz, yz entries of (N, 3, 3) blocks."""
     return np.stack([blocks[:, a, b] for a, b in VOIGT_PAIRS], axis=1)
+
+
+def diagonal_blocks(hessian: np.ndarray, dim: int) -> np.ndarray:
+    """The (N, 6) xx, yy, zz, xy, xz, yz entries of the nodal blocks on the
+    diagonal of a (dim N, dim N) ``hessian`` (zeros beyond ``dim``)."""
+    n = len(hessian) // dim
+    blocks = np.zeros((n, 3, 3))
+    index = np.arange(n)
+    blocks[:, :dim, :dim] = hessian.reshape(n, dim, n, dim)[index, :, index, :]
+    return blocks_to_voigt(blocks)

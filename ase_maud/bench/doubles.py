@@ -11,7 +11,7 @@ script reaches into ``tests/``). Nothing else in the package uses them.
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
-from ase_maud import MaudCalculator
+from ase_maud.calculator.maud_calculator import MaudCalculator
 
 
 class PoisonedCalculator(Calculator):

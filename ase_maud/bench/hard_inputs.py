@@ -15,7 +15,8 @@ from ase.build import bulk
 from ase.calculators.emt import EMT
 from ase.optimize import BFGS
 
-from ase_maud import Maud, MaudCalculator
+from ase_maud.calculator.maud_calculator import MaudCalculator
+from ase_maud.optimize.maud import Maud
 from ase_maud.scenes.catalogue import build
 
 #: Malformed net files: (file name, text, the message ``read_net`` raises, a regex).

@@ -25,27 +25,28 @@ names the atoms (or ``a`` and ``Q``), never a NaN.
 from __future__ import annotations
 
 import math
-import threading
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 from ase import Atoms
-from ase.calculators.calculator import Calculator, all_changes
+from ase.calculators.calculator import all_changes
 from numpy.typing import ArrayLike
 
 from ase_maud import backends
-from ase_maud.calculator.potential import MaudPotential, diagonal_blocks, raise_on_closest
+from ase_maud.backends.base import diagonal_blocks
+from ase_maud.calculator.locked import LockedCalculator
+from ase_maud.calculator.potential import MaudPotential
 from ase_maud.checks import all_finite, check
 from ase_maud.physics import pair_law as physics
-from ase_maud.physics import topology
+from ase_maud.physics.pair_law import raise_on_closest
 
 #: Relative tolerance on the spread of z for a ``dim=2`` scene.
 PLANE_TOLERANCE = 1e-10
 
 
-class MaudCalculator(Calculator):
+class MaudCalculator(LockedCalculator):
     """ASE calculator for the Maud potential.
 
     Parameters
@@ -88,20 +89,14 @@ class MaudCalculator(Calculator):
         threads), ``numpy`` (the slow reference) or ``fmm`` (FMM3D at
         ``fmm_eps``, O(N)).
     **kwargs
-        The backends' parameters (each backend declares its own, with its
-        default, in :mod:`.backends`; each is checked whichever backend is
-        chosen): ``tol`` (``auto``: the force error allowed, relative to the
-        largest repulsive force ``max_i |f_i|`` of the repulsion alone; the
-        springs are always exact; default
-        :data:`~.backends.auto.DEFAULT_TOL`, 1e-8, far below what a
-        relaxation resolves yet coarse enough for the FMM on large scenes; 0
-        asks for the exact direct sum), ``crossover`` (``auto``: the number
-        of points from which the FMM is used whatever ``tol``; ``None``, the
-        default, uses the measured table
-        :data:`ase_maud.backends.auto.CROSSOVER`), ``fmm_eps`` (the explicit
-        ``fmm`` backend's requested relative precision, default 1e-6; its
-        forces are good to ``fmm_eps`` of the largest repulsive force);
-        and ASE's own calculator keywords.
+        The backends' parameters (:mod:`.backends`; each checked whichever
+        backend is chosen): ``tol`` (``auto``: the force error allowed,
+        relative to the largest repulsive force; default
+        :data:`~.backends.auto.DEFAULT_TOL`, 1e-8; 0: the exact direct sum),
+        ``crossover`` (``auto``: the points from which the FMM is used
+        whatever ``tol``; None: the measured
+        :data:`~ase_maud.backends.auto.CROSSOVER`), ``fmm_eps`` (the ``fmm``
+        backend's relative precision, default 1e-6), and ASE's keywords.
 
     Raises
     ------
@@ -123,28 +118,11 @@ class MaudCalculator(Calculator):
     ASE's sign ``f = -dE/dr``, stiffness blocks and Hessians in ``Q``; the
     energy counts each pair once.
 
-    Accuracy per run. ``calc.set(tol=...)`` changes the accuracy for the
-    next calls (an optimiser lowers it as its forces approach ``fmax``:
-    ``tol = safety * fmax / calc.last_force_scale``). Results already held
-    stay if they meet the new ``tol`` (a looser one, or any ``tol`` after an
-    exact call); a tighter one discards them. After a call,
-    :attr:`last_backend` names the backend that computed the results held,
-    :attr:`last_tolerance` is their promised force error relative to
-    :attr:`last_force_scale` (0.0 for an exact backend), the largest
-    repulsive force (units of ``Q a``); all three are None before a call.
-
-    Threads. The numba direct sums run on ``numba.get_num_threads()``
-    threads: ``NUMBA_NUM_THREADS`` at start-up, or
-    ``numba.set_num_threads(n)`` (or :func:`ase_maud.threads.pin_threads`)
-    later. The FMM follows ``OMP_NUM_THREADS`` if fmm3dpy was built with
-    OpenMP; the PyPI wheel was not and runs on one thread. The ``auto``
-    crossovers count the FMM's threads as ``ASE_MAUD_FMM_THREADS`` declares
-    them (unset: one; :func:`ase_maud.backends.fmm.threads`).
-
-    Memory is O(N) on every path but ``hessian``. Only what is asked is
-    computed: ``energy``/``forces`` never build the blocks; ``stiffness``
-    computes all three in one pass; ``hessian`` (the dense (dim N, dim N)
-    matrix, small scenes only) comes with the energy and forces of its call.
+    Accuracy per run (``calc.set(tol=...)``, :attr:`last_backend`,
+    :attr:`last_tolerance`, :attr:`last_force_scale`), threads and memory:
+    docs/calculator.md. Only what is asked is computed: ``energy``/``forces``
+    never build the blocks, ``stiffness`` computes all three in one pass,
+    ``hessian`` (dense, small scenes) comes with the energy and forces.
     """
 
     implemented_properties = ['energy', 'free_energy', 'forces', 'stiffness',
@@ -175,30 +153,12 @@ class MaudCalculator(Calculator):
                  Q: float = 1.0, dim: int = 3, q: ArrayLike | None = None,
                  loads: ArrayLike | None = None, backend: str = 'auto',
                  **kwargs: Any) -> None:
-        self._lock = threading.RLock()
         self.potential: MaudPotential = MaudPotential(np.zeros((0, 2), int))
         self.last_backend: str | None = None
         self.last_tolerance: float | None = None
         self.last_force_scale: float | None = None
         super().__init__(springs=springs, a=a, Q=Q, dim=dim, q=q, loads=loads,
                          backend=backend, **kwargs)
-
-    def get_property(self, name: str, atoms: Atoms | None = None,
-                     allow_calculation: bool = True) -> Any:
-        """ASE's, one thread at a time: threads that share this calculator
-        (each with its own atoms) each get the results of their atoms, not
-        those another thread's call left."""
-        with self._lock:
-            return super().get_property(name, atoms, allow_calculation)
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = self.__dict__.copy()
-        del state['_lock']   # a lock is not copied or pickled: each copy has its own
-        return state
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__dict__.update(state)
-        self._lock = threading.RLock()
 
     def set(self, **kwargs: Any) -> dict[str, Any]:
         """Set parameters; invalid values raise ValueError and are not kept.
@@ -290,52 +250,6 @@ class MaudCalculator(Calculator):
         """The length ``a`` of the repulsion ``a**3 Q / L`` (a dimer with
         one spring rests at ``L = a``)."""
         return self.potential.a
-
-    def check_state(self, atoms: Atoms, tol: float = 1e-15) -> list[str]:
-        """What changed since the last calculation, compared exactly.
-
-        ASE's default compares positions within an absolute ``tol``, which
-        misses every move of a scene whose ``a`` is below about 1e-10 and
-        costs several ``isclose`` calls per property request; the potential
-        depends only on the positions (and the number of points), so those,
-        the cell and pbc are compared exactly, whatever the scale.
-        """
-        old = self.atoms
-        if old is None or len(old) != len(atoms):
-            return list(all_changes)
-        return [name for name, was, now in (
-            ('positions', old.arrays['positions'], atoms.arrays['positions']),
-            ('numbers', old.arrays['numbers'], atoms.arrays['numbers']),
-            ('cell', old.cell.array, atoms.cell.array), ('pbc', old.pbc, atoms.pbc))
-            if not (was == now).all()]
-
-    def _hold(self, atoms: Atoms, system_changes: Sequence[str]) -> None:
-        """Keep what :meth:`check_state` compares next time (ASE's
-        ``Calculator.calculate`` keeps ``atoms.copy()``, and ASE's
-        ``get_property`` has made one already): the copy held is updated in
-        place when ``system_changes`` (what :meth:`check_state` found, or
-        what :meth:`compute` is told) name the positions alone and the atoms
-        and their constraints are as many as held, and made anew otherwise."""
-        old = self.atoms
-        if old is atoms:
-            return
-        if (old is None or len(old) != len(atoms)
-                or len(old.constraints) != len(atoms.constraints)
-                or not set(system_changes) <= {'positions'}):
-            self.atoms = atoms.copy()
-        else:
-            old.arrays['positions'][:] = atoms.arrays['positions']
-
-    def compute(self, atoms: Atoms, properties: Sequence[str]) -> dict[str, Any]:
-        """The ``properties`` of ``atoms`` computed now, in one call (what
-        ``get_property`` does after a move, without its change detection and
-        copy of the atoms): for an optimizer that moves the positions itself,
-        so ``atoms`` differ from those of the last call in their positions
-        only. Returns :attr:`results`."""
-        with self._lock:
-            self.results = {}
-            self.calculate(atoms, properties, ['positions'])
-            return self.results
 
     def check_atoms(self, atoms: Atoms) -> np.ndarray:
         """Validate ``atoms`` for this potential; return its positions.
@@ -513,14 +427,7 @@ class MaudCalculator(Calculator):
             block that overflows float64.
         """
         self.potential.check_size(len(atoms))
-        positions = self.check_atoms(atoms)
-        block = self.potential.hessian_block(positions, indices)
-        if not all_finite(block):
-            if self.potential.repulsive:
-                raise_on_closest(self.potential.reduced(positions), self.potential.a)
-            raise ValueError(f'the Hessian overflows float64 at Q = {self.potential.Q!r}: '
-                             'choose units nearer the scene')
-        return block
+        return self.potential.hessian_block(self.check_atoms(atoms), indices)
 
     def hessian_rows(self, atoms: Atoms, free: np.ndarray) -> np.ndarray | None:
         """The atoms with a free coordinate (``free``: mask (N, dim)) where
@@ -571,70 +478,6 @@ class MaudCalculator(Calculator):
         """
         atoms = atoms if atoms is not None else self.atoms
         return self.potential.spring_hessian(len(atoms))
-
-    def unbounded_components(self, atoms: Atoms) -> list[list[int]]:
-        """Spring components of ``atoms`` proved to fly away for ever
-        (:func:`.topology.unbounded_components`); empty if there are none."""
-        return topology.unbounded_components(
-            atoms, self.potential.spring_components(len(atoms)), self.dim)
-
-    def minimum_proved(self, atoms: Atoms) -> bool:
-        """True if ``atoms`` are proved to have a finite minimum, however far
-        out (:func:`.topology.minimum_proved`): then a run that spreads far is
-        on its way there, not diverging.
-
-        Parameters
-        ----------
-        atoms : Atoms
-            The scene, with its constraints.
-
-        Returns
-        -------
-        bool
-            True if every constraint is a ``FixAtoms`` or ``FixCartesian`` and
-            every spring component is held along each direction (or there is
-            one component whose loads sum to zero there); False if nothing
-            is proved.
-
-        Raises
-        ------
-        ValueError
-            A spring names an atom beyond the last one.
-        """
-        return topology.minimum_proved(atoms, self.potential.spring_components(len(atoms)),
-                                       self.potential.loads, self.dim)
-
-    def no_equilibrium(self, atoms: Atoms, minimum: bool = True) -> str | None:
-        """Why ``atoms`` can have no finite equilibrium, in words, or None if
-        nothing is proved: loads with a net sum along a direction nothing
-        holds (:func:`.topology.net_load`: no stationary point at all), or,
-        for a ``minimum``, spring components that fly away
-        (:meth:`unbounded_components`).
-
-        Parameters
-        ----------
-        atoms : Atoms
-            The scene, with its constraints.
-        minimum : bool, default True
-            Also report spring components that fly away (a minimum is
-            sought); False: only a net load (no stationary point at all).
-
-        Returns
-        -------
-        str or None
-            One sentence saying what is wrong and what to fix (the message
-            of :class:`~ase_maud.NoEquilibriumError`), or None.
-
-        Raises
-        ------
-        ValueError
-            A spring names an atom beyond the last one.
-        """
-        total = topology.net_load(atoms, self.potential.loads, self.dim)
-        if total is not None:
-            return topology.describe_net_load(total)
-        components = self.unbounded_components(atoms) if minimum else []
-        return topology.describe_unbounded(components) if components else None
 
 
 #: The name under which ASE's trajectory stores a MaudCalculator.

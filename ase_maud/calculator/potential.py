@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 import scipy.sparse as sp
+from ase import Atoms
 from numpy.typing import ArrayLike
 
 from ase_maud import backends
@@ -280,13 +281,19 @@ class MaudPotential:
         points ``index`` (n,), shape (dim n, dim n), units of ``Q``, without
         the whole: the repulsion's part in O(n N)
         (:func:`.physics.repulsion_hessian_block`), the springs' a slice of
-        their constant Hessian."""
+        their constant Hessian. A ValueError names a bad index, the closest
+        pair of points, or an overflow."""
         index = check_indices(index, len(positions))
         coords = (self.dim * index[:, None] + np.arange(self.dim)).ravel()
         block = self.spring_hessian(len(positions))[coords][:, coords].toarray()
         if self.repulsive:
             block += self.Q * physics.repulsion_hessian_block(
                 self.reduced(positions), index, self.dim)
+        if not np.isfinite(block).all():
+            if self.repulsive:
+                physics.raise_on_closest(self.reduced(positions), self.a)
+            raise ValueError(f'the Hessian overflows float64 at Q = {self.Q!r}: '
+                             'choose units nearer the scene')
         return block
 
     def whole_hessian(self, repulsion: np.ndarray) -> np.ndarray:
@@ -340,6 +347,69 @@ class MaudPotential:
                ).T.reshape(hv.shape)
         return hv.reshape(v.shape)
 
+    def unbounded_components(self, atoms: Atoms) -> list[list[int]]:
+        """Spring components of ``atoms`` proved to fly away for ever
+        (:func:`.topology.unbounded_components`); empty if there are none."""
+        return topology.unbounded_components(
+            atoms, self.spring_components(len(atoms)), self.dim)
+
+    def minimum_proved(self, atoms: Atoms) -> bool:
+        """True if ``atoms`` are proved to have a finite minimum, however far
+        out (:func:`.topology.minimum_proved`): then a run that spreads far is
+        on its way there, not diverging.
+
+        Parameters
+        ----------
+        atoms : Atoms
+            The scene, with its constraints.
+
+        Returns
+        -------
+        bool
+            True if every constraint is a ``FixAtoms`` or ``FixCartesian`` and
+            every spring component is held along each direction (or there is
+            one component whose loads sum to zero there); False if nothing
+            is proved.
+
+        Raises
+        ------
+        ValueError
+            A spring names an atom beyond the last one.
+        """
+        return topology.minimum_proved(atoms, self.spring_components(len(atoms)),
+                                       self.loads, self.dim)
+
+    def no_equilibrium(self, atoms: Atoms, minimum: bool = True) -> str | None:
+        """Why ``atoms`` can have no finite equilibrium, in words, or None if
+        nothing is proved: loads with a net sum along a direction nothing
+        holds (:func:`.topology.net_load`: no stationary point at all), or,
+        for a ``minimum``, spring components that fly away
+        (:meth:`unbounded_components`).
+
+        Parameters
+        ----------
+        atoms : Atoms
+            The scene, with its constraints.
+        minimum : bool, default True
+            Also report spring components that fly away (a minimum is
+            sought); False: only a net load (no stationary point at all).
+
+        Returns
+        -------
+        str or None
+            One sentence saying what is wrong and what to fix (the message
+            of :class:`~ase_maud.NoEquilibriumError`), or None.
+
+        Raises
+        ------
+        ValueError
+            A spring names an atom beyond the last one.
+        """
+        total = topology.net_load(atoms, self.loads, self.dim)
+        if total is not None:
+            return topology.describe_net_load(total)
+        components = self.unbounded_components(atoms) if minimum else []
+        return topology.describe_unbounded(components) if components else None
 
 @numba.njit(cache=True)
 def _spring_sums(x: np.ndarray, springs: np.ndarray,
@@ -415,37 +485,3 @@ def _flat_entries(springs: np.ndarray, weights: np.ndarray, dim: int,
             flat[dim * e + axis] = (dim * rows[e] + axis) * size + dim * columns[e] + axis
             data[dim * e + axis] = sums[e]
     return flat, data
-
-
-#: Pairs closer than this many ``a`` overflow the blocks ``1 / L**3`` (and
-#: from about 1e-154 a the forces): named when a result is not finite.
-CLOSEST_REDUCED_DISTANCE = 1e-100
-
-
-def raise_on_closest(scaled: np.ndarray, a: float) -> None:
-    """Raise ValueError naming the closest pair of points if it is closer
-    than :data:`CLOSEST_REDUCED_DISTANCE` ``a`` (``scaled`` is ``x / a``),
-    or at the same position."""
-    if len(scaled) < 2:
-        return
-    i, j, distance = physics.closest_pair(scaled)
-    if distance == 0:
-        raise ValueError(f'atoms {i} and {j} are at the same position '
-                         f'{(a * scaled[i]).tolist()}: the repulsion a^3 Q / L '
-                         'is infinite there')
-    if distance < CLOSEST_REDUCED_DISTANCE:
-        raise ValueError(
-            f'atoms {i} and {j} are {distance:.3g} a '
-            f'apart (a = {a!r}): 1/L**3 overflows float64 below about '
-            f'{CLOSEST_REDUCED_DISTANCE:g} a; move them apart or choose a '
-            'smaller a')
-
-
-def diagonal_blocks(hessian: np.ndarray, dim: int) -> np.ndarray:
-    """The (N, 6) xx, yy, zz, xy, xz, yz entries of the nodal blocks on the
-    diagonal of a (dim N, dim N) ``hessian`` (zeros beyond ``dim``)."""
-    n = len(hessian) // dim
-    blocks = np.zeros((n, 3, 3))
-    index = np.arange(n)
-    blocks[:, :dim, :dim] = hessian.reshape(n, dim, n, dim)[index, :, index, :]
-    return backends.blocks_to_voigt(blocks)

@@ -79,7 +79,7 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str):
         invalid = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
         if invalid:   # argparse of Python < 3.14 suggests nothing
-            from ase_maud.io.nets import did_you_mean
+            from ase_maud.checks import did_you_mean
 
             message += did_you_mean(invalid[1], re.findall(r"'([^']*)'", invalid[2]))
         self.exit(2, f'{self.prog}: error: {message}; see {self.prog} --help\n')
@@ -96,9 +96,9 @@ def _top_parser() -> tuple[argparse.ArgumentParser, Any]:
         '  ase-maud relax net.obj --fix boundary --out relaxed.obj\n'
         '  ase-maud show maud.traj --gif\n  ase-maud classify maud.traj\n'
         'Each command has its own --help.')
-    from ase_maud import __version__
+    from importlib.metadata import version   # the installed version, when asked
 
-    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
+    parser.add_argument('--version', action='version', version=f"%(prog)s {version('ase-maud')}")
     return parser, parser.add_subparsers(dest='command', metavar='COMMAND')
 
 

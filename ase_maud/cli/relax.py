@@ -64,7 +64,8 @@ def relax_command(args: argparse.Namespace) -> int:
         form_warnings,
         write_forces_csv,
     )
-    from ase_maud.io.nets import mean_spring_length, net_format, read_net, set_tables, write_net
+    from ase_maud.io.net_writer import write_net
+    from ase_maud.io.nets import mean_spring_length, net_format, read_net, set_tables
     from ase_maud.optimize.maud import Maud
     from ase_maud.physics.topology import free_point_loads
     from ase_maud.scenes.catalogue import build

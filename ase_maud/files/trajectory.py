@@ -124,20 +124,19 @@ class _ResultsOnly:
 
 
 def parameters_once_writer(path: str | os.PathLike):
-    """An ASE trajectory writer for ``path`` that stores a MaudCalculator's
-    parameters (springs, ``a``, ``Q``, ``dim``, ``q``, loads) with the first
-    frame only, and each frame's energy and forces as ASE does: the springs
-    of every frame made a run's trajectory 27 % larger than ASE's own for the
-    same frames. :func:`ase_maud.io.nets.read_net` reads the parameters of
-    any frame from the first; ``ase gui`` reads every frame as before."""
-    from ase.io.trajectory import TrajectoryWriter
-
-    from ase_maud.calculator.maud_calculator import MaudCalculator
+    """An ASE trajectory writer for ``path`` that stores the calculator's
+    parameters (a MaudCalculator's: springs, ``a``, ``Q``, ``dim``, ``q``,
+    loads) with the first frame only, and each frame's energy and forces as
+    ASE does: the springs of every frame made a run's trajectory 27 % larger
+    than ASE's own for the same frames. :func:`ase_maud.io.nets.read_net`
+    reads the parameters of any frame from the first (:func:`first_frame`);
+    ``ase gui`` reads every frame as before."""
+    from ase.io.trajectory import TrajectoryWriter  # ASE's io: loaded when a run writes
 
     class ParametersOnce(TrajectoryWriter):
         def _write_atoms(self, atoms, **kwargs):
             calc = atoms.calc
-            if not len(self) or not isinstance(calc, MaudCalculator):
+            if not len(self) or calc is None:
                 return super()._write_atoms(atoms, **kwargs)
             atoms.calc = _ResultsOnly(calc)
             try:
@@ -148,11 +147,9 @@ def parameters_once_writer(path: str | os.PathLike):
     return ParametersOnce(path, 'w')
 
 
-def first_frame_parameters(path: str | os.PathLike) -> dict:
-    """The MaudCalculator parameters the first frame of the trajectory at
-    ``path`` stores ({} if none): those of every frame of a run's trajectory
-    (:func:`parameters_once_writer`)."""
-    from ase_maud.calculator.maud_calculator import stored_parameters
-
+def first_frame(path: str | os.PathLike) -> Atoms | None:
+    """The first frame of the trajectory at ``path`` (None if it has none):
+    it holds the calculator's parameters of every frame of a run's
+    trajectory (:func:`parameters_once_writer`)."""
     with _frames(Path(path)) as frames:
-        return stored_parameters(frames[0]) if len(frames) else {}
+        return frames[0] if len(frames) else None

@@ -4,6 +4,7 @@ JSON, PLY/STL/OFF/VTK/VTU through meshio, points plus edge lists, ASE's own
 formats; per-point and per-edge tables (loads, force densities).
 """
 
+from ase_maud.io.net_writer import write_net
 from ase_maud.io.nets import (
     check_net_path,
     default_a,
@@ -11,7 +12,6 @@ from ase_maud.io.nets import (
     read_frames,
     read_net,
     set_tables,
-    write_net,
 )
 from ase_maud.old_paths import old_names
 

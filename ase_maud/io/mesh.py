@@ -3,7 +3,7 @@ VTU, read through meshio (the maintained reader and writer of these formats).
 
 The springs are the edges of the faces (triangles, quads, polygons), each
 undirected pair once, plus the segments of line cells; coincident points are
-merged as in OBJ (:func:`~ase_maud.io.obj.merge_coincident`: STL stores
+merged as in OBJ (:func:`~ase_maud.io.net_data.merge_coincident`: STL stores
 every triangle's corners anew). Volume cells (tetrahedra, hexahedra...) are
 refused: their edges are no surface net.
 
@@ -22,8 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ase_maud.io.net_data import NetData, PathLike
-from ase_maud.io.obj import merge_coincident
+from ase_maud.io.net_data import NetData, PathLike, merge_coincident
 from ase_maud.physics.topology import face_edges, unique_pairs
 
 #: Suffixes read by :func:`read_mesh`, and meshio's name of each format.

@@ -72,19 +72,17 @@ from ase import Atoms
 from ase.constraints import FixAtoms
 
 from ase_maud.calculator.maud_calculator import CALC_NAME, MaudCalculator, stored_parameters
-from ase_maud.checks import as_whole, check, check_writable
-from ase_maud.files.atomic_replace import replace_text, replace_with
-from ase_maud.files.trajectory import first_frame_parameters
-from ase_maud.io.compas import compas_text, read_compas, read_compas_forces
-from ase_maud.io.mesh import MESH_FORMATS, read_mesh, write_mesh
-from ase_maud.io.net_data import NetData, PathLike
-from ase_maud.io.obj import MERGE_TOLERANCE, merge_coincident, obj_text, read_obj
+from ase_maud.checks import as_whole, check, check_writable, did_you_mean
+from ase_maud.files.trajectory import first_frame
+from ase_maud.io.compas import read_compas, read_compas_forces
+from ase_maud.io.mesh import MESH_FORMATS, read_mesh
+from ase_maud.io.net_data import MERGE_TOLERANCE, NetData, PathLike, merge_coincident
+from ase_maud.io.obj import read_obj
 from ase_maud.io.tables import read_loads_csv, read_q_csv
-from ase_maud.io.text import XYZ_SUFFIXES, check_xyz_counts, coordinates, read_edges, read_indices
+from ase_maud.io.text import XYZ_SUFFIXES, check_xyz_counts, read_edges, read_indices
 from ase_maud.physics.dofs import keep_on_plane
 from ase_maud.physics.topology import (
     boundary_vertices,
-    fixed_atoms,
     free_point_loads,
     leaf_vertices,
     mean_spring_length,
@@ -93,14 +91,14 @@ from ase_maud.physics.topology import (
 )
 
 if TYPE_CHECKING:
-    from ase_maud.form.member_forces import FormResult
+    pass
 
 __all__ = ['A_PER_MEAN_SPRING', 'CALC_NAME', 'FIX_RULES', 'MERGE_TOLERANCE', 'NetData',
            'READ_FORMATS',
            'check_net_path', 'default_a', 'edges_path', 'mean_spring_length',
            'merge_coincident', 'net_format', 'read_compas', 'read_compas_forces',
            'read_edges', 'read_frames', 'read_indices', 'read_net', 'read_obj',
-           'relaxed_fmax', 'set_tables', 'stored_parameters', 'write_net']
+           'relaxed_fmax', 'set_tables', 'stored_parameters']
 
 
 #: The rules ``fixed=`` takes by name (:func:`read_net`).
@@ -399,15 +397,6 @@ def _one_number(text) -> float | None:
         return None
 
 
-def did_you_mean(word: str, choices) -> str:
-    """'; did you mean X?' for the choice closest to a mistyped ``word``
-    (difflib's ratio at least 0.6), else ''."""
-    import difflib
-
-    close = difflib.get_close_matches(word, [str(c) for c in choices], n=1)
-    return f'; did you mean {close[0]!r}?' if close else ''
-
-
 def _whole_index(index):
     """A frame index as an int, or a ValueError naming it."""
     whole = as_whole(index)
@@ -457,7 +446,8 @@ def _read_ase(path, index):
     stored = stored_parameters(frames[0])
     if not stored and net_format(path) == 'traj' and getattr(
             frames[0].calc, 'name', '') == CALC_NAME:   # a run's: with its first frame only
-        stored = first_frame_parameters(path)
+        first = first_frame(path)
+        stored = {} if first is None else stored_parameters(first)
     if stored:   # a calculator stored without a has the default a
         stored.setdefault('a', MaudCalculator.default_parameters['a'])
     for atoms in frames:
@@ -477,104 +467,3 @@ def _fixed_indices(indices, natoms):
         twice = next(i for n, i in enumerate(checked) if i in checked[:n])
         raise ValueError(f'fixed point {twice} is given twice')
     return checked
-
-
-def write_net(path: PathLike, atoms: Atoms, like: PathLike | None = None,
-              result: FormResult | None = None) -> list[Path]:
-    """Write the net ``atoms`` (with a MaudCalculator) to ``path``; return
-    the files written.
-
-    The format is ``path``'s (see the module docstring). ``like``, a file of
-    the same format with as many points (the one the net was read from),
-    is kept as it is but for the coordinates that moved, each written as
-    the shortest text that reads back as its float (an unmoved coordinate
-    keeps its text); line endings, comments, faces, curves, groups, COMPAS
-    attributes and layout stay (a COMPAS file whose ``q`` or loads changed is
-    written anew, without its layout). Without it: OBJ gets the springs as
-    ``l`` lines, JSON a COMPAS 2.x graph (fixed points ``is_anchor``, loads
-    ``px``, ``py``, ``pz``, force densities ``q``). A trajectory stores the
-    springs, ``a``, ``Q``, ``dim``, ``q`` and ``loads`` with the frame; OBJ
-    and the other formats hold no ``q`` or loads. The faces a net was read
-    with (``atoms.info['faces']``) are written to OBJ (``f`` lines, the
-    other springs as ``l``) and to the meshes of :data:`MESH_FORMATS`
-    (:func:`~ase_maud.io.mesh.write_mesh`), from whatever file they came. ``.xyz``
-    (``.extxyz``) is extended XYZ with every digit of the coordinates
-    (ASE's writer keeps 8 decimals) and the fixed points as ``move_mask``;
-    any other format is written by ASE. Both get the edge list at
-    :func:`edges_path`. COMPAS JSON keeps the supports as ``is_anchor``
-    and, given a ``result`` (:func:`ase_maud.form.member_forces.form_result` of
-    ``atoms``), holds the member forces and reactions
-    (:func:`~ase_maud.io.compas.compas_text`); the other formats ignore
-    ``result``.
-
-    Parameters
-    ----------
-    path : file name
-        Where to write; its suffix chooses the format (``.obj``, ``.json``,
-        ``.traj``, ``.xyz``, or any ASE writes). Replaced whole, atomically,
-        keeping the old file's permissions.
-    atoms : Atoms
-        The net, with a :class:`~ase_maud.MaudCalculator`.
-    like : file name or None, default None
-        The file the net was read from, kept but for the moved coordinates.
-    result : FormResult or None, default None
-        Member forces and reactions to store (COMPAS JSON only).
-
-    Returns
-    -------
-    list of Path
-        The files written (the net, and an edge list beside it where the
-        format holds no springs).
-
-    Raises
-    ------
-    ValueError
-        Atoms without a MaudCalculator, a suffix no writer takes, a
-        ``like`` of another format or number of points, or a path that
-        cannot be written (a missing or read-only directory).
-    OSError
-        The disk refused the write (the old file is left whole).
-    """
-    path = Path(path)
-    kind = net_format(path)
-    if not isinstance(atoms.calc, MaudCalculator):
-        raise ValueError(f'cannot write {path.name}: the net needs its MaudCalculator '
-                         '(the springs, a, Q), and the atoms have ' + (
-                             'no calculator' if atoms.calc is None else
-                             f'a {type(atoms.calc).__name__}'))
-    if like is not None and net_format(like) != kind:
-        raise ValueError(f'cannot write {path.name} like {Path(like).name}: '
-                         'they are of different formats')
-    # everything is read (``like`` may be ``path``) before anything is
-    # replaced, and each file is replaced whole (ase_maud.files.atomic_replace)
-    if kind == 'obj':
-        replace_text(path, obj_text(atoms, like), newline='')
-    elif kind == 'mesh':
-        write_mesh(path, atoms.positions, atoms.info.get('faces'), atoms.calc.springs)
-    elif kind == 'json':
-        replace_text(path, compas_text(atoms, like, result), newline='')
-    elif kind == 'traj':
-        replace_with(path, lambda temporary: ase.io.write(temporary, atoms, format='traj'))
-    else:
-        if path.suffix.lower() in XYZ_SUFFIXES:
-            replace_text(path, _extxyz_text(atoms))
-        else:
-            replace_with(path, lambda temporary: ase.io.write(temporary, atoms))
-        edges = edges_path(path)
-        springs = '\n'.join(f'{i} {j}' for i, j in atoms.calc.springs)
-        replace_text(edges, f'# springs of {path.name}: two 0-based point indices a line\n'
-                     + springs + ('\n' if springs else ''))
-        return [path, edges]
-    return [path]
-
-
-def _extxyz_text(atoms):
-    """Extended XYZ of the symbols, positions (shortest exact repr) and,
-    if any point is fixed, ``move_mask`` (F for fixed), as ASE reads it."""
-    fixed = fixed_atoms(atoms)
-    mask = ':move_mask:L:1' if fixed.any() else ''
-    rows = [f'{symbol} {coordinates(x)}{" F" if held else " T" if mask else ""}\n'
-            for symbol, x, held in zip(atoms.get_chemical_symbols(), atoms.positions,
-                                       fixed, strict=True)]
-    return (f'{len(atoms)}\nProperties=species:S:1:pos:R:3{mask} pbc="F F F"\n'
-            + ''.join(rows))

@@ -9,9 +9,9 @@ import warnings
 from io import StringIO
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from ase_maud.io.net_data import NetData, PathLike
+from ase_maud.io.mesh import mesh_cells
+from ase_maud.io.net_data import MERGE_TOLERANCE, NetData, PathLike, merge_coincident
 from ase_maud.io.text import (
     check_finite,
     coordinates,
@@ -20,13 +20,7 @@ from ase_maud.io.text import (
     parse_numbers,
     token_lines,
 )
-from ase_maud.physics.topology import spring_components, unique_pairs
-
-#: OBJ vertices closer than this times the diagonal of their bounding box
-#: are one point (a Rhino export gives every curve its own copies of its
-#: end vertices).
-MERGE_TOLERANCE = 1e-9
-
+from ase_maud.physics.topology import unique_pairs
 
 #: OBJ curve types (``cstype``, after an optional ``rat``) read, with
 #: ``deg 1``: polylines through their control points.
@@ -43,27 +37,6 @@ def read_obj(path: PathLike) -> NetData:
     point (:func:`merge_coincident`).
     """
     return _obj_file(path, with_rows=False)[0]
-
-
-def merge_coincident(points: np.ndarray,
-                     tolerance: float = MERGE_TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
-    """The point of every one of (N, 3) ``points`` once coincident ones are
-    merged, and the merged points.
-
-    Two points closer than ``tolerance`` times the diagonal of the points'
-    bounding box are one (and so, in a chain, are all points linked by such
-    pairs); a merged point sits where its first copy does, and merged points
-    are in the order of their first copies.
-    """
-    diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
-    pairs = cKDTree(points).query_pairs(tolerance * diagonal, output_type='ndarray')
-    labels = spring_components(len(points), pairs)
-    first = np.full(labels.max() + 1, len(points))
-    np.minimum.at(first, labels, np.arange(len(points)))
-    order = np.argsort(first)
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    return rank[labels], points[first[order]]
 
 
 def _statements(path):
@@ -290,8 +263,6 @@ def obj_text(atoms, like):
     that moved, or points, the faces ``atoms.info['faces']`` as ``f`` lines
     and the other springs as ``l`` lines."""
     if like is None:
-        from ase_maud.io.mesh import mesh_cells
-
         lines = [f'v {coordinates(x)}' for x in atoms.positions]
         for name, cells in mesh_cells(atoms.info.get('faces'), atoms.calc.springs):
             keyword = 'l' if name == 'line' else 'f'

@@ -101,7 +101,7 @@ def minimum_proved(atoms: Atoms | None, target: str) -> bool:
     the run then gets no divergence test."""
     calc = getattr(atoms, 'calc', None)
     return (target == 'minimum' and isinstance(calc, MaudCalculator)
-            and calc.minimum_proved(atoms))
+            and calc.potential.minimum_proved(atoms))
 
 
 def no_equilibrium(atoms: Atoms | None, target: str) -> NoEquilibriumError | None:
@@ -110,7 +110,7 @@ def no_equilibrium(atoms: Atoms | None, target: str) -> NoEquilibriumError | Non
     ``target='minimum'`` (:meth:`MaudCalculator.no_equilibrium`); None if
     nothing is proved (another calculator proves nothing)."""
     calc = getattr(atoms, 'calc', None)
-    why = (calc.no_equilibrium(atoms, minimum=target == 'minimum')
+    why = (calc.potential.no_equilibrium(atoms, minimum=target == 'minimum')
            if isinstance(calc, MaudCalculator) else None)
     return NoEquilibriumError(f'before the first step: {why}') if why else None
 

@@ -261,3 +261,27 @@ def closest_pair(points: np.ndarray) -> tuple[int, int, float]:
     i = int(np.argmin(distance))
     j = int(other[i])
     return min(i, j), max(i, j), float(distance[i])
+
+
+#: Pairs closer than this many ``a`` overflow the blocks ``1 / L**3`` (and
+#: from about 1e-154 a the forces): named when a result is not finite.
+CLOSEST_REDUCED_DISTANCE = 1e-100
+
+
+def raise_on_closest(scaled: np.ndarray, a: float) -> None:
+    """Raise ValueError naming the closest pair of points if it is closer
+    than :data:`CLOSEST_REDUCED_DISTANCE` ``a`` (``scaled`` is ``x / a``),
+    or at the same position."""
+    if len(scaled) < 2:
+        return
+    i, j, distance = closest_pair(scaled)
+    if distance == 0:
+        raise ValueError(f'atoms {i} and {j} are at the same position '
+                         f'{(a * scaled[i]).tolist()}: the repulsion a^3 Q / L '
+                         'is infinite there')
+    if distance < CLOSEST_REDUCED_DISTANCE:
+        raise ValueError(
+            f'atoms {i} and {j} are {distance:.3g} a '
+            f'apart (a = {a!r}): 1/L**3 overflows float64 below about '
+            f'{CLOSEST_REDUCED_DISTANCE:g} a; move them apart or choose a '
+            'smaller a')

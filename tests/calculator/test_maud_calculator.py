@@ -501,7 +501,7 @@ def test_unbounded_components(random_points, dim, expected):
     atoms = Atoms('H5', random_points(5, dim, seed=1))
     atoms.set_constraint(FixAtoms([1]))
     atoms.calc = MaudCalculator(springs=[[0, 1], [2, 3]], dim=dim)
-    assert atoms.calc.unbounded_components(atoms) == expected
+    assert atoms.calc.potential.unbounded_components(atoms) == expected
 
 
 @pytest.mark.parametrize('a', [1e-12, 1.0, 1e12])

@@ -10,10 +10,12 @@ import numpy as np
 import pytest
 
 from ase_maud import __version__
+from ase_maud.checks import did_you_mean
 from ase_maud.cli.command import main
 from ase_maud.cli.relax import convergence_share
 from ase_maud.cli.saddles import counted
-from ase_maud.io.nets import did_you_mean, read_net, write_net
+from ase_maud.io.net_writer import write_net
+from ase_maud.io.nets import read_net
 from ase_maud.kernel_cache import COMPILE_NOTICE, compile_notice
 from ase_maud.saddles.attempts import Attempt
 

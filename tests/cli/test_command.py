@@ -14,7 +14,8 @@ from ase.optimize import BFGS
 from ase_maud.cli import command, options
 from ase_maud.cli import saddles as saddles_cli
 from ase_maud.cli.command import main
-from ase_maud.io.nets import read_net, write_net
+from ase_maud.io.net_writer import write_net
+from ase_maud.io.nets import read_net
 from ase_maud.scenes.catalogue import SUITE, build, scene_sizes
 from ase_maud.scenes.saddle_scenes import rim
 

@@ -13,7 +13,8 @@ from ase_maud import Maud, MaudCalculator
 from ase_maud.cli.command import main
 from ase_maud.form.force_density import solve_force_density
 from ase_maud.form.member_forces import form_result, write_forces_csv
-from ase_maud.io.nets import read_net, write_net
+from ase_maud.io.net_writer import write_net
+from ase_maud.io.nets import read_net
 
 from helpers import ROOT
 

@@ -8,7 +8,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 from ase_maud.cli.command import main
-from ase_maud.io.nets import read_net, write_net
+from ase_maud.io.net_writer import write_net
+from ase_maud.io.nets import read_net
 from ase_maud.io.obj import _any_obj_file, _plain_obj_file
 from ase_maud.physics.topology import boundary_edges, boundary_vertices, unique_pairs
 

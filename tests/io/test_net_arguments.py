@@ -12,7 +12,8 @@ from ase import Atoms
 from ase.calculators.emt import EMT
 
 import ase_maud.io.nets
-from ase_maud.io.nets import read_net, write_net
+from ase_maud.io.net_writer import write_net
+from ase_maud.io.nets import read_net
 
 from helpers import one_line_error, write_quad_net
 

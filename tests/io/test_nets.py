@@ -11,6 +11,7 @@ from ase.constraints import FixAtoms
 
 from ase_maud import Maud, MaudCalculator
 from ase_maud.bench.hard_inputs import BROKEN
+from ase_maud.io.net_writer import write_net
 from ase_maud.io.nets import (
     MERGE_TOLERANCE,
     edges_path,
@@ -20,7 +21,6 @@ from ase_maud.io.nets import (
     read_frames,
     read_net,
     read_obj,
-    write_net,
 )
 
 from helpers import quad_net, rule_a, write_quad_net

@@ -54,7 +54,7 @@ def test_a_loaded_net_far_below_its_supports_converges(seed):
     # On 5f059dc: DivergenceError at step ~255 (spread 3 x a N); its minimum
     # lies at about 4.7 x a N. The fixed boundary proves the minimum.
     atoms = loaded_net(seed, -100.0)
-    assert atoms.calc.minimum_proved(atoms)
+    assert atoms.calc.potential.minimum_proved(atoms)
     converged, dyn, log = relax(atoms)
     assert converged, log[-400:]
     assert dyn.monitor.bounded and dyn.monitor.marks == 0
@@ -71,7 +71,7 @@ def test_an_unproved_net_that_grows_far_converges(seed):
     # balance ahead (on 5f059dc: DivergenceError).
     make = lambda: loaded_net(seed, -1e3, plane=20)  # noqa: E731
     atoms = make()
-    assert not atoms.calc.minimum_proved(atoms)
+    assert not atoms.calc.potential.minimum_proved(atoms)
     converged, dyn, log = relax(atoms, fmax=1e-4)
     assert converged, log[-400:]
     assert not dyn.monitor.bounded and dyn.monitor.marks >= 3

@@ -67,3 +67,14 @@ def test_a_name_0_1_never_had_is_an_attribute_error():
         assert _quietly('ase_maud.stiffness').NoSuchModel
     with pytest.raises(AttributeError, match='no attribute'):
         assert importlib.import_module('ase_maud.bench.runner').no_such_name
+
+
+@pytest.mark.parametrize('name', ['minimum_proved', 'no_equilibrium', 'unbounded_components'])
+def test_the_calculator_s_scene_proofs_of_0_1_are_its_potential_s(name):
+    from ase_maud.scenes import build
+    atoms = build('ring', 8, seed=3)
+    with pytest.warns(FutureWarning, match=f'calc.potential.{name}'):
+        method = getattr(atoms.calc, name)
+    assert method(atoms) == getattr(atoms.calc.potential, name)(atoms)
+    with pytest.raises(AttributeError, match='no attribute'):
+        assert atoms.calc.no_such_method

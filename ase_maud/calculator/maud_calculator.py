@@ -8,11 +8,9 @@ Energy, each pair counted once (the specification's P double-counts: P = 2E)::
 with ``q_s`` each spring's force density multiplier (default 1) and ``F_i``
 constant nodal loads (default none).
 
-``a`` is a length and ``Q`` a force per length, in whatever units the user
-works in (ASE's eV and Angstrom if the scene is mixed with other ASE tools).
-Forces follow ASE's sign, ``f = -dE/dr``. The property ``stiffness`` holds the
-nodal blocks ``K_mm = d2E/dr_m2`` (N, dim, dim), the Hessian's diagonal blocks:
-the stiffness at point m with every other point held fixed.
+``a`` is a length and ``Q`` a force per length, in the user's units. Forces
+follow ASE's sign, ``f = -dE/dr``. The property ``stiffness`` holds the nodal
+blocks ``K_mm = d2E/dr_m2`` (N, dim, dim), the Hessian's diagonal blocks.
 
 The potential itself, its reduced units (everything is computed at ``a = Q
 = 1`` for the scene measured in ``a`` and scaled back) and its exact spring
@@ -25,6 +23,7 @@ names the atoms (or ``a`` and ``Q``), never a NaN.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -350,6 +349,13 @@ class MaudCalculator(LockedCalculator):
         self.last_force_scale = potential.force_unit * (
             math.sqrt((f_rep * f_rep).sum(axis=1).max(initial=0.0))
             if potential.repulsive else 0.0)
+
+    def __getattr__(self, name: str) -> Any:
+        """0.1's scene proofs, now :attr:`potential`'s (a FutureWarning until 0.3)."""
+        if name not in ('minimum_proved', 'no_equilibrium', 'unbounded_components'):
+            raise AttributeError(f'MaudCalculator has no attribute {name!r}')
+        warnings.warn(f'MaudCalculator.{name} is now calc.potential.{name}', FutureWarning, 2)
+        return getattr(self.__dict__['potential'], name)
 
     def get_stiffness(self, atoms: Atoms | None = None) -> np.ndarray:
         """Nodal blocks ``K_mm``, shape (N, dim, dim), units of ``Q``.

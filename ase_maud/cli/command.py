@@ -96,7 +96,7 @@ def _top_parser() -> tuple[argparse.ArgumentParser, Any]:
         '  ase-maud relax net.obj --fix boundary --out relaxed.obj\n'
         '  ase-maud show maud.traj --gif\n  ase-maud classify maud.traj\n'
         'Each command has its own --help.')
-    from importlib.metadata import version   # the installed version, when asked
+    from importlib.metadata import version  # the installed version, when asked
 
     parser.add_argument('--version', action='version', version=f"%(prog)s {version('ase-maud')}")
     return parser, parser.add_subparsers(dest='command', metavar='COMMAND')

@@ -11,7 +11,7 @@ observed. Its state goes into a restart file (:meth:`RunMonitor.todict`).
   (:func:`divergence_judged`; another calculator's run ends by fmax, steps
   or stagnation, as ASE's optimizers' do) and only where no finite minimum
   is proved (``bounded`` False; a scene whose calculator proves one,
-  ``calc.minimum_proved``, is on its way there however far it spreads, and
+  ``calc.potential.minimum_proved``, is on its way there however far it spreads, and
   only the stagnation rules apply).
   The run is judged by its forces as it grows: each time the scene's
   extent (the larger of its size, the largest distance from the centroid,
@@ -97,7 +97,7 @@ def divergence_judged(atoms: Atoms | None) -> bool:
 
 def minimum_proved(atoms: Atoms | None, target: str) -> bool:
     """True if a run seeks a ``target='minimum'`` whose existence the
-    calculator of ``atoms`` proves (:meth:`MaudCalculator.minimum_proved`):
+    calculator of ``atoms`` proves (:meth:`MaudPotential.minimum_proved`):
     the run then gets no divergence test."""
     calc = getattr(atoms, 'calc', None)
     return (target == 'minimum' and isinstance(calc, MaudCalculator)
@@ -107,7 +107,7 @@ def minimum_proved(atoms: Atoms | None, target: str) -> bool:
 def no_equilibrium(atoms: Atoms | None, target: str) -> NoEquilibriumError | None:
     """The NoEquilibriumError of a run on ``atoms`` whose calculator proves
     the scene has no finite equilibrium, or no finite minimum for a
-    ``target='minimum'`` (:meth:`MaudCalculator.no_equilibrium`); None if
+    ``target='minimum'`` (:meth:`MaudPotential.no_equilibrium`); None if
     nothing is proved (another calculator proves nothing)."""
     calc = getattr(atoms, 'calc', None)
     why = (calc.potential.no_equilibrium(atoms, minimum=target == 'minimum')

@@ -227,14 +227,25 @@ def check_writable(name: str, value: str | os.PathLike, directory: bool = False)
         if not os.access(existing, os.W_OK | os.X_OK):
             raise ValueError(f'{text}: the directory {str(existing)!r} is not writable')
         return path
-    if path.is_dir():
-        raise ValueError(f'{text} is a directory; give a file name')
+    if path.is_dir() or str(value).endswith(('/', os.sep)):
+        raise ValueError(f'{text} is a directory (a name ending in {os.sep!r} names one); '
+                         'give a file name')
+    if path.is_symlink():   # its target is written, the link kept
+        path = Path(os.path.realpath(path))
+        text += f' (a link to {str(path)!r})'
+        if path.is_dir():
+            raise ValueError(f'{text} is a directory; give a file name')
+    if path.exists() and not path.is_file():   # a device or a pipe: written in place
+        if not os.access(path, os.W_OK):
+            raise ValueError(f'{text} is not writable')
+        return Path(value)
     parent = path.parent
     if not parent.is_dir():
         raise ValueError(f'{text}: the directory {str(parent)!r} does not exist')
-    if not os.access(parent, os.W_OK | os.X_OK):
+    if not os.access(parent, os.W_OK | os.X_OK) and not (
+            path.is_file() and os.access(path, os.W_OK)):   # else written in place
         raise ValueError(f'{text}: the directory {str(parent)!r} is not writable')
-    return path
+    return Path(value)
 
 
 

@@ -64,6 +64,19 @@ def picture_path(args: argparse.Namespace) -> str:
     return args.output or str(Path(args.file).with_suffix('.gif' if args.gif else '.png'))
 
 
+def log_file(log: str | None):
+    """--log as ASE's optimisers take it: the name, or for a named pipe or a
+    device an open file (opened without waiting for a reader: a pipe that
+    nothing reads is an OSError at once, where ASE's open would wait)."""
+    import os
+
+    from ase_maud.files.atomic_replace import is_special, open_in_place
+
+    if log in (None, '-') or not is_special(log):
+        return log
+    return os.fdopen(open_in_place(log), 'a', encoding='utf-8')
+
+
 def check_outputs(args: argparse.Namespace) -> None:
     """Every file the command of ``args`` will write, checked before any
     work: a ValueError naming the option and what is wrong, or an output

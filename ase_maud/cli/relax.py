@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ase_maud.cli.options import net_options
+from ase_maud.cli.options import log_file, net_options
 
 if TYPE_CHECKING:
     pass
@@ -70,7 +70,7 @@ def relax_command(args: argparse.Namespace) -> int:
     start = atoms.positions.copy()
     progress = (sys.stderr.isatty() if args.progress is None else args.progress) \
         and not args.quiet and args.log != '-'
-    logfile = args.log or (None if progress or args.quiet else '-')
+    logfile = log_file(args.log) or (None if progress or args.quiet else '-')
     with CallRecorder(atoms.calc) as recorder, StagedTrajectory(args.traj) as staged, \
             Maud(atoms, model=args.model, method=args.method, logfile=logfile,
                  trajectory=staged.trajectory,

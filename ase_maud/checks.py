@@ -227,9 +227,11 @@ def check_writable(name: str, value: str | os.PathLike, directory: bool = False)
         if not os.access(existing, os.W_OK | os.X_OK):
             raise ValueError(f'{text}: the directory {str(existing)!r} is not writable')
         return path
-    if path.is_dir() or str(value).endswith(('/', os.sep)):
-        raise ValueError(f'{text} is a directory (a name ending in {os.sep!r} names one); '
-                         'give a file name')
+    if path.is_dir():
+        raise ValueError(f'{text} is a directory; give a file name')
+    if str(value).endswith(('/', os.sep)):
+        raise ValueError(f'{text} names a directory (it ends in {os.sep!r}); give a file '
+                         'name')
     if path.is_symlink():   # its target is written, the link kept
         path = Path(os.path.realpath(path))
         text += f' (a link to {str(path)!r})'

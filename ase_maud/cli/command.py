@@ -36,6 +36,7 @@ an output that names an input or another output refused
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
@@ -73,6 +74,14 @@ class _Parser(argparse.ArgumentParser):
     """argparse's parser with its errors in one line, as the command's own
     (``ase-maud relax: error: argument --fmax: ...; see ase-maud relax
     --help``), status 2."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # a number in any notation Python reads is a value, not an option:
+        # argparse's own test takes -1 and -.5, not -1e-3 (--load 0 0 -1e-3)
+        self._negative_number_matcher = re.compile(
+            r'^-(?:\d[\d_]*\.?[\d_]*|\.\d[\d_]*)(?:[eE][-+]?\d+)?$|^-(?:inf|infinity|nan)$',
+            re.IGNORECASE)
 
     def error(self, message: str):
         self.exit(2, f'{self.prog}: error: {message}; see {self.prog} --help\n')

@@ -57,7 +57,7 @@ def relax_command(args: argparse.Namespace) -> int:
     else:
         atoms = read_net(args.net, load=args.load, **net_options(args))
         label = Path(args.net).name
-    set_tables(atoms, loads=args.loads, q=args.q)
+    set_tables(atoms, loads=args.loads, q=args.q, dim=getattr(args, 'dim', None))
     a, springs = atoms.calc.parameters['a'], atoms.calc.parameters.get('springs', ())
     share = (f' ({a / mean_spring_length(atoms.positions, springs):.3g} x the mean spring '
              'length at the start)' if a else ' (the force-density equilibrium: no '

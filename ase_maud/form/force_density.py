@@ -58,5 +58,14 @@ def force_density_positions(atoms: Atoms) -> np.ndarray:
     # L_ff is symmetric positive definite: a symmetric ordering, no pivoting
     factors = spla.splu(laplacian[free][:, free].tocsc(), permc_spec='MMD_AT_PLUS_A',
                         diag_pivot_thresh=0.0, options={'SymmetricMode': True})
-    positions[free, :potential.dim] = factors.solve(right[:, :potential.dim])
+    with np.errstate(over='ignore', invalid='ignore'):
+        solved = factors.solve(right[:, :potential.dim])
+    if not np.isfinite(right).all() or not np.isfinite(solved).all():
+        row = free[np.flatnonzero(~np.isfinite(solved).all(axis=1))[0]] \
+            if not np.isfinite(solved).all() else free[0]
+        raise ValueError(f'the force-density equilibrium overflows (point {row} at '
+                         f'{solved[np.searchsorted(free, row)].tolist()}): the loads, '
+                         'supports and force densities are beyond the range of floats; '
+                         'scale them')
+    positions[free, :potential.dim] = solved
     return positions

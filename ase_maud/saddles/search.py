@@ -193,6 +193,7 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
         checked[k] for k in ('local', 'budget', 'fmax', 'steps', 'window', 'empty_rounds'))
     if wanted is not None:
         wanted = check('wanted', wanted, 'count')
+    check_client(client)
     if partner is not None:
         check_same_scene(minimum, partner)
     if mirror:
@@ -258,6 +259,16 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     if partner is not None and not found.saddles:
         merge([path_to_partner(minimum, partner, fmax, steps if mirror else None, distance_atol)])
     return found
+
+
+def check_client(client: Any) -> None:
+    """A ValueError naming ``client`` unless it is None or has what the
+    search asks of a ``dask.distributed`` client (``submit``, ``gather``,
+    ``scheduler_info``)."""
+    needed = ('submit', 'gather', 'scheduler_info')
+    if client is not None and not all(callable(getattr(client, n, None)) for n in needed):
+        raise ValueError(f'client must be None or a dask.distributed Client (with '
+                         f'{", ".join(needed)}), got {client!r}')
 
 
 def _batches(tasks: list, client: Any, enough: Callable[[], bool]):

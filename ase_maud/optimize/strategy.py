@@ -103,6 +103,9 @@ from ase_maud.physics.neighbours import NearestDistances
 #: after which a calculator's energy is taken to be noisy (Minimum._change).
 DISAGREEMENTS = 2
 
+#: The largest rise, relative to the energy, taken for noise (Minimum._change).
+NOISE_MAX = 0.1
+
 
 @dataclass(frozen=True)
 class Strategy:
@@ -190,11 +193,14 @@ class Minimise(Strategy):
 
         An energy that rose over a step along which the forces drive the
         points at both ends (descent at the start and at the end: a smooth
-        energy consistent with its forces cannot rise there but over a bump)
-        disagrees with its forces; from the second such step on, the
-        calculator's energy is taken to carry (undeclared) noise of the
-        largest such rise (``state.noise_seen``, relative), and changes
-        within it are judged by the forces, as a declared noise is."""
+        energy consistent with its forces cannot rise there but over a bump),
+        by more than the forces say it fell (the trapezoid estimate: a bump,
+        two points passing each other, rises less than the fall around it)
+        and by less than :data:`NOISE_MAX` of the energy, disagrees with its
+        forces; from the second such step on, the calculator's energy is
+        taken to carry (undeclared) noise of the largest such rise
+        (``state.noise_seen``, relative), and changes within it are judged
+        by the forces, as a declared noise is."""
         move = x - last.x
         if self.band:
             return work_change(last.forces, move, forces)
@@ -202,8 +208,10 @@ class Minimise(Strategy):
         seen = state.noise_seen
         change, slack = merit_change(last.merit, max(last.noise, seen), last.forces, move,
                                      merit, forces, max(noise, seen), energy)
+        trapezoid = work_change(last.forces, move, forces)[0]   # < 0: a fall, by the forces
         if (energy and change > slack and np.vdot(last.forces, move) > 0
-                and np.vdot(forces, move) > 0):
+                and np.vdot(forces, move) > 0 and change > -trapezoid
+                and change < NOISE_MAX * abs(last.merit)):
             state.disagreements += 1
             rise = change / max(abs(last.merit), 1e-300)
             state.noise_suspected = max(state.noise_suspected, rise)

@@ -146,3 +146,25 @@ def test_basin_hopping_with_large_hops_ends(seed):
                 hopping.run(10)
         calls[optimizer] = count[0]
     assert calls[Maud] <= 5 * calls[BFGS]
+
+
+@pytest.mark.parametrize('held', [0, 3])
+@pytest.mark.parametrize('seed', [0, 1, 2, 5])
+def test_a_ring_held_at_one_point_finds_the_free_ring_s_saddle(seed, held):
+    """A ring of 8 held at one point (no loads: the hold removes only the
+    translations): target='saddle' follows the free ring's modes and ends at
+    its saddle, moved to keep the point, in as many steps (it diverged)."""
+    from ase.constraints import FixAtoms
+    free = build('ring', 8, seed=seed)
+    with Maud(free, logfile=None, target='saddle') as opt:
+        assert opt.run(fmax=1e-6, steps=500)
+    atoms = build('ring', 8, seed=seed)
+    start = atoms.positions[held].copy()
+    atoms.set_constraint([*atoms.constraints, FixAtoms(indices=[held])])
+    with Maud(atoms, logfile=None, target='saddle') as held_opt:
+        assert held_opt.run(fmax=1e-6, steps=500)
+    assert held_opt.found.verdict == 'saddle' and held_opt.found.index == 1
+    assert held_opt.nsteps == opt.nsteps
+    np.testing.assert_array_equal(atoms.positions[held], start)
+    assert atoms.get_potential_energy() == pytest.approx(free.get_potential_energy(),
+                                                         rel=1e-10)

@@ -244,6 +244,13 @@ def check_writable(name: str, value: str | os.PathLike, directory: bool = False)
     parent = path.parent
     if not parent.is_dir():
         raise ValueError(f'{text}: the directory {str(parent)!r} does not exist')
+    try:
+        longest = os.pathconf(parent, 'PC_NAME_MAX')
+    except (OSError, ValueError, AttributeError):   # not said (Windows)
+        longest = 255
+    if len(path.name.encode()) > longest:
+        raise ValueError(f'{text}: the name is {len(path.name.encode())} bytes, longer than '
+                         f'the {longest} its file system takes; give a shorter name')
     if not os.access(parent, os.W_OK | os.X_OK) and not (
             path.is_file() and os.access(path, os.W_OK)):   # else written in place
         raise ValueError(f'{text}: the directory {str(parent)!r} is not writable')

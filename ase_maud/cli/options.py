@@ -83,7 +83,7 @@ def check_outputs(args: argparse.Namespace) -> None:
     that names an input or another output (:mod:`ase_maud.files.output_paths`)."""
     from ase_maud.checks import check_writable
     from ase_maud.files.output_paths import check_distinct, check_own_json
-    from ase_maud.io.nets import check_net_path
+    from ase_maud.io.nets import check_net_path, edges_path, net_format
 
     if args.command == 'relax':
         check_writable('--traj', args.traj)
@@ -91,6 +91,8 @@ def check_outputs(args: argparse.Namespace) -> None:
             check_writable('--log', args.log)
         if args.out:
             check_net_path('--out', args.out)
+            if net_format(args.out) == 'ase':   # the edge list written beside it
+                check_writable("--out's edge list", edges_path(args.out))
         if args.forces:
             check_writable('--forces', args.forces)
     elif args.command == 'show':

@@ -711,7 +711,7 @@ def judged(expect: str, run) -> str:
         if not clear:
             return 'raw traceback'
         return 'clear error' if expect == 'refuse' else 'false error'
-    except Exception:   # noqa: BLE001 (counted)
+    except (Exception, SystemExit):   # noqa: BLE001 (counted; a library's exit too)
         return 'raw traceback'
     if expect == 'refuse' or not right:
         return 'silently wrong'

@@ -229,12 +229,32 @@ def check_writable(name: str, value: str | os.PathLike, directory: bool = False)
         return path
     if path.is_dir():
         raise ValueError(f'{text} is a directory; give a file name')
+    if str(value).endswith(('/', os.sep)):
+        raise ValueError(f'{text} names a directory (it ends in {os.sep!r}); give a file '
+                         'name')
+    if path.is_symlink():   # its target is written, the link kept
+        path = Path(os.path.realpath(path))
+        text += f' (a link to {str(path)!r})'
+        if path.is_dir():
+            raise ValueError(f'{text} is a directory; give a file name')
+    if path.exists() and not path.is_file():   # a device or a pipe: written in place
+        if not os.access(path, os.W_OK):
+            raise ValueError(f'{text} is not writable')
+        return Path(value)
     parent = path.parent
     if not parent.is_dir():
         raise ValueError(f'{text}: the directory {str(parent)!r} does not exist')
-    if not os.access(parent, os.W_OK | os.X_OK):
+    try:
+        longest = os.pathconf(parent, 'PC_NAME_MAX')
+    except (OSError, ValueError, AttributeError):   # not said (Windows)
+        longest = 255
+    if len(path.name.encode()) > longest:
+        raise ValueError(f'{text}: the name is {len(path.name.encode())} bytes, longer than '
+                         f'the {longest} its file system takes; give a shorter name')
+    if not os.access(parent, os.W_OK | os.X_OK) and not (
+            path.is_file() and os.access(path, os.W_OK)):   # else written in place
         raise ValueError(f'{text}: the directory {str(parent)!r} is not writable')
-    return path
+    return Path(value)
 
 
 

@@ -8,6 +8,13 @@ result). Run with the threads pinned::
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python dev/hostile_sweep.py
 
 The SIGKILL class is tests/optimize/test_resume.py (5 kills at seeded moments).
+
+``--issue-52`` runs issue 52's classes alone (special files and links as
+outputs, mesh inputs, round trips, arguments as written, the cases ASE's
+BFGS converges on, the last raw tracebacks), each case judged as correct,
+a clear error, data lost, silently wrong, a hang, a false error or a raw
+traceback (:func:`judged`); the command-line cases run in subprocesses with
+a generous timeout, so a hang is counted, not waited on.
 """
 
 from __future__ import annotations
@@ -670,7 +677,434 @@ def long_runs(directory: Path):
             for n, z in (('chain', 30), ('hanging_net', 12)) for s in range(2)]
 
 
+# -- issue 52: outputs where the user pointed, inputs read or refused, ASE's --
+# -- convergence cases, the last raw tracebacks --------------------------------
+
+class DataLost(Exception):
+    """A file of the user's (a device, a pipe, a link's target) replaced or lost."""
+
+
+class Hang(Exception):
+    """A run that did not end within its (generous) time."""
+
+
+#: What each issue-52 case is judged as (module docstring of the classes below).
+KINDS = ('correct', 'clear error', 'data lost', 'silently wrong', 'hang', 'false error',
+         'raw traceback')
+
+
+def judged(expect: str, run) -> str:
+    """The kind (:data:`KINDS`) of ``run()``, which returns True for a right
+    answer (False: a wrong one) and raises DataLost or Hang: ``expect`` is
+    'ok' (a valid input: an error is a false error) or 'refuse' (an answer
+    is silently wrong, a ValueError or MaudError a clear error)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore')
+            right = run()
+    except DataLost:
+        return 'data lost'
+    except Hang:
+        return 'hang'
+    except (ValueError, MaudError, OSError) as error:
+        clear = bool(str(error)) and type(error).__name__ in (
+            'ValueError', 'OSError') or isinstance(error, MaudError)
+        if not clear:
+            return 'raw traceback'
+        return 'clear error' if expect == 'refuse' else 'false error'
+    except (Exception, SystemExit):   # noqa: BLE001 (counted; a library's exit too)
+        return 'raw traceback'
+    if expect == 'refuse' or not right:
+        return 'silently wrong'
+    return 'correct'
+
+
+def cli(folder: Path, *argv: str, timeout: float = 300.0) -> tuple[int, str]:
+    """``python -m ase_maud argv`` in ``folder`` (a subprocess: a hang is
+    caught by ``timeout``, generous for a busy machine): status, stderr."""
+    import subprocess
+    try:
+        run = subprocess.run([sys.executable, '-m', 'ase_maud', *argv], cwd=folder,
+                             capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        raise Hang(' '.join(argv)) from None
+    return run.returncode, run.stderr
+
+
+def refused_or(status: int, error: str, done: bool) -> bool:
+    """True for a run that did what was asked (``done``) with status 0; a
+    ValueError for a one-line refusal (status 2); else a raw traceback."""
+    if status == 2 and error.strip().count('\n') == 0 and error.startswith('ase-maud'):
+        raise ValueError(error.strip())
+    if status not in (0, 2):
+        raise RuntimeError(error.strip()[-300:])
+    return status == 0 and done
+
+
+def special_outputs(directory: Path):
+    """Every writer's output as a device node (a twin of /dev/null made in a
+    temporary folder; root only), a named pipe nobody reads, a link, a link
+    to nothing, a name ending in '/', a 250-byte name: ('ok' or 'refuse', run)."""
+    import stat as stat_module
+    relax = ['relax', '--scene', 'ring', '--size', '6', '--quiet']
+    options = {'--forces': ('.csv', relax), '--traj': ('.traj', relax),
+               '--out json': ('.json', relax), '--out obj': ('.obj', relax),
+               '--out xyz': ('.xyz', relax), '--log': ('.log', relax)}
+    cases = []
+
+    def folder_for(name):
+        folder = directory / f'special{len(list(directory.glob("special*")))}{name}'
+        folder.mkdir()
+        return folder
+
+    def device(option, suffix, argv):
+        if os.geteuid() != 0:
+            return True   # no device node without root: nothing to judge
+        folder = folder_for('dev')
+        os.mknod(folder / 'null', 0o666 | stat_module.S_IFCHR, os.makedev(1, 3))
+        os.symlink('null', folder / f'null{suffix}')   # a net's format is its suffix
+        status, error = cli(folder, *argv, option.split()[0], f'null{suffix}')
+        if not stat_module.S_ISCHR(os.stat(folder / 'null').st_mode):
+            raise DataLost(option)
+        return refused_or(status, error, True)
+
+    def pipe(option, suffix, argv):
+        folder = folder_for('fifo')
+        os.mkfifo(folder / f'pipe{suffix}')
+        status, error = cli(folder, *argv, option.split()[0], f'pipe{suffix}', timeout=600)
+        if not stat_module.S_ISFIFO(os.stat(folder / f'pipe{suffix}').st_mode):
+            raise DataLost(option)
+        return refused_or(status, error, False)   # nothing reads it: refused
+
+    def link(option, suffix, argv, dangling):
+        folder = folder_for('link')
+        target = folder / f'real{suffix}'
+        if not dangling:
+            target.write_text('old\n')
+        os.symlink(target.name, folder / f'link{suffix}')
+        status, error = cli(folder, *argv, option.split()[0], f'link{suffix}')
+        if not (folder / f'link{suffix}').is_symlink():
+            raise DataLost(option)
+        done = target.exists() and target.read_bytes() != b'old\n'
+        return refused_or(status, error, done)
+
+    def slash(option, suffix, argv):
+        folder = folder_for('slash')
+        (folder / 'outdir').mkdir()
+        status, error = cli(folder, *argv, option.split()[0], 'outdir/')
+        if [p.name for p in folder.iterdir()] != ['outdir'] or any(
+                (folder / 'outdir').iterdir()):
+            return False   # misplaced
+        return refused_or(status, error, False)
+
+    def long_name(option, suffix, argv):
+        folder = folder_for('long')
+        name = 'n' * (250 - len(suffix)) + suffix
+        status, error = cli(folder, *argv, option.split()[0], name)
+        return refused_or(status, error, (folder / name).exists())
+    for option, (suffix, argv) in options.items():
+        cases += [('ok', lambda o=option, s=suffix, a=argv: device(o, s, a)),
+                  ('refuse', lambda o=option, s=suffix, a=argv: pipe(o, s, a)),
+                  ('ok', lambda o=option, s=suffix, a=argv: link(o, s, a, False)),
+                  ('ok', lambda o=option, s=suffix, a=argv: link(o, s, a, True)),
+                  ('refuse', lambda o=option, s=suffix, a=argv: slash(o, s, a)),
+                  # an XYZ's edge list beside it (NAME.edges.txt) is over 255 bytes:
+                  # refused before any work
+                  ('refuse' if suffix == '.xyz' else 'ok',
+                   lambda o=option, s=suffix, a=argv: long_name(o, s, a))]
+
+    def show(kind):
+        folder = folder_for('show')
+        write_net(folder / 'net.obj', build('ring', 6, seed=1))
+        if kind == 'link':
+            os.symlink('real.png', folder / 'link.png')
+            status, error = cli(folder, 'show', 'net.obj', '-o', 'link.png')
+            if not (folder / 'link.png').is_symlink():
+                raise DataLost('show -o')
+            return refused_or(status, error, (folder / 'real.png').exists())
+        os.mkfifo(folder / 'pipe.png')
+        status, error = cli(folder, 'show', 'net.obj', '-o', 'pipe.png', timeout=600)
+        return refused_or(status, error, False)
+    cases += [('ok', lambda: show('link')), ('refuse', lambda: show('pipe'))]
+    return cases
+
+
+PLY_TEXT = ('ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n'
+            'property float z\nelement face {n}\nproperty list uchar int vertex_indices\n'
+            'end_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n{rows}')
+
+
+def mesh_inputs(directory: Path):
+    """Mesh files: face indices out of range, faces twice, what meshio
+    cannot read, OFF of any face size: ('ok' or 'refuse', run)."""
+    def text(name, content):
+        path = directory / f'in52{abs(hash(content))}{name}'
+        path.write_text(content)
+        return path
+
+    def ply(*faces):
+        return text('.ply', PLY_TEXT.format(n=len(faces), rows=''.join(
+            f'{len(f)} {" ".join(map(str, f))}\n' for f in faces)))
+
+    def square(path, **keywords):
+        atoms = read_net(path, **keywords)
+        edges = sorted(map(tuple, atoms.calc.springs.tolist()))
+        return edges == [(0, 1), (0, 3), (1, 2), (2, 3)] or edges == [
+            (0, 1), (0, 2), (0, 3), (1, 2), (2, 3)]
+
+    def boundary(path):
+        atoms = read_net(path, fixed='boundary')
+        return sorted(atoms.constraints[0].index.tolist()) == [0, 1, 2, 3]
+    refuse = [lambda v=v: read_net(ply((0, 1, 2), (0, 2, v))) and False
+              for v in (-1, -4, 4, 1000)]
+    refuse += [lambda: read_net(text('.stl', 'solid x\nendsolid x\n')) and False,
+               lambda: read_net(text('.stl', '')) and False,
+               lambda: read_net(text('.vtk', '# vtk DataFile Version 4.2\nx\nASCII\nDATASET '
+                                     'UNSTRUCTURED_GRID\nPOINTS 4 float\n0 0 0 1 0 0 1 1 0 0 1 0'
+                                     '\nCELLS 1 5\n4 0 1 2 3\nCELL_TYPES 1\n4\n')) and False,
+               lambda: read_net(text('.off', 'OFF\n3 1 0\n0 0 0\n1 0 0\n1 1 0\n3 0 1 5\n'))
+               and False]
+    ok = [lambda: square(text('.off', 'OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n')),
+          lambda: square(text('.off', 'OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n'
+                              '4 0 1 2 3 255 0 0\n')),
+          lambda: square(text('.off', 'NOFF\n4 1 0\n0 0 0 0 0 1\n1 0 0 0 0 1\n1 1 0 0 0 1\n'
+                              '0 1 0 0 0 1\n4 0 1 2 3\n')),
+          lambda: boundary(ply((0, 1, 2), (0, 2, 3), (2, 1, 0))),
+          lambda: boundary(text('.obj', 'v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\n'
+                                'f 1 3 4\nf 3 2 1\n'))]
+    return [('refuse', r) for r in refuse] + [('ok', o) for o in ok]
+
+
+def round_trips(directory: Path):
+    """Each writer's file read back, with and without the options that wrote
+    it, is the scene written (forces equal): ('ok', run)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'tests' / 'io'))
+    from test_mesh_input import scene  # the tests' seeded scene of random q, loads, a, Q
+
+    def case(kind, seed, given):
+        atoms = scene(seed)
+        path = directory / f'trip{kind}{seed}{given}.{kind}'
+        write_net(path, atoms)
+        p = atoms.calc.parameters
+        options = {'a': p['a'], 'Q': p['Q']} if given or kind in ('obj', 'xyz') else {}
+        if kind in ('obj', 'xyz'):
+            options.update(fixed=atoms.constraints[0].index.tolist(), dim=3)
+        back = read_net(path, **options)
+        if kind in ('obj', 'xyz'):
+            back.calc.set(q=p['q'], loads=p['loads'])   # OBJ and XYZ hold neither
+        return np.allclose(back.get_forces(), atoms.get_forces(), rtol=1e-12, atol=1e-12)
+
+    def relaxed(seed):
+        folder = directory / f'tripcli{seed}'
+        folder.mkdir()
+        write_net(folder / 'net.obj', build('hanging_net', 5, seed=seed))
+        (folder / 'fixed.txt').write_text('\n'.join(map(str, build(
+            'hanging_net', 5, seed=seed).constraints[0].index.tolist())) + '\n')
+        status, error = cli(folder, 'relax', 'net.obj', '--fix', 'fixed.txt', '--Q', '2',
+                            '--a', '0.5', '--fmax', '1e-6', '--quiet', '--out', 'r.json')
+        refused_or(status, error, True)
+        return all(np.linalg.norm(read_net(folder / 'r.json', **given).get_forces(),
+                                  axis=1).max() < 1e-6 for given in ({}, {'Q': 2.0, 'a': 0.5}))
+    return ([('ok', lambda k=k, s=s, g=g: case(k, s, g)) for k in ('json', 'traj', 'obj', 'xyz')
+             for s in range(2) for g in (False, True)]
+            + [('ok', lambda s=s: relaxed(s)) for s in range(2)])
+
+
+def arguments_as_written(directory: Path):
+    """--load in scientific notation, a flat mesh under out-of-plane --loads
+    (3D unless --dim 2 is given), the documented canopy example."""
+    import meshio
+
+    def canopy(folder):
+        n = 6
+        x, y = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))
+        quads = [[i * n + j, i * n + j + 1, (i + 1) * n + j + 1, (i + 1) * n + j]
+                 for i in range(n - 1) for j in range(n - 1)]
+        meshio.write(folder / 'canopy.ply', meshio.Mesh(
+            np.c_[x.ravel(), y.ravel(), np.zeros(n * n)], [('quad', np.array(quads, np.int32))]),
+            binary=False)
+        (folder / 'loads.csv').write_text('i,px,py,pz\n' + ''.join(
+            f'{k},0,0,-0.2\n' for k in range(n * n)))
+
+    def case(*argv, expect_dim=None):
+        folder = directory / f'args{abs(hash(argv))}'
+        folder.mkdir()
+        canopy(folder)
+        status, error = cli(folder, 'relax', 'canopy.ply', '--fix', 'outer', '--quiet',
+                            '--out', 'out.json', *argv)
+        refused_or(status, error, True)
+        return read_net(folder / 'out.json').calc.dim == expect_dim
+    ok = [lambda z=z: case('--load', '0', '0', z, expect_dim=3)
+          for z in ('-1e-3', '-1E-3', '-.5e-2', '-0.001', '-1e+0')]
+    ok += [lambda: case('--loads', 'loads.csv', '--forces', 'forces.csv', expect_dim=3)]
+    refuse = [lambda: case('--loads', 'loads.csv', '--dim', '2', expect_dim=2),
+              lambda: case('--load', '0', '0', '-1e-3x')]
+    return [('ok', o) for o in ok] + [('refuse', r) for r in refuse]
+
+
+def ase_converges(directory: Path):
+    """Where BFGS converges: undeclared energy noise, a = 0 nets with force
+    densities spread over decades, a ring of 8 with a point held (saddle),
+    BasinHopping of LJ6 with dr=2.5 (bounded force calls)."""
+    from ase import Atoms
+    from ase.calculators.lj import LennardJones
+    from doubles import NoisyEnergy
+
+    def both(make, fmax, steps=1000, **keywords):
+        ends = []
+        for optimizer in (BFGS, Maud):
+            atoms = make()
+            with optimizer(atoms, logfile=None, **(keywords if optimizer is Maud else {})) \
+                    as opt:
+                ends.append((opt.run(fmax=fmax, steps=steps), atoms))
+        return ends
+
+    def noisy(scene, size, seed):
+        def make():
+            atoms = build(scene, size, seed=seed)
+            atoms.calc = NoisyEnergy(1e-2, seed, False, **atoms.calc.parameters)
+            return atoms
+        (bfgs, _), (maud, atoms) = both(make, 1e-4)
+        exact = atoms.copy()
+        exact.calc = MaudCalculator(**{**atoms.calc.parameters, 'backend': 'numpy'})
+        return bfgs and maud and np.linalg.norm(exact.get_forces(), axis=1).max() < 1e-4
+
+    def linear(size, spread, seed):
+        q = np.exp(np.random.default_rng(seed).uniform(-1, 1, 2 * size * (size - 1))
+                   * np.log(spread))
+
+        def make():
+            atoms = build('hanging_net', size, seed=seed)
+            atoms.calc.set(a=0.0, q=q[:len(atoms.calc.springs)],
+                           loads=np.tile([0.0, 0.0, -0.1], (len(atoms), 1)))
+            return atoms
+        (bfgs, reference), (maud, atoms) = both(make, 1e-6, 3000)
+        return bfgs and maud and np.allclose(atoms.positions, reference.positions,
+                                             atol=1e-4 * np.abs(reference.positions).max())
+
+    def held_ring(seed):
+        atoms = build('ring', 8, seed=seed)
+        atoms.set_constraint([*atoms.constraints, FixAtoms(indices=[0])])
+        with Maud(atoms, logfile=None, target='saddle') as opt:
+            return opt.run(fmax=1e-6, steps=1000) and opt.found.verdict == 'saddle'
+
+    def hops(seed):
+        calls = []
+        for optimizer in (BFGS, Maud):
+            half = 6 ** (1 / 3)
+            atoms = Atoms('He6', positions=np.random.RandomState(42 + seed).uniform(
+                -half, half, (6, 3)))
+            atoms.calc = LennardJones()
+            count, calculate = [0], atoms.calc.calculate
+
+            def counted(*args, count=count, calculate=calculate, **kwargs):
+                count[0] += 1
+                if count[0] > 100000:
+                    raise Hang('basin hopping: over 100000 force calls')
+                return calculate(*args, **kwargs)
+            atoms.calc.calculate = counted
+            np.random.seed(seed)
+            with BasinHopping(atoms, temperature=1.0, dr=2.5, optimizer=optimizer,
+                              logfile=None, optimizer_logfile=None, trajectory=None,
+                              local_minima_trajectory=None) as hopping:
+                hopping.run(10)
+            calls.append(count[0])
+        return calls[1] <= 5 * calls[0]
+    return ([('ok', lambda c=c, z=z, s=s: noisy(c, z, s)) for c, z in
+             (('hanging_net', 5), ('random_graph', 12), ('hanging_net', 10)) for s in range(2)]
+            + [('ok', lambda z=z, p=p, s=s: linear(z, p, s)) for z in (5, 7, 10)
+               for p in (1e1, 1e3, 1e6) for s in range(2)]
+            + [('ok', lambda s=s: held_ring(s)) for s in range(3)]
+            + [('ok', lambda s=s: hops(s)) for s in range(3)])
+
+
+def last_tracebacks(directory: Path):
+    """The raw tracebacks issue 52 lists: each a clear error now ('refuse')."""
+    from ase.calculators.calculator import Calculator, all_changes
+
+    from ase_maud import search_saddles
+
+    class Reduced(Calculator):
+        implemented_properties = ['energy', 'forces']
+
+        def __init__(self, flat):
+            super().__init__()
+            self.flat = flat
+            if not flat:
+                self.implemented_properties = ['forces']
+
+        def calculate(self, atoms=None, properties=('energy',), system_changes=all_changes):
+            super().calculate(atoms, properties, system_changes)
+            forces = -atoms.positions.copy()
+            self.results = {'forces': forces[:, :2]} if self.flat else {'forces': forces}
+            if self.flat:
+                self.results['energy'] = 0.0
+
+    def copper(calc):
+        atoms = Icosahedron('Cu', 2)
+        atoms.rattle(0.05, seed=1)
+        atoms.calc = calc
+        return atoms
+
+    def minimum():
+        atoms = build('ring', 8, seed=1)
+        Maud(atoms, logfile=None).run(fmax=1e-6)
+        return atoms
+
+    def disc():
+        status, error = cli(directory, 'relax', '--scene', 'disc', '--size', '10', '--quiet')
+        return refused_or(status, error, False)
+    cases = [lambda m=m: Maud(copper(EMT()), logfile=None, model=m).run(fmax=1e-3, steps=20)
+             for m in ('springs', 'near')]
+    cases += [lambda f=f: Maud(copper(Reduced(f)), logfile=None).run(fmax=1e-3, steps=20)
+              for f in (True, False)]
+    cases += [lambda: Maud(UnitCellFilter(build('hanging_net', 5, seed=1)),
+                           logfile=None).run(fmax=1e-3, steps=20),
+              disc, lambda: search_saddles(minimum(), client=object())]
+    return [('refuse', lambda c=c: c() and False) for c in cases]
+
+
+def issue_52_classes(directory: Path):
+    return [('special files, links, names as outputs (each writer)',
+             special_outputs(directory)),
+            ('mesh inputs: face indices, faces twice, meshio failures, OFF',
+             mesh_inputs(directory)),
+            ("round trips of every writer under the options that wrote it",
+             round_trips(directory)),
+            ('arguments as written: --load 0 0 -1e-3, flat nets under --loads',
+             arguments_as_written(directory)),
+            ("where BFGS converges: noise, a = 0 spreads, a held ring's saddle, hops",
+             ase_converges(directory)),
+            ('the raw tracebacks listed', last_tracebacks(directory))]
+
+
+def main_52() -> None:
+    """The issue-52 classes alone: per class, each kind of :data:`KINDS`."""
+    with tempfile.TemporaryDirectory() as name:
+        directory = Path(name)
+        print('| class | inputs | ' + ' | '.join(KINDS) + ' |')
+        print('| --- ' * (len(KINDS) + 2) + '|')
+        total, defects = Counter(), []
+        for title, cases in issue_52_classes(directory):
+            counts = Counter()
+            for expect, run in cases:
+                kind = judged(expect, run)
+                counts[kind] += 1
+                if kind not in ('correct', 'clear error'):
+                    defects.append(f'{title}: {kind} (case {sum(counts.values())})')
+            total += counts
+            print(f'| {title} | {len(cases)} | '
+                  + ' | '.join(str(counts[k]) for k in KINDS) + ' |', flush=True)
+        print(f'| all | {sum(total.values())} | '
+              + ' | '.join(str(total[k]) for k in KINDS) + ' |')
+    for line in defects:
+        print(' -', line, file=sys.stderr)
+
+
 def main() -> None:
+    if '--issue-52' in sys.argv:
+        main_52()
+        return
     with tempfile.TemporaryDirectory() as name:
         directory = Path(name)
         classes = [('unchecked run arguments (fmax x steps)', run_arguments()),

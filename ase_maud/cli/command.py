@@ -76,6 +76,14 @@ class _Parser(argparse.ArgumentParser):
     (``ase-maud relax: error: argument --fmax: ...; see ase-maud relax
     --help``), status 2."""
 
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # a number in any notation Python reads is a value, not an option:
+        # argparse's own test takes -1 and -.5, not -1e-3 (--load 0 0 -1e-3)
+        self._negative_number_matcher = re.compile(
+            r'^-(?:\d[\d_]*\.?[\d_]*|\.\d[\d_]*)(?:[eE][-+]?\d+)?$|^-(?:inf|infinity|nan)$',
+            re.IGNORECASE)
+
     def error(self, message: str):
         invalid = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
         if invalid:   # argparse of Python < 3.14 suggests nothing

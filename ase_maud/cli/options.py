@@ -97,6 +97,19 @@ def picture_path(args: argparse.Namespace) -> str:
     return args.output or str(Path(args.file).with_suffix('.gif' if args.gif else '.png'))
 
 
+def log_file(log: str | None):
+    """--log as ASE's optimisers take it: the name, or for a named pipe or a
+    device an open file (opened without waiting for a reader: a pipe that
+    nothing reads is an OSError at once, where ASE's open would wait)."""
+    import os
+
+    from ase_maud.files.atomic_replace import is_special, open_in_place
+
+    if log in (None, '-') or not is_special(log):
+        return log
+    return os.fdopen(open_in_place(log), 'a', encoding='utf-8')
+
+
 def check_outputs(args: argparse.Namespace) -> None:
     """Every file the command of ``args`` will write, checked before any
     work: a ValueError naming the option and what is wrong, or an output
@@ -104,7 +117,7 @@ def check_outputs(args: argparse.Namespace) -> None:
     # Imported when the command runs, so that ase-maud --help answers at once.
     from ase_maud.checks import check_writable
     from ase_maud.files.output_paths import check_distinct, check_own_json
-    from ase_maud.io.nets import check_net_path
+    from ase_maud.io.nets import check_net_path, edges_path, net_format
 
     if args.command == 'relax':
         check_writable('--traj', args.traj)
@@ -112,6 +125,8 @@ def check_outputs(args: argparse.Namespace) -> None:
             check_writable('--log', args.log)
         if args.out:
             check_net_path('--out', args.out)
+            if net_format(args.out) == 'ase':   # the edge list written beside it
+                check_writable("--out's edge list", edges_path(args.out))
         if args.forces:
             check_writable('--forces', args.forces)
     elif args.command == 'show':

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ase_maud.cli.options import net_options
+from ase_maud.cli.options import log_file, net_options
 
 if TYPE_CHECKING:
     pass
@@ -79,7 +79,7 @@ def relax_command(args: argparse.Namespace) -> int:
     else:
         atoms = read_net(args.net, **net_options(args))
         label = Path(args.net).name
-    set_tables(atoms, loads=args.loads, q=args.q)
+    set_tables(atoms, loads=args.loads, q=args.q, dim=getattr(args, 'dim', None))
     faces = atoms.info.pop('faces', None)   # for --out, not in every trajectory frame
     a, springs = atoms.calc.parameters['a'], atoms.calc.parameters.get('springs', ())
     share = (f' ({a / mean_spring_length(atoms.positions, springs):.3g} x the mean spring '
@@ -90,7 +90,7 @@ def relax_command(args: argparse.Namespace) -> int:
     start = atoms.positions.copy()
     progress = (sys.stderr.isatty() if args.progress is None else args.progress) \
         and not args.quiet and args.log != '-'
-    logfile = args.log or (None if progress or args.quiet else '-')
+    logfile = log_file(args.log) or (None if progress or args.quiet else '-')
     with CallRecorder(atoms.calc) as recorder, StagedTrajectory(args.traj) as staged, \
             Maud(atoms, model=args.model, method=args.method, logfile=logfile,
                  trajectory=staged.trajectory,

@@ -23,8 +23,9 @@ from pathlib import Path
 from typing import Any
 
 from ase_maud.errors import FileInUseError
-from ase_maud.files.atomic_replace import temporary_beside
+from ase_maud.files.atomic_replace import is_special, temporary_beside, write_target
 from ase_maud.files.run_lock import RunLock
+from ase_maud.files.trajectory import parameters_once_writer
 
 PathLike = str | os.PathLike
 #: (argument, file) pairs: the argument as the user wrote it ('--traj',
@@ -97,9 +98,14 @@ class StagedTrajectory:
     """
 
     def __init__(self, path: PathLike):
-        from ase_maud.files.trajectory import parameters_once_writer
-
-        self.path = Path(path)
+        self.path = write_target(path)   # a link's target, the link kept
+        self.kept = False
+        if is_special(self.path):   # a device: written in place, nothing staged
+            check_seekable('trajectory', self.path)
+            self.temporary, self._locks = self.path, []
+            self.trajectory = parameters_once_writer(self.path)
+            self.kept = True
+            return
         RunLock(None, self.path).check()
         self.temporary = temporary_beside(self.path)
         self._locks = [RunLock(None, self.temporary)]
@@ -108,7 +114,6 @@ class StagedTrajectory:
         except BaseException:
             self.temporary.unlink()
             raise
-        self.kept = False
 
     def keep(self) -> None:
         """Move the trajectory onto ``path`` if it holds a frame (once); a
@@ -125,7 +130,7 @@ class StagedTrajectory:
             self.kept = True
 
     def __enter__(self) -> StagedTrajectory:
-        if self.path.exists():
+        if self.path.exists() and not self.kept:
             self._locks.append(RunLock(None, self.path))
         try:
             for lock in self._locks:
@@ -143,6 +148,20 @@ class StagedTrajectory:
             lock.__exit__()
 
 
+def check_seekable(name: str, path: PathLike) -> None:
+    """A ValueError naming ``name`` if ``path`` is a named pipe or a socket:
+    an ASE trajectory (or a restart file) is written with seeks, which a
+    pipe has not, and opening one that nobody reads would wait for ever."""
+    import stat
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return
+    if stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode):
+        raise ValueError(f'{name} {str(path)!r} is a named pipe (or socket): a '
+                         f'{name} is written with seeks a pipe does not have; give a file')
+
+
 def check_run_files(restart: Any, logfile: Any, trajectory: Any) -> None:
     """:func:`check_distinct` of an optimizer's files (those given by name:
     not None, ``'-'`` or an open file): ``restart`` and its arrays file
@@ -152,4 +171,7 @@ def check_run_files(restart: Any, logfile: Any, trajectory: Any) -> None:
         if isinstance(value, (str, os.PathLike)) and value != '-']
     if isinstance(restart, (str, os.PathLike)):
         named.append(("restart's arrays file", os.fspath(restart) + '.arrays'))
+    for name, value in named:
+        if name != 'logfile':
+            check_seekable(name, value)
     check_distinct((), named)

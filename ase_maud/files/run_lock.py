@@ -66,8 +66,8 @@ class RunLock:
         self._held = []
 
     def _take(self, what: str, path: Path, created: bool) -> None:
-        if fcntl is None:
-            return
+        if fcntl is None or (path.exists() and not path.is_file()):
+            return   # a device or a pipe is written in place, never locked
         handle = open(path, 'ab')
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)

@@ -91,9 +91,18 @@ def force_density_positions(atoms: Atoms) -> np.ndarray:
     loads = np.zeros((natoms, 3)) if potential.loads is None else potential.loads
     right = loads[free] / potential.Q - laplacian[free][:, held] @ positions[held]
     factors = free_factors(laplacian[free][:, free], bool(len(potential.compressed)))
-    positions[free, :potential.dim] = factors.solve(right[:, :potential.dim])
-    if not np.isfinite(positions).all():
-        raise ValueError(_SINGULAR)
+    with np.errstate(over='ignore', invalid='ignore'):
+        solved = factors.solve(right[:, :potential.dim])
+    if not np.isfinite(right).all() or not np.isfinite(solved).all():
+        if np.isfinite(right).all() and len(potential.compressed):
+            raise ValueError(_SINGULAR)
+        row = free[np.flatnonzero(~np.isfinite(solved).all(axis=1))[0]] \
+            if not np.isfinite(solved).all() else free[0]
+        raise ValueError(f'the force-density equilibrium overflows (point {row} at '
+                         f'{solved[np.searchsorted(free, row)].tolist()}): the loads, '
+                         'supports and force densities are beyond the range of floats; '
+                         'scale them')
+    positions[free, :potential.dim] = solved
     return positions
 
 

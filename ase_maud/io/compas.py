@@ -229,13 +229,73 @@ def _compas_forces(path, data, springs):
     return q.reshape(len(springs)), loads.reshape(-1, 3), said_q, said_loads
 
 
-def read_compas_forces(path: PathLike, springs: np.ndarray) -> dict[str, np.ndarray]:
+#: The key, in a COMPAS document's graph (mesh) ``attributes``, of the
+#: ``a`` and ``Q`` :func:`compas_text` wrote with: a file's ``q`` is the
+#: force density ``Q q``, so a net read back is the net written.
+PARAMETERS_KEY = 'ase_maud'
+
+
+def _stored_parameters(path, data) -> dict[str, float]:
+    """The ``a`` and ``Q`` a COMPAS document stores under
+    :data:`PARAMETERS_KEY` (checked), or {}."""
+    attributes = data.get('attributes')
+    stored = attributes.get(PARAMETERS_KEY) if isinstance(attributes, dict) else None
+    if stored is None:
+        return {}
+    if not isinstance(stored, dict) or not set(stored) <= {'a', 'Q'}:
+        raise ValueError(f'{path}: attributes.{PARAMETERS_KEY} must be an object of a and '
+                         f'Q, got {stored!r}')
+    try:
+        return {name: check(name, float(value) if isinstance(value, int) else value)
+                for name, value in stored.items()}
+    except ValueError as error:
+        raise ValueError(f'{path}: attributes.{PARAMETERS_KEY}: {error}') from None
+
+
+def read_compas_forces(path: PathLike, springs: np.ndarray) -> dict[str, Any]:
     """The force densities ``q`` of ``springs`` (as :func:`read_compas` gives
     them) and the loads of a COMPAS JSON file, as calculator parameters:
-    only those the file says anything of (see the module docstring)."""
+    only those the file says anything of (see the module docstring); with
+    the ``a`` and ``Q`` it stores (:data:`PARAMETERS_KEY`), ``q`` is the
+    file's divided by that ``Q``."""
     _, data = _compas_data(path)
     q, loads, said_q, said_loads = _compas_forces(path, data, springs)
-    return {**({'q': q} if said_q else {}), **({'loads': loads} if said_loads else {})}
+    stored = _stored_parameters(path, data)
+    q = q / stored.get('Q', 1.0)
+    return {**({'q': q} if said_q else {}), **({'loads': loads} if said_loads else {}),
+            **stored}
+
+
+def _parameters(atoms) -> dict[str, float]:
+    """The ``a`` and ``Q`` of ``atoms``' calculator that a COMPAS file must
+    store to be read back as written: none where reading gives them anyway
+    (``Q = 1`` and ``a`` the default of the net, :func:`ase_maud.io.nets.default_a`),
+    else both."""
+    from ase import Atoms
+    from ase.constraints import FixAtoms
+
+    from ase_maud.io.nets import default_a
+
+    potential = atoms.calc.potential
+    a, Q = float(potential.a), float(potential.Q)
+    read = Atoms(positions=atoms.positions)   # as read back: the anchors alone held
+    read.set_constraint(FixAtoms(mask=fixed_atoms(atoms)))
+    if Q == 1.0 and a == default_a(read, potential.springs):
+        return {}
+    return {'a': a, 'Q': Q}
+
+
+def _set_parameters(data, parameters) -> None:
+    """Store ``parameters`` (:func:`_parameters`) in COMPAS ``data``'s
+    attributes (or drop an earlier run's where there are none)."""
+    if not isinstance(data.get('attributes'), dict):
+        if not parameters:
+            return
+        data['attributes'] = {}
+    if parameters:
+        data['attributes'][PARAMETERS_KEY] = parameters
+    else:
+        data['attributes'].pop(PARAMETERS_KEY, None)
 
 
 #: A JSON string (skipped) or number (group 1).
@@ -271,10 +331,11 @@ def compas_text(atoms, like, result=None):
     (``Q q L``, tension positive) and ``length``, and whose reactions vertex
     attributes ``rx``, ``ry``, ``rz`` of the supports."""
     potential = atoms.calc.potential
-    q = np.broadcast_to(potential.stiffnesses, len(potential.springs))
+    q = potential.Q * np.broadcast_to(potential.stiffnesses, len(potential.springs))
     loads = np.zeros((len(atoms), 3)) if potential.loads is None else potential.loads
     if like is None:
         document = _compas_graph(atoms, q, loads)
+        _set_parameters(document['data'], _parameters(atoms))
         if result is not None:
             _set_results(like, document['data'], result)
         return json.dumps(document)
@@ -298,9 +359,15 @@ def compas_text(atoms, like, result=None):
             attributes[axis] = value
     changed = _update_forces(like, data, atoms.calc.springs, q, loads)
     changed = _update_supports(like, data, fixed_atoms(atoms)) or changed
+    # q is Q q: a Q other than the file's changes what its q mean (an a
+    # other than its own is stored where the document is written anew)
+    parameters = _parameters(atoms)
+    changed = changed or parameters.get('Q', 1.0) != _stored_parameters(like, data).get(
+        'Q', 1.0)
     if result is not None:
         _set_results(like, data, result)
     if changed or result is not None or not layout:
+        _set_parameters(data, parameters)
         return json.dumps(document)
     pieces, done = [mark], 0
     for start in sorted(edits):
@@ -391,8 +458,9 @@ def _compas_graph(atoms, q, loads):
                         if loads[n].any() else {})}
             for n, (x, y, z) in enumerate(atoms.positions)}
     edge = {str(n): {} for n in range(len(atoms))}
+    said = atoms.calc.potential.q is not None or atoms.calc.potential.Q != 1
     for (i, j), qs in zip(atoms.calc.springs, q, strict=True):
-        edge[str(i)][str(j)] = {} if atoms.calc.potential.q is None else {'q': float(qs)}
+        edge[str(i)][str(j)] = {'q': float(qs)} if said else {}
     data = {'attributes': {}, 'default_node_attributes': {'x': 0.0, 'y': 0.0, 'z': 0.0},
             'default_edge_attributes': {}, 'node': node, 'edge': edge,
             'max_node': len(atoms) - 1}

@@ -1,5 +1,7 @@
 """Meshes in the formats meshing and CAD tools write: PLY, STL, OFF, VTK and
-VTU, read through meshio (the maintained reader and writer of these formats).
+VTU, read through meshio (the maintained reader and writer of these formats),
+but OFF, read here (:func:`read_off`: meshio's reader takes triangles only,
+and ends the interpreter on anything else).
 
 The springs are the edges of the faces (triangles, quads, polygons), each
 undirected pair once, plus the segments of line cells; coincident points are
@@ -13,11 +15,17 @@ faces the net was read with (``atoms.info['faces']``, set by
 the springs that are no face's edge as line cells, so that the file read back
 is the same net. STL and OFF (as meshio reads it) hold triangles only: a net
 with other faces or with lines is refused there, in words, rather than
-written with diagonals it does not have.
+written with diagonals it does not have. A face index out of
+range (negative included) is refused by file and face; a face listed twice
+is read once (:func:`ase_maud.io.nets.read_net` says so). Any failure of
+meshio, its ``SystemExit`` included, is a ValueError naming the file.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
+import re
 from pathlib import Path
 
 import numpy as np
@@ -97,14 +105,21 @@ def read_mesh(path: PathLike) -> NetData:
     the module docstring); a ValueError names the file and what is wrong."""
     import meshio  # imported here: its import costs time every command would pay
 
+    if Path(path).suffix.lower() == '.off':
+        return read_off(path)
     try:
-        with np.errstate(over='ignore'):   # meshio's test for binary STL on a text file
+        with np.errstate(over='ignore'), contextlib.redirect_stdout(io.StringIO()), \
+                contextlib.redirect_stderr(io.StringIO()):
             mesh = meshio.read(path, file_format=MESH_FORMATS[Path(path).suffix.lower()])
     except FileNotFoundError:
         raise
-    except Exception as error:   # meshio's readers raise many kinds
-        raise ValueError(f'{path}: meshio cannot read it ({type(error).__name__}: '
-                         f'{error})') from error
+    except (Exception, SystemExit) as error:   # meshio's readers raise many kinds, and exit
+        said = f'{type(error).__name__}: {error}' if not isinstance(error, SystemExit) else (
+            'its reader gave up on a cell type or layout it does not know: VTK '
+            'polylines, strips and pixels, say')
+        raise ValueError(f'{path}: meshio cannot read it ({said})') from None
+    if mesh.points.ndim != 2 or not len(mesh.points):
+        raise ValueError(f'{path}: no points')
     points = np.zeros((len(mesh.points), 3))
     points[:, :mesh.points.shape[1]] = mesh.points
     bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
@@ -115,8 +130,14 @@ def read_mesh(path: PathLike) -> NetData:
         raise ValueError(f'{path}: no points')
     rings, pairs = [], [np.zeros((0, 2), dtype=int)]
     merged, points = merge_coincident(points)
-    for block in mesh.cells:
-        cells = merged[np.asarray(block.data, dtype=int)]
+    for number, block in enumerate(mesh.cells):
+        data = np.asarray(block.data, dtype=np.int64)
+        if data.size and (data.min() < 0 or data.max() >= len(merged)):
+            row = np.flatnonzero(((data < 0) | (data >= len(merged))).any(axis=1))[0]
+            raise ValueError(f'{path}: {block.type} {row} of cell block {number} names points '
+                             f'{data[row].tolist()}; the file has {len(merged)} points '
+                             '(0-based)')
+        cells = merged[data]
         if block.type in FACE_CELLS or block.type.startswith('polygon'):
             rings.append(cells)
             pairs.append(face_edges(cells))
@@ -125,9 +146,77 @@ def read_mesh(path: PathLike) -> NetData:
         elif block.type != 'vertex':
             raise ValueError(f'{path}: cells of type {block.type!r}; a net is made of '
                              f'faces ({", ".join(FACE_CELLS)}) and lines')
-    pairs = np.sort(np.concatenate(pairs), axis=1)
-    pairs = pairs[pairs[:, 0] != pairs[:, 1]]   # corners merged into one
-    first = np.sort(unique_pairs(pairs)[1])
     # one block of faces stays one array (a list of lists costs more than the read)
     faces = rings[0] if len(rings) == 1 else [ring for cells in rings for ring in cells.tolist()]
+    return _net(points, np.concatenate(pairs), faces)
+
+
+def _net(points, pairs, faces):
+    """The NetData of ``points``, edge ``pairs`` (each kept once, in order)
+    and ``faces``."""
+    pairs = np.sort(np.asarray(pairs, dtype=int).reshape(-1, 2), axis=1)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]   # corners merged into one
+    first = np.sort(unique_pairs(pairs)[1])
     return NetData(points, pairs[first], faces, [])
+
+
+#: OFF headers read by :func:`read_off`: OFF with any of the prefixes ST
+#: (texture), C (colours), N (normals) of its vertex lines.
+OFF_HEADER = re.compile(r'^(ST)?C?N?OFF$')
+
+
+def read_off(path: PathLike) -> NetData:
+    """Points and faces of an OFF file (``OFF``, ``COFF``, ``NOFF``, ``STOFF``
+    ...; faces of any number of corners, a colour after a face's indices
+    ignored, as are a vertex line's normal, colour and texture; ``#``
+    comments); a ValueError names the file, the line and what was expected."""
+    lines = []
+    with open(path, encoding='utf-8', errors='replace') as text:
+        for number, line in enumerate(text, 1):
+            words = line.split('#', 1)[0].split()
+            if words:
+                lines.append((number, words))
+    if not lines or not OFF_HEADER.match(lines[0][1][0]):
+        raise ValueError(f'{path}: line {lines[0][0] if lines else 1}: an OFF file starts '
+                         "with 'OFF' (or COFF, NOFF, STOFF...); 4OFF, nOFF and binary OFF "
+                         'are not read')
+    header = lines[0][1][1:] or (lines.pop(1)[1] if len(lines) > 1 else [])
+    where = lambda number: f'{path}: line {number}'   # noqa: E731
+    try:
+        nv, nf = int(header[0]), int(header[1])
+    except (IndexError, ValueError):
+        raise ValueError(f'{where(lines[0][0])}: expected the counts of vertices, faces '
+                         f'and edges, got {" ".join(header)!r}') from None
+    if nv < 1 or nf < 0 or len(lines) < 1 + nv + nf:
+        raise ValueError(f'{where(lines[0][0])}: {nv} vertices and {nf} faces declared, '
+                         f'{len(lines) - 1} lines hold them' if nv >= 1 and nf >= 0 else
+                         f'{where(lines[0][0])}: {nv} vertices, {nf} faces')
+    points = np.empty((nv, 3))
+    for row, (number, words) in enumerate(lines[1:1 + nv]):
+        try:
+            points[row] = [float(w) for w in words[:3]]
+        except ValueError:
+            raise ValueError(f'{where(number)}: expected a vertex, three numbers x y z, '
+                             f'got {" ".join(words)!r}') from None
+        if not np.isfinite(points[row]).all():
+            raise ValueError(f'{where(number)}: vertex {row} has a non-finite coordinate')
+    merged, points = merge_coincident(points)
+    faces, pairs = [], []
+    for number, words in lines[1 + nv:1 + nv + nf]:
+        try:
+            count = int(words[0])
+            corners = [int(w) for w in words[1:1 + count]]
+        except ValueError:
+            raise ValueError(f'{where(number)}: expected a face, a count and as many '
+                             f'point indices, got {" ".join(words)!r}') from None
+        if count < 2 or len(corners) < count:
+            raise ValueError(f'{where(number)}: a face of {count} corners lists '
+                             f'{len(corners)}')
+        bad = [i for i in corners if not 0 <= i < nv]
+        if bad:
+            raise ValueError(f'{where(number)}: face index {bad[0]} out of range (the file '
+                             f'has {nv} vertices, 0-based)')
+        ring = merged[corners].tolist()
+        faces.append(ring)
+        pairs += zip(ring, ring[1:] + ring[:1], strict=True)
+    return _net(points, pairs, faces)

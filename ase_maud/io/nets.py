@@ -21,8 +21,10 @@ Formats, chosen by the file name's suffix:
   {...}}`` of COMPAS 1.x, ``{"dtype": ..., "data": {...}}`` of 2.x). Points
   are in the order of the file's vertex (node) keys; a vertex attribute
   ``is_anchor`` or ``is_fixed`` that is true fixes the point. As in
-  compas_fd, an edge attribute ``q`` is the spring's force density (the
-  calculator's ``q``, a multiplier of ``Q``: ``Q q`` with ``Q = 1``) and
+  compas_fd, an edge attribute ``q`` is the spring's force density ``Q q``
+  (the calculator's ``q`` times the ``Q`` the file stores in its
+  ``attributes.ase_maud``, with ``a``, where this package wrote it: a net
+  written is read back as it was, its ``a`` and ``Q`` the defaults) and
   vertex attributes ``px``, ``py``, ``pz`` its load (the calculator's
   ``loads``), each from the item's own attributes, else the file's
   defaults, else 1 and 0. Written back as the original structure with
@@ -69,7 +71,7 @@ import ase.io
 import ase.io.formats
 import numpy as np
 from ase import Atoms
-from ase.constraints import FixAtoms
+from ase.constraints import FixAtoms, FixCartesian
 
 from ase_maud.calculator.maud_calculator import CALC_NAME, MaudCalculator, stored_parameters
 from ase_maud.checks import as_whole, check, check_writable, did_you_mean
@@ -302,6 +304,7 @@ def _read(path, edges, fixed, a, Q, dim, index, load=None):
             _check_frame(path, index, 1)
         positions, springs, faces, anchors = {'obj': read_obj, 'json': read_compas,
                                               'mesh': read_mesh}[kind](path)
+        faces = _faces_once(path, faces)
         frames = [Atoms(positions=positions, pbc=False)]
         if len(faces):   # written back with the net (write_net)
             frames[0].info['faces'] = faces
@@ -344,6 +347,26 @@ def _read(path, edges, fixed, a, Q, dim, index, load=None):
     return frames
 
 
+def _faces_once(path, faces):
+    """``faces`` with each face listed twice or more (the same corners, in any
+    order or direction) kept once, a warning naming the first repeat: a face
+    twice would make its edges look inner to --fix boundary."""
+    seen, once, repeats = {}, [], []
+    for number, face in enumerate(faces):
+        key = tuple(sorted(face))
+        if key in seen:
+            repeats.append((number, seen[key]))
+        else:
+            seen[key] = number
+            once.append(face)
+    if repeats:
+        import warnings
+        number, first = repeats[0]
+        warnings.warn(f'{path}: {len(repeats)} face(s) listed again, read once (face '
+                      f'{number}, 0-based, repeats face {first})', stacklevel=4)
+    return once
+
+
 def _fixed_points(path, fixed, positions, springs, faces):
     """The indices ``fixed=`` names (:func:`read_net`), checked."""
     natoms = len(positions)
@@ -370,15 +393,23 @@ def _fixed_points(path, fixed, positions, springs, faces):
 
 
 def set_tables(atoms: Atoms, loads: PathLike | None = None,
-               q: PathLike | None = None) -> None:
+               q: PathLike | None = None, dim: int | None = None) -> None:
     """Set the loads and force densities of the net ``atoms`` (with a
     MaudCalculator) from CSV tables (:mod:`ase_maud.io.tables`): the
     loads replace the calculator's, the force densities replace those of
     the edges listed. ``q`` may also be one number, every spring's (a
     negative one: every member in compression, an arch or a gridshell). None
-    leaves either as it is."""
+    leaves either as it is. A flat net (``dim=2``) whose loads leave its
+    plane becomes 3D, as :func:`read_net` makes it when it reads them,
+    unless ``dim`` (the user's) is 2."""
     if loads is not None:
-        atoms.calc.set(loads=read_loads_csv(loads, len(atoms)))
+        table = read_loads_csv(loads, len(atoms))
+        if atoms.calc.dim == 2 and dim is None and np.any(table[:, 2]):
+            atoms.set_constraint([c for c in atoms.constraints if not (
+                isinstance(c, FixCartesian) and list(c.mask) == [False, False, True])])
+            atoms.calc.set(dim=3, loads=table)
+        else:
+            atoms.calc.set(loads=table)
     if q is not None and (every := _one_number(q)) is not None:
         atoms.calc.set(q=np.full(len(atoms.calc.potential.springs), check('q', every)))
     elif q is not None:

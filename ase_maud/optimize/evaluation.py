@@ -82,19 +82,39 @@ class CheckedOptimizable:
         if (self.held is not None and np.array_equal(x, self.held[0])
                 and self.held[3] is self._witness()):
             return self.held[:3]
-        gradient = self.inner.get_gradient()
+        gradient = self._checked(x, self.inner.get_gradient)
         rows = gradient.reshape(-1, 3)
         bad = np.flatnonzero(~np.isfinite(rows).all(axis=1))
         if bad.size:
             force = ', '.join(f'{v:.6g}' for v in 0.0 - rows[bad[0]])
             self._fail(f'non-finite forces (atom {bad[0]}: [{force}]'
                        f'{f" and {bad.size - 1} more atoms" if bad.size > 1 else ""})')
-        value = self.inner.get_value()
+        value = self._checked(x, self.inner.get_value)
         if not np.isfinite(value):
             self._fail(f'a non-finite energy ({value})')
         self.good = (x.copy(), self.steps())
         self.held = (x.copy(), value, gradient, self._witness())
         return self.held[:3]
+
+    def _checked(self, x: np.ndarray, get: Callable[[], Any]) -> Any:
+        """``get()`` (the inner gradient or value), or a ValueError naming
+        the calculator if its forces are not one row of three per atom (the
+        positions' shape) or it lacks a property (no energy, say)."""
+        from ase.calculators.calculator import PropertyNotImplementedError
+        atoms = getattr(self.inner, 'atoms', None)
+        calc = type(getattr(atoms, 'calc', None)).__name__
+        try:
+            result = get()
+        except PropertyNotImplementedError as error:
+            raise ValueError(f'the calculator ({calc}): {error}: Maud needs the energy '
+                             'and forces (as BFGS and LBFGS do; FIRE needs the forces '
+                             'alone)') from None
+        if np.ndim(result) and np.size(result) != x.size:
+            forces = atoms.get_forces() if atoms is not None else result
+            raise ValueError(f'the calculator ({calc}) returned forces of shape '
+                             f'{np.shape(forces)}; an optimiser needs one row of three '
+                             f'components per atom, {x.size // 3} x 3')
+        return result
 
     def _witness(self) -> Any:
         """The calculator's forces object behind the results held: a new

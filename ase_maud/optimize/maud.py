@@ -58,6 +58,7 @@ from ase_maud.errors import (
 )
 from ase_maud.optimize import array_loop as arrays
 from ase_maud.optimize.evaluation import CheckedOptimizable, Handoff, in_rows_of_3, no_step_error
+from ase_maud.optimize.gauge import free_forces, free_view, gauge_point, held_move
 from ase_maud.optimize.models.base import StiffnessModel
 from ase_maud.optimize.monitor import RunMonitor, no_equilibrium
 from ase_maud.optimize.resume import RunRestart, replay, to_last_step
@@ -181,6 +182,8 @@ class Maud(Optimizer):
         self.optimizable = CheckedOptimizable(in_rows_of_3(self.optimizable),
                                               lambda: self.nsteps, self._stop)
         self.logfile.write(''.join(parts.notes))
+        #: A saddle search held at one point: the free scene's (optimize.gauge).
+        self._gauge = gauge_point(self._atoms()) if self.target == 'saddle' else None
 
     @property
     def target(self) -> str:
@@ -236,6 +239,9 @@ class Maud(Optimizer):
         self._afresh_if_changed()
         opt = self.optimizable
         forces = -opt.get_gradient().reshape(-1, 3)
+        start = opt.get_x().reshape(-1, 3)
+        if self._gauge is not None:
+            forces = free_forces(forces, self._gauge)
         merit = opt.get_value() if self.target == 'minimum' else float(np.vdot(forces, forces))
         self.fmax_now = float(np.linalg.norm(forces, axis=1).max())
         try:
@@ -245,6 +251,8 @@ class Maud(Optimizer):
                                       self._local_at, self._no_step)
         except MaudError as error:
             self._stop(error)
+        if self._gauge is not None:
+            x = held_move(x, start, self._gauge)
         opt.set_x(x.ravel())
         self.strategy.moved(self.state, opt.get_x().reshape(-1, 3))
         self._evaluate()
@@ -255,7 +263,10 @@ class Maud(Optimizer):
         if not np.array_equal(self.optimizable.get_x().reshape(-1, 3), x):
             self.optimizable.set_x(x.ravel())
         try:
-            solver = self.model.at(self._atoms(), self.state.model)
+            atoms = self._atoms()
+            if getattr(self, '_gauge', None) is not None:
+                atoms = free_view(atoms, self._gauge)
+            solver = self.model.at(atoms, self.state.model)
         except np.linalg.LinAlgError as error:
             self._no_step(f'the {self.model.name} stiffness model failed ({error})')
         return solver if self._subset is None else self._subset.solver(solver)

@@ -53,6 +53,23 @@ class Assembly:
     notes: tuple[str, ...]
 
 
+def _check_cell_filter(atoms: Any) -> None:
+    """A ValueError, before any step, for a cell filter (ASE's UnitCellFilter,
+    FrechetCellFilter, StrainFilter) whose calculator gives no stress, as
+    BFGS says at its first step (Maud would first meet the zero cell of a
+    scene without one: a singular matrix)."""
+    from ase.filters import StrainFilter, UnitCellFilter
+
+    if not isinstance(atoms, (UnitCellFilter, StrainFilter)):
+        return
+    calc = getattr(atoms.atoms, 'calc', None)
+    offers = getattr(calc, 'implemented_properties', ('stress',))
+    if calc is not None and 'stress' not in offers:
+        raise ValueError(f'{type(atoms).__name__}: stress property not implemented by the '
+                         f'calculator ({type(calc).__name__}): a cell filter relaxes the '
+                         'cell by the stress; relax the atoms alone (no filter)')
+
+
 def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
              steps: dict[str, Any], order: int, mode: Any,
              **options: Any) -> Assembly:
@@ -62,6 +79,7 @@ def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
     user's step keywords (checked), ``order`` and ``mode`` a saddle search's."""
     system = atoms.__ase_optimizable__() if hasattr(
         atoms, '__ase_optimizable__') else atoms
+    _check_cell_filter(atoms)
     subset = SubsetView(atoms) if type(atoms) is Filter else None
     images = image_size(system)
     scene = (subset.current() if subset is not None
@@ -92,7 +110,8 @@ def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
              + ([f'Maud: the calculator gives no stiffness; it is learnt from the forces '
                  f'({model.name} model)\n'] if isinstance(model, SecantModel) else []))
     points = None if scene is None else len(scene) if subset is None else len(subset.index)
-    return Assembly(model, compose(model, rule, nearest, check_mode(mode, points)),
+    return Assembly(model, compose(model, rule, nearest, check_mode(mode, points),
+                                   quadratic=_quadratic(scene)),
                     subset, scene is not None, tuple(notes))
 
 
@@ -107,6 +126,19 @@ def compressed(scene) -> np.ndarray:
     potential = getattr(getattr(scene, 'calc', None), 'potential', None)
     struts = getattr(potential, 'compressed', None)
     return np.zeros(0, dtype=int) if struts is None else struts
+
+
+def _quadratic(scene: Any):
+    """Whether ``scene``'s energy is now quadratic (a MaudCalculator without
+    repulsion, ``a = 0``: springs and constant loads), asked at each step
+    (``calc.set(a=...)`` may change it); None for a scene of other atoms."""
+    if scene is None:
+        return None
+
+    def quadratic() -> bool:
+        potential = getattr(getattr(scene, 'calc', None), 'potential', None)
+        return potential is not None and getattr(potential, 'a', None) == 0
+    return quadratic
 
 
 def check_calculator(scene: Atoms | None) -> None:

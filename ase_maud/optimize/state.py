@@ -61,6 +61,11 @@ class MaudState:
     solver: Solver | None = None
     modes: np.ndarray | None = None
     predicted: float | None = None
+    #: energy noise learnt from steps whose energy disagreed with the forces
+    #: (:meth:`ase_maud.optimize.strategy.Minimum._change`; relative, not saved)
+    noise_seen: float = 0.0
+    noise_suspected: float = 0.0
+    disagreements: int = 0
 
     def todict(self) -> dict[str, Any]:
         return {'gamma': self.gamma, 'k': self.k, 'v': self.v,

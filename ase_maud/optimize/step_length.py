@@ -21,7 +21,8 @@ a merit is the energy (``target='minimum'``) or ``|f|**2``.
   line-search cut; the change judged by the forces within the noise).
 - :class:`Limits`: the longest move of each point, as a fraction of its
   distance to its nearest other point, in length units, or as a fraction
-  of the scene's size; :func:`bound` scales a move within them (each point
+  of the scene's size (none where the energy is quadratic: a net without
+  repulsion); :func:`bound` scales a move within them (each point
   on its own, or the whole move by one factor) and :func:`reach` says how
   far along a move the first point meets its limit (:func:`reaches`: each
   point).
@@ -135,8 +136,13 @@ class Limits:
     maxstep_nn: float | None = None
     maxstep: float | None = None
     maxstep_size: float | None = None
+    #: Whether the energy is (now) quadratic, so that no bound applies: a
+    #: net without repulsion (a = 0), whose Newton move is its minimum.
+    quadratic: Callable[[], bool] | None = None
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
+        if self.quadratic is not None and self.quadratic():
+            return np.full(len(x), np.inf)
         limit = (np.full(len(x), np.inf) if self.maxstep_nn is None
                  else self.maxstep_nn * self.nearest(x))
         if self.maxstep is not None:

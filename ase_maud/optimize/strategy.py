@@ -100,6 +100,13 @@ from ase_maud.optimize.step_length import (
 from ase_maud.optimize.step_rules import CLIMB_SIDE, LOWEST_MODES, StepRule
 from ase_maud.physics.neighbours import NearestDistances
 
+#: Steps whose energy rose while the forces drove the points at both ends
+#: after which a calculator's energy is taken to be noisy (Minimum._change).
+DISAGREEMENTS = 2
+
+#: The largest rise, relative to the energy, taken for noise (Minimum._change).
+NOISE_MAX = 0.1
+
 
 @dataclass(frozen=True)
 class Strategy:
@@ -158,7 +165,7 @@ class Minimise(Strategy):
         to ``x`` is taken back)."""
         last = state.last
         change, slack = (0.0, 0.0) if last is None else self._change(last, x, merit, forces,
-                                                                     noise)
+                                                                     noise, state)
         if change > slack and not self.band:   # the step raised the merit
             if state.solver is None:   # resumed: the model where the step began
                 state.solver = local_at(last.x)
@@ -180,14 +187,39 @@ class Minimise(Strategy):
         return True
 
     def _change(self, last: Point, x: np.ndarray, merit: float, forces: np.ndarray,
-                noise: float) -> tuple[float, float]:
+                noise: float, state: MaudState) -> tuple[float, float]:
         """The merit's change over the step from ``last`` to ``x`` and the slack
         within which it is no rise (:func:`merit_change`; a band's
-        :func:`work_change`)."""
+        :func:`work_change`).
+
+        An energy that rose over a step along which the forces drive the
+        points at both ends (descent at the start and at the end: a smooth
+        energy consistent with its forces cannot rise there but over a bump),
+        by more than the forces say it fell (the trapezoid estimate: a bump,
+        two points passing each other, rises less than the fall around it)
+        and by less than :data:`NOISE_MAX` of the energy, disagrees with its
+        forces; from the second such step on, the calculator's energy is
+        taken to carry (undeclared) noise of the largest such rise
+        (``state.noise_seen``, relative), and changes within it are judged
+        by the forces, as a declared noise is."""
+        move = x - last.x
         if self.band:
-            return work_change(last.forces, x - last.x, forces)
-        return merit_change(last.merit, last.noise, last.forces, x - last.x, merit, forces,
-                            noise, energy=self.model.target == 'minimum')
+            return work_change(last.forces, move, forces)
+        energy = self.model.target == 'minimum'
+        seen = state.noise_seen
+        change, slack = merit_change(last.merit, max(last.noise, seen), last.forces, move,
+                                     merit, forces, max(noise, seen), energy)
+        trapezoid = work_change(last.forces, move, forces)[0]   # < 0: a fall, by the forces
+        if (energy and change > slack and np.vdot(last.forces, move) > 0
+                and np.vdot(forces, move) > 0 and change > -trapezoid
+                and change < NOISE_MAX * abs(last.merit)):
+            state.disagreements += 1
+            rise = change / max(abs(last.merit), 1e-300)
+            state.noise_suspected = max(state.noise_suspected, rise)
+            if state.disagreements >= DISAGREEMENTS:
+                state.noise_seen = state.noise_suspected
+                return work_change(last.forces, move, forces)
+        return change, slack
 
     def _revert(self, state: MaudState, change: float, forces: np.ndarray) -> None:
         """Go back to where the last step (which changed the merit by
@@ -372,11 +404,14 @@ class Saddle(Strategy):
 
 
 def compose(model: StiffnessModel, rule: StepRule, nearest: NearestDistances,
-            mode: int | np.ndarray | None = None) -> Strategy:
+            mode: int | np.ndarray | None = None,
+            quadratic: Callable[[], bool] | None = None) -> Strategy:
     """The strategy for ``model``'s target: :class:`Saddle` for ``'saddle'``
     (following ``mode``, see :class:`~ase_maud.optimize.directions.ModeFollowing`), else
-    :class:`Minimise`; ``nearest`` gives the limits' neighbour distances."""
-    limits = Limits(nearest, rule.maxstep_nn, rule.maxstep, rule.maxstep_size)
+    :class:`Minimise`; ``nearest`` gives the limits' neighbour distances,
+    ``quadratic`` whether the energy is quadratic (no limits for a minimum)."""
+    limits = Limits(nearest, rule.maxstep_nn, rule.maxstep, rule.maxstep_size,
+                    quadratic if model.target == 'minimum' else None)
     if model.target == 'saddle':
         return Saddle(model, rule, limits, ModeFollowing(rule.order, mode))
     return Minimise(model, rule, limits)

@@ -48,7 +48,7 @@ from ase_maud.checks import check_all
 from ase_maud.counting import CallRecorder, Work, fresh_copy
 from ase_maud.errors import MaudError
 from ase_maud.optimize.maud import Maud
-from ase_maud.saddles.search import SaddleSearch, run_tasks, search_saddles
+from ase_maud.saddles.search import SaddleSearch, check_client, run_tasks, search_saddles
 
 #: The keys of :meth:`Landscape.todict`, in order (``ase-maud saddles``
 #: replaces a JSON file of these keys only).
@@ -210,6 +210,7 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
     energy_rtol, distance_atol = checked['energy_rtol'], checked['distance_atol']
     start = fresh_copy(atoms)
     found = Landscape(minima=[start])
+    check_client(client)
     point = classify(start, ftol=np.inf, work=found.work)   # its fmax is tested here
     if point.verdict != 'minimum' or point.fmax > fmax:
         raise ValueError(f'landscape needs a minimum to start from; this is a '

@@ -278,6 +278,7 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
         checked[k] for k in ('local', 'budget', 'fmax', 'steps', 'window', 'empty_rounds'))
     if wanted is not None:
         wanted = check('wanted', wanted, 'count')
+    check_client(client)
     if partner is not None:
         check_same_scene(minimum, partner)
     if mirror and partner is not None:
@@ -374,6 +375,16 @@ def force_call_cpu(atoms: Atoms, repeat: int = 3) -> float:
         copy.get_forces()
         times.append(time.process_time() - start)
     return max(float(np.median(times)), time.get_clock_info('process_time').resolution)
+
+
+def check_client(client: Any) -> None:
+    """A ValueError naming ``client`` unless it is None or has what the
+    search asks of a ``dask.distributed`` client (``submit``, ``gather``,
+    ``scheduler_info``)."""
+    needed = ('submit', 'gather', 'scheduler_info')
+    if client is not None and not all(callable(getattr(client, n, None)) for n in needed):
+        raise ValueError(f'client must be None or a dask.distributed Client (with '
+                         f'{", ".join(needed)}), got {client!r}')
 
 
 def _batches(tasks: list, client: Any, enough: Callable[[], bool]):

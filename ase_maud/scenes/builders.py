@@ -424,7 +424,7 @@ def disc(size: int = 3000, seed: int = 0, a: float = 1.0, Q: float = 1.0) -> Ato
     the interior points are drawn uniformly (none closer than MIN_DISTANCE),
     flat, each z moved by up to 0.3 a.
     """
-    n = _count(size, 8, 'disc')
+    n = _count(size, 13, 'disc')   # the rim takes 2 pi R points: 12 of 12, 0 free
     rng = np.random.default_rng(seed)
     radius = np.sqrt(n / np.pi)
     rim = max(int(2 * np.pi * radius), 3)

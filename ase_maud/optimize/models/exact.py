@@ -118,7 +118,11 @@ class ExactModel(StiffnessModel):
             return self._internal(matrix.copy() if matrix is hessian else matrix,
                                   allowed_rigid_modes(atoms.positions, dim, allowed), basis)
         if self.target == 'minimum':
-            return (_CholeskySolver.of(matrix, basis, free, index, self.floor)
+            # a quadratic energy (a net without repulsion, a = 0): its own
+            # Hessian, unshifted where definite, whose Newton move is the minimum
+            quadratic = getattr(getattr(atoms.calc, 'potential', None), 'a', None) == 0
+            return ((quadratic and _CholeskySolver.of(matrix, basis, free, index, 0.0))
+                    or _CholeskySolver.of(matrix, basis, free, index, self.floor)
                     or _EigenSolver(matrix, basis, free, index, self._absolute))
         return _EigenSolver(matrix, basis, free, index, self._absolute)
 

@@ -69,6 +69,10 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
         raise ValueError(f'model={name!r} needs a calculator with the property '
                          f'{cls.prop!r} (such as MaudCalculator); this one '
                          f'offers {sorted(offers)}')
+    if name in ('springs', 'near', 'global') and not hasattr(calc, 'potential'):
+        raise ValueError(f"model={name!r} needs a calculator with springs and the "
+                         'repulsion (a MaudCalculator: its potential); this one is a '
+                         f"{type(calc).__name__}: use model='auto', 'bfgs' or 'secant'")
     taken = {'floor', *_EXTRA_OPTIONS.get(cls, ())}
     for option in set(options) - taken:
         check(option, options[option])

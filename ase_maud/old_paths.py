@@ -118,6 +118,8 @@ CARRIED = {
         'unsupported': 'physics.topology',
     },
     'io': {
+        'A_PER_MEAN_SPRING': 'physics.topology',
+        'default_a': 'physics.topology',
         'write_net': 'io.net_writer',
         'CALC_NAME': 'calculator.maud_calculator',
         'stored_parameters': 'calculator.maud_calculator',

@@ -22,7 +22,8 @@ from ase.optimize import BFGS
 from ase_maud import Maud, MaudCalculator
 from ase_maud.analysis.stationary import classify
 from ase_maud.cli.command import main
-from ase_maud.io.nets import A_PER_MEAN_SPRING, edges_path
+from ase_maud.io.nets import edges_path
+from ase_maud.physics.topology import A_PER_MEAN_SPRING
 from ase_maud.scenes.catalogue import build
 
 #: The checkout: examples/, benchmarks/ and dev/ beside tests/.

@@ -200,7 +200,7 @@ def add_file(parser):
 def add_net_options(parser):
     """--edges, --fix, --a, --Q and --dim of a command that reads a net."""
     # Imported when the command runs, so that ase-maud --help answers at once.
-    from ase_maud.io.nets import A_PER_MEAN_SPRING
+    from ase_maud.physics.topology import A_PER_MEAN_SPRING
 
     parser.add_argument('--edges', metavar='EDGES_FILE',
                         help='edge list: two 0-based point indices per line (default: '

@@ -17,7 +17,7 @@ import numpy as np
 from ase_maud.checks import as_number, check
 from ase_maud.io.net_data import NetData, PathLike
 from ase_maud.io.text import check_finite, number_text, original_text
-from ase_maud.physics.topology import fixed_atoms
+from ase_maud.physics.topology import default_a, fixed_atoms
 
 #: Vertex (node) attributes of COMPAS data that fix a point when true.
 ANCHOR_ATTRIBUTES = ('is_anchor', 'is_fixed')
@@ -269,12 +269,11 @@ def read_compas_forces(path: PathLike, springs: np.ndarray) -> dict[str, Any]:
 def _parameters(atoms) -> dict[str, float]:
     """The ``a`` and ``Q`` of ``atoms``' calculator that a COMPAS file must
     store to be read back as written: none where reading gives them anyway
-    (``Q = 1`` and ``a`` the default of the net, :func:`ase_maud.io.nets.default_a`),
+    (``Q = 1`` and ``a`` the default of the net, :func:`ase_maud.physics.topology.default_a`),
     else both."""
     from ase import Atoms
     from ase.constraints import FixAtoms
 
-    from ase_maud.io.nets import default_a
 
     potential = atoms.calc.potential
     a, Q = float(potential.a), float(potential.Q)

@@ -84,12 +84,13 @@ from ase_maud.io.tables import read_loads_csv, read_q_csv
 from ase_maud.io.text import XYZ_SUFFIXES, check_xyz_counts, read_edges, read_indices
 from ase_maud.physics.dofs import keep_on_plane
 from ase_maud.physics.topology import (
+    A_PER_MEAN_SPRING,
     boundary_vertices,
+    default_a,
     free_point_loads,
     leaf_vertices,
     mean_spring_length,
     outer_rim,
-    unsupported,
 )
 
 if TYPE_CHECKING:
@@ -105,48 +106,6 @@ __all__ = ['A_PER_MEAN_SPRING', 'CALC_NAME', 'FIX_RULES', 'MERGE_TOLERANCE', 'Ne
 
 #: The rules ``fixed=`` takes by name (:func:`read_net`).
 FIX_RULES = ('boundary', 'outer', 'leaves')
-
-
-#: ``a`` of a net read from a file that stores none, as a fraction of its
-#: mean spring length (:func:`default_a`; benchmarks/a_rule.py measures it).
-A_PER_MEAN_SPRING = 0.3
-
-
-def default_a(atoms: Atoms, springs: np.ndarray) -> float:
-    """``a`` of a net that comes without one (its supports set).
-
-    ``0``, the force-density equilibrium of its springs and loads (the
-    repulsion off: none of the out-of-balance of the members and loads is
-    left to it), where the supports make that equilibrium unique
-    (:func:`~ase_maud.physics.topology.unsupported`: a support held in every
-    direction on every spring component). Else the repulsion is what holds
-    the net and sets its spacing: :data:`A_PER_MEAN_SPRING` times its mean
-    spring length, the largest fraction of 0.1, 0.2, 0.3, 0.4, 0.5, 0.7, 1
-    with which each of ten compas sample nets (32 to 4900 points), its
-    boundary (leaves) fixed, relaxes within the bounding box of its supports
-    (docs/dev/bench/a_rule.md).
-
-    Parameters
-    ----------
-    atoms : Atoms
-        The net's points, with its supports as constraints.
-    springs : ndarray of shape (K, 2)
-        Its springs (0-based index pairs).
-
-    Returns
-    -------
-    float
-        ``a`` in the unit of the positions: 0, or
-        :data:`A_PER_MEAN_SPRING` times the mean spring length.
-
-    Raises
-    ------
-    ValueError
-        A spring names a point beyond the last one.
-    """
-    if unsupported(atoms, springs) is None:
-        return 0.0
-    return A_PER_MEAN_SPRING * mean_spring_length(atoms.positions, springs)
 
 
 def net_format(path: PathLike) -> str:

@@ -338,3 +338,45 @@ def unsupported(atoms: Atoms, springs: np.ndarray, dim: int = 3) -> str | None:
         return (f'point {loose[0]} is on a spring component with no support: its '
                 'force-density equilibrium is not unique (fix a point of each component)')
     return None
+
+
+#: ``a`` of a net read from a file that stores none, as a fraction of its
+#: mean spring length (:func:`default_a`; benchmarks/a_rule.py measures it).
+A_PER_MEAN_SPRING = 0.3
+
+
+def default_a(atoms: Atoms, springs: np.ndarray) -> float:
+    """``a`` of a net that comes without one (its supports set).
+
+    ``0``, the force-density equilibrium of its springs and loads (the
+    repulsion off: none of the out-of-balance of the members and loads is
+    left to it), where the supports make that equilibrium unique
+    (:func:`~ase_maud.physics.topology.unsupported`: a support held in every
+    direction on every spring component). Else the repulsion is what holds
+    the net and sets its spacing: :data:`A_PER_MEAN_SPRING` times its mean
+    spring length, the largest fraction of 0.1, 0.2, 0.3, 0.4, 0.5, 0.7, 1
+    with which each of ten compas sample nets (32 to 4900 points), its
+    boundary (leaves) fixed, relaxes within the bounding box of its supports
+    (docs/dev/bench/a_rule.md).
+
+    Parameters
+    ----------
+    atoms : Atoms
+        The net's points, with its supports as constraints.
+    springs : ndarray of shape (K, 2)
+        Its springs (0-based index pairs).
+
+    Returns
+    -------
+    float
+        ``a`` in the unit of the positions: 0, or
+        :data:`A_PER_MEAN_SPRING` times the mean spring length.
+
+    Raises
+    ------
+    ValueError
+        A spring names a point beyond the last one.
+    """
+    if unsupported(atoms, springs) is None:
+        return 0.0
+    return A_PER_MEAN_SPRING * mean_spring_length(atoms.positions, springs)

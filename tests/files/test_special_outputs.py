@@ -18,7 +18,8 @@ from ase_maud.checks import check_writable
 from ase_maud.cli.command import main
 from ase_maud.files.atomic_replace import NAME_BYTES, replace_text, temporary_beside
 from ase_maud.files.output_paths import StagedTrajectory, check_run_files
-from ase_maud.io.nets import read_net, write_net
+from ase_maud.io.net_writer import write_net
+from ase_maud.io.nets import read_net
 from ase_maud.scenes.catalogue import build
 
 

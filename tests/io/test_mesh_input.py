@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from ase_maud.form.force_density import solve_force_density
-from ase_maud.io.nets import read_net, write_net
+from ase_maud.io.net_writer import write_net
+from ase_maud.io.nets import read_net
 from ase_maud.scenes.catalogue import build
 
 PLY = ('ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n'

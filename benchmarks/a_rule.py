@@ -27,8 +27,8 @@ from pathlib import Path
 
 from ase_maud import Maud
 from ase_maud.counting import CallRecorder
-from ase_maud.io.nets import A_PER_MEAN_SPRING, mean_spring_length, read_compas, read_net, read_obj
-from ase_maud.physics.topology import support_excursion
+from ase_maud.io.nets import mean_spring_length, read_compas, read_net, read_obj
+from ase_maud.physics.topology import A_PER_MEAN_SPRING, support_excursion
 
 #: The compas samples of the measurement: meshes and line networks.
 SAMPLES = ['faces.obj', 'faces_big.obj', 'hypar.obj', 'quadmesh.obj', 'tubemesh.obj',

@@ -8,8 +8,8 @@ import pytest
 from ase_maud import Maud
 from ase_maud.cli.command import main
 from ase_maud.io.net_writer import write_net
-from ase_maud.io.nets import A_PER_MEAN_SPRING, mean_spring_length, read_net
-from ase_maud.physics.topology import support_excursion
+from ase_maud.io.nets import mean_spring_length, read_net
+from ase_maud.physics.topology import A_PER_MEAN_SPRING, support_excursion
 
 from helpers import quad_net, write_quad_net
 

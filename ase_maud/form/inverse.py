@@ -199,14 +199,43 @@ def find_force_densities(atoms: Atoms, heights: dict[int, float] | None = None,
                          q0: np.ndarray | None = None, tol: float = 1e-6,
                          max_solves: int = 200) -> InverseResult:
     """Force densities for which the ``a = 0`` net ``atoms`` meets the
-    targets (``heights`` and/or ``forces``: the module docstring), found by
-    L-BFGS-B within ``bounds`` on each ``q`` (``(low, high)``, numbers or
-    (K,) arrays; negative for members in compression) from ``q0`` (default:
-    the calculator's ``q`` with the bounds' sign, clipped into them), stopping as soon as
-    every target is met within ``tol`` or after ``max_solves`` forward
-    solves. ``atoms`` is then set to the best form found: its calculator's
-    ``q`` and its positions (``a`` untouched: the form is the ``a = 0``
-    one). Returns an :class:`InverseResult`.
+    targets, found by L-BFGS-B on the adjoint gradient (module docstring).
+
+    Parameters
+    ----------
+    atoms : Atoms
+        A net with a MaudCalculator and supports that hold it (the
+        force-density equilibrium is unique); set on return to the best form
+        found: its calculator's ``q`` and its positions (``a`` untouched).
+    heights : dict of int to float, optional
+        Target heights ``z`` (length units) of chosen points.
+    forces : tuple, optional
+        ``(low, high)`` bounds on each member's force ``Q q L`` (``Q a``),
+        numbers or (K,) arrays, None for no bound on a side.
+    bounds : tuple, default (0.01, 100.0)
+        ``(low, high)`` on each ``q`` (multiples of ``Q``), numbers or (K,)
+        arrays, on one side of 0 (negative: members in compression).
+    q0 : ndarray of shape (K,), optional
+        The start (default: the calculator's ``q`` with the bounds' sign,
+        clipped into them).
+    tol : float, default 1e-6
+        A target is met within ``tol`` of its scale (the diagonal for
+        heights, the largest bound for forces).
+    max_solves : int, default 200
+        Forward solves (one per evaluation of the loss and its gradient).
+
+    Returns
+    -------
+    InverseResult
+        ``q``, the positions, whether every target is met, the solves made
+        and the remaining errors.
+
+    Raises
+    ------
+    ValueError
+        No target, a height of a point the net lacks or of a flat net,
+        bounds that straddle 0, or supports that leave the equilibrium
+        non-unique (each named).
     """
     problem = ForceDensityProblem(atoms, heights, forces)
     count = len(problem.springs)

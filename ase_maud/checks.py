@@ -11,6 +11,7 @@ a file or directory the package will write.
 
 from __future__ import annotations
 
+import difflib
 import math
 import os
 from collections.abc import Callable
@@ -275,7 +276,6 @@ def check_indices(indices: Any, natoms: int) -> np.ndarray:
 def did_you_mean(word: str, choices) -> str:
     """'; did you mean X?' for the choice closest to a mistyped ``word``
     (difflib's ratio at least 0.6), else ''."""
-    import difflib
 
     close = difflib.get_close_matches(word, [str(c) for c in choices], n=1)
     return f'; did you mean {close[0]!r}?' if close else ''

@@ -41,7 +41,7 @@ def kernels_cached() -> bool:
     """Whether numba's cache holds machine code for a kernel of a loaded
     ase_maud module (its index file, read without compiling): if not, the first
     force call compiles them, 10-30 s. True if numba's cache internals moved."""
-    from numba.core.caching import FunctionCache
+    from numba.core.caching import FunctionCache  # numba: only once the cache dir is set
     from numba.core.dispatcher import Dispatcher
 
     caches = [value._cache for name, module in list(sys.modules.items())
@@ -70,7 +70,7 @@ class compile_notice:
         self.said = False
 
     def __enter__(self):
-        from numba.core import event
+        from numba.core import event  # numba: only once the cache dir is set
 
         notice = self
 

@@ -39,7 +39,7 @@ def pin_threads(n: int, restart: bool) -> None:
     :data:`THREAD_VARIABLES` at ``n`` (right only when run as a program),
     else warn.
     """
-    import numba
+    import numba  # here: after ase_maud set numba's cache dir
     from threadpoolctl import threadpool_limits
 
     value = str(n)

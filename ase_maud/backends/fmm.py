@@ -106,7 +106,7 @@ def near_radius(positions: np.ndarray, fmm_eps: float) -> float:
 def _lfmm3d():
     """FMM3D's Laplace FMM, or ImportError saying how to install it."""
     try:
-        from fmm3dpy import lfmm3d
+        from fmm3dpy import lfmm3d  # an optional backend: imported on its first call
     except ImportError as err:
         raise ImportError("backend='fmm' needs fmm3dpy: pip install fmm3dpy") from err
     return lfmm3d

@@ -43,7 +43,7 @@ def write_csv(path, rows):
 
 def environment(argv=None):
     """What a benchmark must state: threads, versions, machine, command."""
-    import ase
+    import ase  # here: the versions a report states
     import numba
     import scipy
     return {'date': datetime.now(timezone.utc).isoformat(timespec='seconds'),

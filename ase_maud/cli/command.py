@@ -87,7 +87,7 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str):
         invalid = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
         if invalid:   # argparse of Python < 3.14 suggests nothing
-            from ase_maud.checks import did_you_mean
+            from ase_maud.checks import did_you_mean  # on a usage error only
 
             message += did_you_mean(invalid[1], re.findall(r"'([^']*)'", invalid[2]))
         self.exit(2, f'{self.prog}: error: {message}; see {self.prog} --help\n')

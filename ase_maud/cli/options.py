@@ -5,6 +5,7 @@ threads, and the one-line error.
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -46,7 +47,7 @@ def net_options(args: argparse.Namespace) -> dict:
 def set_net_tables(atoms, args: argparse.Namespace) -> None:
     """The --loads and --q tables (or number) of a command that takes them
     (:func:`add_loads`), set on the net ``atoms``."""
-    from ase_maud.io.nets import set_tables
+    from ase_maud.io.nets import set_tables  # when a command runs: ase-maud --help stays fast
 
     set_tables(atoms, loads=getattr(args, 'loads', None), q=getattr(args, 'q', None))
 
@@ -101,9 +102,8 @@ def log_file(log: str | None):
     """--log as ASE's optimisers take it: the name, or for a named pipe or a
     device an open file (opened without waiting for a reader: a pipe that
     nothing reads is an OSError at once, where ASE's open would wait)."""
-    import os
 
-    from ase_maud.files.atomic_replace import is_special, open_in_place
+    from ase_maud.files.atomic_replace import is_special, open_in_place  # when a command runs
 
     if log in (None, '-') or not is_special(log):
         return log

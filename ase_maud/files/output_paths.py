@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -152,7 +153,6 @@ def check_seekable(name: str, path: PathLike) -> None:
     """A ValueError naming ``name`` if ``path`` is a named pipe or a socket:
     an ASE trajectory (or a restart file) is written with seeks, which a
     pipe has not, and opening one that nobody reads would wait for ever."""
-    import stat
     try:
         mode = os.stat(path).st_mode
     except OSError:

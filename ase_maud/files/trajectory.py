@@ -16,6 +16,7 @@ import shutil
 from pathlib import Path
 
 from ase import Atoms
+from ase.io.trajectory import Trajectory, TrajectoryWriter
 
 from ase_maud.files.atomic_replace import replace_with
 
@@ -26,7 +27,6 @@ DAMAGED_SUFFIX = '.damaged'
 def _frames(path: Path):
     """ASE's reader of ``path``, or ValueError naming the file if even its
     header cannot be read."""
-    from ase.io.trajectory import Trajectory
     try:
         return Trajectory(path)
     except Exception as error:   # ASE's ulm reader raises many kinds
@@ -96,7 +96,6 @@ def repair(path: str | os.PathLike) -> str | None:
     count, named = intact(path)
     if count == named:
         return None
-    from ase.io.trajectory import Trajectory
     kept = path.with_name(path.name + DAMAGED_SUFFIX)
     shutil.copy2(path, kept)
 
@@ -131,7 +130,6 @@ def parameters_once_writer(path: str | os.PathLike):
     than ASE's own for the same frames. :func:`ase_maud.io.nets.read_net`
     reads the parameters of any frame from the first (:func:`first_frame`);
     ``ase gui`` reads every frame as before."""
-    from ase.io.trajectory import TrajectoryWriter  # ASE's io: loaded when a run writes
 
     class ParametersOnce(TrajectoryWriter):
         def _write_atoms(self, atoms, **kwargs):

@@ -13,6 +13,8 @@ import uuid
 from typing import Any
 
 import numpy as np
+from ase import Atoms
+from ase.constraints import FixAtoms
 
 from ase_maud.checks import as_number, check
 from ase_maud.io.net_data import NetData, PathLike
@@ -271,8 +273,6 @@ def _parameters(atoms) -> dict[str, float]:
     store to be read back as written: none where reading gives them anyway
     (``Q = 1`` and ``a`` the default of the net, :func:`ase_maud.physics.topology.default_a`),
     else both."""
-    from ase import Atoms
-    from ase.constraints import FixAtoms
 
 
     potential = atoms.calc.potential

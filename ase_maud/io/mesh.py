@@ -79,7 +79,7 @@ def write_mesh(path: PathLike, positions: np.ndarray, faces, springs: np.ndarray
     takes them, ``springs`` (K, 2)) to ``path`` by meshio in the format of
     its suffix (:data:`MESH_FORMATS`); the file replaced whole. A ValueError
     for a format that cannot hold the net (see the module docstring)."""
-    import meshio
+    import meshio  # here: its import costs time every command would pay
 
     from ase_maud.files.atomic_replace import replace_with
 

@@ -63,6 +63,7 @@ has lines) and what was expected.
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -72,6 +73,7 @@ import ase.io.formats
 import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian
+from ase.io.trajectory import Trajectory
 
 from ase_maud.calculator.maud_calculator import CALC_NAME, MaudCalculator, stored_parameters
 from ase_maud.checks import as_whole, check, check_writable, did_you_mean
@@ -147,7 +149,6 @@ def relaxed_fmax(path: PathLike) -> float | None:
     for other files and for trajectories that do not say."""
     if net_format(path) != 'traj':
         return None
-    from ase.io.trajectory import Trajectory
     with Trajectory(path) as frames:
         fmax = (frames.description or {}).get('fmax')
     return None if fmax is None else float(fmax)
@@ -319,7 +320,6 @@ def _faces_once(path, faces):
             seen[key] = number
             once.append(face)
     if repeats:
-        import warnings
         number, first = repeats[0]
         warnings.warn(f'{path}: {len(repeats)} face(s) listed again, read once (face '
                       f'{number}, 0-based, repeats face {first})', stacklevel=4)
@@ -415,7 +415,6 @@ def _read_ase(path, index):
         if isinstance(index, slice):
             frames = ase.io.read(path, index)
         elif net_format(path) == 'traj':   # counted without reading the frames
-            from ase.io.trajectory import Trajectory
             with Trajectory(path) as trajectory:
                 count = len(trajectory)
                 frames = [trajectory[index]] if -count <= index < count else []

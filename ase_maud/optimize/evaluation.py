@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from ase.calculators.calculator import PropertyNotImplementedError
 
 from ase_maud.errors import MaudError
 
@@ -100,7 +101,6 @@ class CheckedOptimizable:
         """``get()`` (the inner gradient or value), or a ValueError naming
         the calculator if its forces are not one row of three per atom (the
         positions' shape) or it lacks a property (no energy, say)."""
-        from ase.calculators.calculator import PropertyNotImplementedError
         atoms = getattr(self.inner, 'atoms', None)
         calc = type(getattr(atoms, 'calc', None)).__name__
         try:

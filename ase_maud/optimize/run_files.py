@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from ase import Atoms
 from ase.filters import Filter
+from ase.mep.neb import BaseNEB
 
 from ase_maud.calculator.maud_calculator import MaudCalculator, stored_parameters
 from ase_maud.checks import check_writable
@@ -46,7 +47,6 @@ def frame_atoms(system: Any) -> list[Atoms]:
     """The Atoms each step of a run on ``system`` writes to its trajectory,
     one frame each: the images of a band (ASE's NEB), the atoms behind a
     Filter or a cell filter, or the atoms themselves."""
-    from ase.mep.neb import BaseNEB
     if isinstance(system, BaseNEB):
         return list(system.images)
     if isinstance(system, Filter):

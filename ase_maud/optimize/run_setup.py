@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from ase import Atoms
 from ase.calculators.singlepoint import SinglePointCalculator
-from ase.filters import Filter
+from ase.filters import Filter, StrainFilter, UnitCellFilter
 
 from ase_maud.calculator.maud_calculator import MaudCalculator
 from ase_maud.checks import check
@@ -58,7 +58,6 @@ def _check_cell_filter(atoms: Any) -> None:
     FrechetCellFilter, StrainFilter) whose calculator gives no stress, as
     BFGS says at its first step (Maud would first meet the zero cell of a
     scene without one: a singular matrix)."""
-    from ase.filters import StrainFilter, UnitCellFilter
 
     if not isinstance(atoms, (UnitCellFilter, StrainFilter)):
         return

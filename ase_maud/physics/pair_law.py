@@ -40,6 +40,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.spatial import cKDTree
 
 
 def repulsion_energy(d: np.ndarray) -> np.ndarray:
@@ -248,7 +249,6 @@ def closest_pair(points: np.ndarray) -> tuple[int, int, float]:
     """The two nearest distinct points ``(i, j, L)``, ``i < j``, of (N, d)
     ``points`` (N >= 2), with their distance exact even where its square
     underflows (below about 1e-154 of the coordinates' unit)."""
-    from scipy.spatial import cKDTree
 
     index = cKDTree(points).query(points, k=2)[1]
     itself = index[:, 0] == np.arange(len(points))

@@ -52,7 +52,7 @@ def spd_inverse(matrix: sp.spmatrix, rtol: float) -> Any:
         lu = splu(sp.csc_matrix(matrix), permc_spec='MMD_AT_PLUS_A',
                   diag_pivot_thresh=0.0, options={'SymmetricMode': True})
         return lu.solve
-    import pyamg
+    import pyamg  # here: multigrid only for the largest factors
     hierarchy = pyamg.smoothed_aggregation_solver(sp.csr_matrix(matrix))
 
     def solve(rhs):

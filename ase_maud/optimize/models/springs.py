@@ -11,7 +11,7 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 from ase import Atoms
-from scipy.sparse.linalg import LinearOperator
+from scipy.sparse.linalg import LinearOperator, lobpcg
 
 from ase_maud.analysis.stationary import hessian_operator
 from ase_maud.counting import Work
@@ -148,7 +148,6 @@ class _LowestModes(ModeSolver):
     def eigenpairs(self, count: int, guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """The ``count`` lowest eigenvalues (ascending) and their modes
         (count, N, 3), started from the moves ``guess`` (k, N, 3) if given."""
-        from scipy.sparse.linalg import lobpcg
 
         size = self.operator.shape[0]
         if size <= 5 * (count + self.rigid.shape[1]):   # too few for LOBPCG

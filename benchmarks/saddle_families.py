@@ -4,8 +4,9 @@ user calls it, on scenes drawn from the seeded families of :mod:`ase_maud.scenes
 clusters, trees; random sizes within ``--sizes``).
 
 For each family and seed: the scene relaxed with Maud to fmax 1e-8 (a start that is not then
-a minimum is left out, and said so), one energy-and-forces call timed (the unit), the default
-search for one saddle (its seed the scene's), and the saddle it returns verified by a fresh
+a minimum, or whose relaxation stops with an error, is left out, and said so), one
+energy-and-forces call timed (the unit), the default search for one saddle (its seed the
+scene's), and the saddle it returns verified by a fresh
 calculator and ``classify`` (index 1 and forces below 1e-6). Counted per search: calls,
 Hessian-vector product vectors, Hessians, CPU seconds (``time.process_time``: run with one
 thread) and the headline, CPU in units of one force call of the scene; the process's peak
@@ -28,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ase_maud import Maud, classify, search_saddles
+from ase_maud import Maud, MaudError, classify, search_saddles
 from ase_maud.counting import fresh_copy
 from ase_maud.scenes.families import FAMILIES
 
@@ -40,7 +41,12 @@ def one(family: str, seed: int, sizes: tuple[int, int]) -> dict | None:
     """The row of the search on ``family``'s scene of ``seed``, or None if its
     relaxation is no minimum."""
     atoms = FAMILIES[family](seed, sizes)
-    Maud(atoms, logfile=None).run(fmax=1e-8, steps=5000)
+    try:
+        Maud(atoms, logfile=None).run(fmax=1e-8, steps=5000)
+    except MaudError as error:   # no minimum to start from: said, left out
+        print(f'{family:12s} {seed:3d} left out: its relaxation stopped: '
+              f'{str(error).splitlines()[0][:160]}', flush=True)
+        return None
     with warnings.catch_warnings():
         warnings.simplefilter('ignore')
         point = classify(atoms)

@@ -878,8 +878,7 @@ def mesh_inputs(directory: Path):
 def round_trips(directory: Path):
     """Each writer's file read back, with and without the options that wrote
     it, is the scene written (forces equal): ('ok', run)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'tests' / 'io'))
-    from test_mesh_input import scene  # the tests' seeded scene of random q, loads, a, Q
+    from ase_maud.bench.hard_inputs import round_trip_scene as scene  # shared with the tests
 
     def case(kind, seed, given):
         atoms = scene(seed)
@@ -948,7 +947,8 @@ def ase_converges(directory: Path):
     BasinHopping of LJ6 with dr=2.5 (bounded force calls)."""
     from ase import Atoms
     from ase.calculators.lj import LennardJones
-    from doubles import NoisyEnergy
+
+    from ase_maud.bench.doubles import UndeclaredNoise
 
     def both(make, fmax, steps=1000, **keywords):
         ends = []
@@ -962,11 +962,11 @@ def ase_converges(directory: Path):
     def noisy(scene, size, seed):
         def make():
             atoms = build(scene, size, seed=seed)
-            atoms.calc = NoisyEnergy(1e-2, seed, False, **atoms.calc.parameters)
+            atoms.calc = UndeclaredNoise(MaudCalculator(**atoms.calc.parameters), 1e-2, seed)
             return atoms
         (bfgs, _), (maud, atoms) = both(make, 1e-4)
         exact = atoms.copy()
-        exact.calc = MaudCalculator(**{**atoms.calc.parameters, 'backend': 'numpy'})
+        exact.calc = MaudCalculator(**{**atoms.calc.inner.parameters, 'backend': 'numpy'})
         return bfgs and maud and np.linalg.norm(exact.get_forces(), axis=1).max() < 1e-4
 
     def linear(size, spread, seed):

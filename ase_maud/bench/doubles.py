@@ -1,6 +1,7 @@
 """Calculator doubles: an ASE calculator that fails at a chosen call
-(:class:`PoisonedCalculator`) and a MaudCalculator whose energy carries a
-declared noise (:class:`NoisyEnergy`).
+(:class:`PoisonedCalculator`), a MaudCalculator whose energy carries a
+declared noise (:class:`NoisyEnergy`), and any calculator whose energy
+carries noise nobody declares (:class:`UndeclaredNoise`).
 
 They are the hard inputs the tests give Maud, and the ones
 ``benchmarks/noisy_energy.py`` and ``dev/hostile_sweep.py`` measure it on: they
@@ -63,3 +64,24 @@ class NoisyEnergy(MaudCalculator):
         self.results['energy'] = self.results['free_energy'] = energy
         if self.declare:
             self.last_tolerance = max(self.last_tolerance, self.noise)
+
+
+class UndeclaredNoise(Calculator):
+    """``inner``'s energy with seeded noise of ``noise`` (relative, uniform
+    in ``[-noise, noise] |E|``) that no one declares, and its exact forces:
+    a plain ASE calculator, so Maud learns the noise from the steps (a
+    MaudCalculator declares its own and is taken at its word)."""
+    implemented_properties = ['energy', 'forces']
+
+    def __init__(self, inner: Calculator, noise: float, seed: int) -> None:
+        super().__init__()
+        self.inner, self.noise = inner, noise
+        self.rng = np.random.default_rng(seed)
+
+    def calculate(self, atoms=None, properties=('energy',), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        copy = atoms.copy()
+        copy.calc = self.inner
+        energy = copy.get_potential_energy()
+        self.results = {'energy': energy + self.noise * abs(energy) * self.rng.uniform(-1, 1),
+                        'forces': copy.get_forces()}

@@ -1,7 +1,8 @@
 """Hard inputs shared by the tests and ``dev/hostile_sweep.py``: malformed net
 files (:data:`BROKEN`), hand-damaged restart values (:data:`DAMAGES`), threads
-sharing one calculator (:func:`wrong_results_of_threads`) and ASE's cell
-filters on an EMT crystal (:func:`relaxed_in_a_cell_filter`).
+sharing one calculator (:func:`wrong_results_of_threads`), ASE's cell
+filters on an EMT crystal (:func:`relaxed_in_a_cell_filter`) and the net of
+random q, loads, a and Q every writer must read back (:func:`round_trip_scene`).
 
 Each is a case a test asserts and the sweep repeats over more seeds; they live
 in the package so that both import the same cases (no script reaches into
@@ -140,3 +141,14 @@ def relaxed_in_a_cell_filter(cell_filter, seed):
     with Maud(cell_filter(crystal), logfile=None) as opt:
         converged = opt.run(fmax=1e-5, steps=2000)
     return converged, crystal.get_potential_energy(), reference.get_potential_energy()
+
+
+def round_trip_scene(seed: int):
+    """A hanging net of 25 points with random ``q``, loads, ``a`` and ``Q``
+    (seeded): what every writer must read back as it wrote it."""
+    rng = np.random.default_rng(seed)
+    atoms = build('hanging_net', 5, seed=seed)
+    atoms.calc.set(a=float(rng.uniform(0.2, 1.0)), Q=float(rng.uniform(0.5, 3.0)),
+                   q=rng.uniform(0.5, 2.0, len(atoms.calc.springs)),
+                   loads=np.c_[np.zeros((len(atoms), 2)), rng.uniform(-1, 0, len(atoms))])
+    return atoms

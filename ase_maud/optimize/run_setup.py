@@ -22,6 +22,7 @@ from ase import Atoms
 from ase.calculators.singlepoint import SinglePointCalculator
 from ase.filters import Filter, StrainFilter, UnitCellFilter
 
+from ase_maud.calculator import accuracy
 from ase_maud.calculator.maud_calculator import MaudCalculator
 from ase_maud.checks import check
 from ase_maud.optimize.models.base import StiffnessModel
@@ -109,8 +110,9 @@ def assemble(atoms: Any, model: str | StiffnessModel, target: str | None,
              + ([f'Maud: the calculator gives no stiffness; it is learnt from the forces '
                  f'({model.name} model)\n'] if isinstance(model, SecantModel) else []))
     points = None if scene is None else len(scene) if subset is None else len(subset.index)
+    learns_noise = not accuracy.is_aware(getattr(scene, 'calc', None))
     return Assembly(model, compose(model, rule, nearest, check_mode(mode, points),
-                                   quadratic=_quadratic(scene)),
+                                   quadratic=_quadratic(scene), learns_noise=learns_noise),
                     subset, scene is not None, tuple(notes))
 
 

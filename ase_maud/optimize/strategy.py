@@ -156,6 +156,11 @@ class Minimise(Strategy):
 
     #: Rows of :attr:`MaudState.modes` a restart file keeps: None (no modes).
     kept_modes = None
+    #: Whether the energy may carry noise its calculator does not declare, to be
+    #: learnt from the steps (:meth:`_change`): a calculator that declares its
+    #: accuracy (:class:`~ase_maud.calculator.accuracy.ToleranceAware`, a
+    #: MaudCalculator) is taken at its word.
+    learns_noise: bool = False
 
     def step(self, state: MaudState, x: np.ndarray, merit: float, forces: np.ndarray,
              noise: float, local_at: LocalAt) -> np.ndarray:
@@ -198,8 +203,8 @@ class Minimise(Strategy):
         by more than the forces say it fell (the trapezoid estimate: a bump,
         two points passing each other, rises less than the fall around it)
         and by less than :data:`NOISE_MAX` of the energy, disagrees with its
-        forces; from the second such step on, the calculator's energy is
-        taken to carry (undeclared) noise of the largest such rise
+        forces; from the second such step on (where :attr:`learns_noise`),
+        the calculator's energy is taken to carry noise of the largest such rise
         (``state.noise_seen``, relative), and changes within it are judged
         by the forces, as a declared noise is."""
         move = x - last.x
@@ -210,7 +215,7 @@ class Minimise(Strategy):
         change, slack = merit_change(last.merit, max(last.noise, seen), last.forces, move,
                                      merit, forces, max(noise, seen), energy)
         trapezoid = work_change(last.forces, move, forces)[0]   # < 0: a fall, by the forces
-        if (energy and change > slack and np.vdot(last.forces, move) > 0
+        if (self.learns_noise and energy and change > slack and np.vdot(last.forces, move) > 0
                 and np.vdot(forces, move) > 0 and change > -trapezoid
                 and change < NOISE_MAX * abs(last.merit)):
             state.disagreements += 1
@@ -405,13 +410,15 @@ class Saddle(Strategy):
 
 def compose(model: StiffnessModel, rule: StepRule, nearest: NearestDistances,
             mode: int | np.ndarray | None = None,
-            quadratic: Callable[[], bool] | None = None) -> Strategy:
+            quadratic: Callable[[], bool] | None = None,
+            learns_noise: bool = False) -> Strategy:
     """The strategy for ``model``'s target: :class:`Saddle` for ``'saddle'``
     (following ``mode``, see :class:`~ase_maud.optimize.directions.ModeFollowing`), else
-    :class:`Minimise`; ``nearest`` gives the limits' neighbour distances,
-    ``quadratic`` whether the energy is quadratic (no limits for a minimum)."""
+    :class:`Minimise` (``learns_noise``: :attr:`Minimise.learns_noise`);
+    ``nearest`` gives the limits' neighbour distances, ``quadratic`` whether
+    the energy is quadratic (no limits for a minimum)."""
     limits = Limits(nearest, rule.maxstep_nn, rule.maxstep, rule.maxstep_size,
                     quadratic if model.target == 'minimum' else None)
     if model.target == 'saddle':
         return Saddle(model, rule, limits, ModeFollowing(rule.order, mode))
-    return Minimise(model, rule, limits)
+    return Minimise(model, rule, limits, learns_noise)

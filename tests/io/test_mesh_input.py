@@ -13,6 +13,7 @@ import warnings
 import numpy as np
 import pytest
 
+from ase_maud.bench.hard_inputs import round_trip_scene
 from ase_maud.form.force_density import solve_force_density
 from ase_maud.io.net_writer import write_net
 from ase_maud.io.nets import read_net
@@ -90,16 +91,6 @@ def test_a_face_listed_twice_is_read_once_with_a_note(tmp_path):
     assert sorted(atoms.constraints[0].index.tolist()) == [0, 1, 2, 3]
 
 
-def scene(seed):
-    """A hanging net with random q, loads, a and Q (seeded)."""
-    rng = np.random.default_rng(seed)
-    atoms = build('hanging_net', 5, seed=seed)
-    atoms.calc.set(a=float(rng.uniform(0.2, 1.0)), Q=float(rng.uniform(0.5, 3.0)),
-                   q=rng.uniform(0.5, 2.0, len(atoms.calc.springs)),
-                   loads=np.c_[np.zeros((len(atoms), 2)), rng.uniform(-1, 0, len(atoms))])
-    return atoms
-
-
 def forces_of(atoms):
     return atoms.get_potential_energy(), atoms.get_forces()
 
@@ -108,7 +99,7 @@ def forces_of(atoms):
 def test_compas_json_comes_back_as_written(tmp_path, seed):
     """q and Q, loads, a: the default read and the read with the options
     that wrote it give the scene written (a = 0 too)."""
-    atoms = scene(seed)
+    atoms = round_trip_scene(seed)
     for a in (atoms.calc.parameters['a'], 0.0):
         atoms.calc.set(a=a)
         write_net(tmp_path / 'net.json', atoms)
@@ -124,7 +115,7 @@ def test_compas_json_comes_back_as_written(tmp_path, seed):
 
 @pytest.mark.parametrize('kind', ['traj', 'json'])
 def test_every_stored_parameter_comes_back(tmp_path, kind):
-    atoms = scene(7)
+    atoms = round_trip_scene(7)
     write_net(tmp_path / f'net.{kind}', atoms)
     back = read_net(tmp_path / f'net.{kind}')
     np.testing.assert_allclose(forces_of(back)[1], forces_of(atoms)[1], rtol=1e-12,

@@ -12,7 +12,6 @@ import warnings
 import numpy as np
 import pytest
 from ase import Atoms
-from ase.calculators.calculator import Calculator, all_changes
 from ase.calculators.emt import EMT
 from ase.calculators.lj import LennardJones
 from ase.cluster import Icosahedron
@@ -20,40 +19,8 @@ from ase.optimize import BFGS
 from ase.optimize.basin import BasinHopping
 
 from ase_maud import Maud, MaudCalculator
+from ase_maud.bench.doubles import UndeclaredNoise
 from ase_maud.scenes.catalogue import build
-
-
-class NoisyEMT(Calculator):
-    """EMT whose energy carries seeded noise of ``noise`` (relative,
-    undeclared); its forces exact."""
-    implemented_properties = ['energy', 'forces']
-
-    def __init__(self, noise, seed):
-        super().__init__()
-        self.inner, self.noise = EMT(), noise
-        self.rng = np.random.default_rng(seed)
-
-    def calculate(self, atoms=None, properties=('energy',), system_changes=all_changes):
-        super().calculate(atoms, properties, system_changes)
-        copy = atoms.copy()
-        copy.calc = self.inner
-        energy = copy.get_potential_energy()
-        self.results = {'energy': energy + self.noise * abs(energy) * self.rng.uniform(-1, 1),
-                        'forces': copy.get_forces()}
-
-
-class NoisyMaud(MaudCalculator):
-    """A MaudCalculator whose energy carries undeclared seeded noise."""
-
-    def __init__(self, noise, seed, **parameters):
-        super().__init__(**parameters)
-        self.noise, self.rng = noise, np.random.default_rng(seed)
-
-    def calculate(self, atoms=None, properties=('energy',), system_changes=all_changes):
-        super().calculate(atoms, properties, system_changes)
-        energy = self.results['energy'] + self.noise * abs(self.results['energy']) * \
-            self.rng.uniform(-1, 1)
-        self.results['energy'] = self.results['free_energy'] = energy
 
 
 def fmax_of(atoms, calc):
@@ -72,7 +39,7 @@ def test_undeclared_energy_noise_like_bfgs(scene, size, seed):
     for optimizer in (BFGS, Maud):
         atoms = build(scene, size, seed=seed)
         parameters = atoms.calc.parameters
-        atoms.calc = NoisyMaud(1e-2, seed, **parameters)
+        atoms.calc = UndeclaredNoise(MaudCalculator(**parameters), 1e-2, seed)
         with optimizer(atoms, logfile=None) as opt:
             assert opt.run(fmax=1e-4, steps=1000)
         steps[optimizer] = opt.nsteps
@@ -86,7 +53,7 @@ def test_undeclared_energy_noise_on_emt(seed):
     for optimizer in (BFGS, Maud):
         atoms = Icosahedron('Cu', 2)
         atoms.rattle(0.05, seed=seed)
-        atoms.calc = NoisyEMT(1e-2, seed)
+        atoms.calc = UndeclaredNoise(EMT(), 1e-2, seed)
         with optimizer(atoms, logfile=None) as opt:
             assert opt.run(fmax=1e-3, steps=1000)
         assert fmax_of(atoms, EMT()) < 1e-3

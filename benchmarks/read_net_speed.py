@@ -55,6 +55,8 @@ def main() -> None:
     parser.add_argument('--repeat', type=int, default=3)
     parser.add_argument('--out', type=Path)
     args = parser.parse_args()
+    if args.out is not None and args.out.exists():
+        parser.error(f'--out {str(args.out)!r} exists: give a new file')
     mesh = grid_mesh(args.n)
     rows = []
     with tempfile.TemporaryDirectory() as folder:
@@ -79,7 +81,8 @@ def main() -> None:
     sys.stdout.write(report)
     if args.out is not None:   # saved as printed
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(report)
+        with open(args.out, 'x') as handle:   # an existing file is never replaced
+            handle.write(report)
 
 
 if __name__ == '__main__':

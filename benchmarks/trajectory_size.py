@@ -52,6 +52,8 @@ def main(argv: list[str] | None = None) -> None:
             ('--out', Path, None, 'the Markdown table (default: printed only)')):
         parser.add_argument(flag, type=kind, default=default, help=meaning)
     args = parser.parse_args(argv)
+    if args.out is not None and args.out.exists():
+        parser.error(f'--out {str(args.out)!r} exists: give a new file')
     with tempfile.TemporaryDirectory() as folder:
         count, ours, theirs = measure(args.size, args.steps, Path(folder))
     excess = ours / theirs - 1
@@ -66,7 +68,8 @@ def main(argv: list[str] | None = None) -> None:
     sys.stdout.write(report)
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(report)
+        with open(args.out, 'x') as handle:   # an existing file is never replaced
+            handle.write(report)
 
 
 if __name__ == '__main__':

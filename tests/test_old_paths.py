@@ -18,6 +18,13 @@ NAMES = json.loads((Path(__file__).parent / 'old_public_names.json').read_text()
 #: whose names are now the modules of the commands, ``ase_maud.cli.relax`` and
 #: so on: the one place where an old name means something else.
 COMMAND_MODULES = {'relax', 'show', 'classify', 'saddles', 'bench', 'backends'}
+#: 0.1's constants of the saddle search's exact release and of the settling
+#: of its surroundings, removed in 0.3 with what they tuned (CHANGELOG.md); and
+#: classify's bound of the dense lowest eigenpairs, which 'auto' no longer takes.
+REMOVED = {'ase_maud.activation': {'RELEASE_CAP_DOFS', 'RELEASE_CAP_STEPS',
+                                   'RELEASE_EXACT_MAX_DOFS', 'SETTLE_CYCLES', 'SETTLE_GAIN',
+                                   'SETTLE_RATIO', 'SETTLE_STEPS'},
+           'ase_maud.analysis': {'LOWEST_MAX_DOFS'}}
 
 
 def _quietly(module: str):
@@ -29,7 +36,8 @@ def _quietly(module: str):
 @pytest.mark.parametrize('module', sorted(NAMES))
 def test_every_public_name_of_0_1_is_its_new_home_s(module):
     old = _quietly(module)
-    names = set(NAMES[module]) - (COMMAND_MODULES if module == 'ase_maud.cli' else set())
+    names = (set(NAMES[module]) - (COMMAND_MODULES if module == 'ase_maud.cli' else set())
+             - REMOVED.get(module, set()))
     for name in sorted(names):
         with warnings.catch_warnings():
             warnings.simplefilter('ignore', FutureWarning)

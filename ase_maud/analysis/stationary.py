@@ -9,14 +9,12 @@ verdict. Three paths give the same counts:
   ``numpy.linalg.eigh``; for up to :data:`DENSE_MAX_DOFS` free degrees of
   freedom.
 - ``lowest``: the lowest ``k`` eigenvalues of the same dense Hessian (LAPACK's
-  ``syevr`` asked for those only), for up to :data:`LOWEST_MAX_DOFS`: one
-  Hessian where ``iterative`` takes hundreds of products (the soft modes of
-  a large minimum hold LOBPCG to its iteration limit), and less than ``eigh``
-  of every eigenvalue (docs/dev/bench/saddles.md, "Above 1500 free
-  coordinates").
+  ``syevr`` asked for those only), on request.
 - ``iterative``: the lowest ``k`` eigenvalues by LOBPCG on Hessian-vector
   products (:meth:`ase_maud.calculator.potential.MaudPotential.hvp`), O(N) memory,
-  O(N**2) time per product, a block of vectors per pass over the pairs. The
+  O(N**2) time per product, a block of vectors per pass over the pairs,
+  above :data:`DENSE_MAX_DOFS`; to the digits the signs need
+  (:func:`_lowest_spectrum`). The
   preconditioner is :func:`near_field_stiffness`, a sparse positive model of
   ``H`` (springs and close pairs), factorised once: the near field carries
   the conditioning, so the number of products hardly grows with N.
@@ -65,11 +63,11 @@ from ase_maud.physics.topology import mean_spring_length
 #: Eigenvalues with ``|lambda| <= RTOL * max|lambda|`` count as zero.
 RTOL = 1e-8
 #: ``method='auto'`` takes every eigenvalue up to this many free degrees of
-#: freedom ...
-DENSE_MAX_DOFS = 2000
-#: ... and takes the lowest eigenvalues of the dense Hessian up to this many
-#: (a free 3D scene of 2000 points; 290 MB a copy), LOBPCG above.
-LOWEST_MAX_DOFS = 6000
+#: freedom (a dense Hessian of 8 MB), the lowest by LOBPCG above: no array
+#: of N x N there (a dense Hessian of 2000 points, 290 MB, took 5.7-8.5 CPU s
+#: where LOBPCG took 0.6 s on a net of 1440 points and 5.6-8.4 s on a tree
+#: and a cluster of 1419, 2026-12-06).
+DENSE_MAX_DOFS = 1000
 #: Default force tolerance for "stationary", in units of ``Q a``.
 FTOL = 1e-6
 
@@ -212,7 +210,7 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
         constraints (fixed coordinates are left out).
     method : 'auto', 'dense', 'lowest' or 'iterative'
         ``auto`` is dense up to :data:`DENSE_MAX_DOFS` free degrees of freedom,
-        lowest up to :data:`LOWEST_MAX_DOFS`, iterative above.
+        iterative above.
     k : int
         Eigenvalues the lowest and iterative paths compute (the lowest). If all are
         negative the index is not known and a ValueError asks for a larger k.
@@ -252,8 +250,7 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
     rigid = rigid_body_modes(positions, free, dim)
     n_modes = int(free.sum()) - rigid.shape[1]
     if method == 'auto':
-        method = ('dense' if free.sum() <= DENSE_MAX_DOFS else
-                  'lowest' if free.sum() <= LOWEST_MAX_DOFS else 'iterative')
+        method = 'dense' if free.sum() <= DENSE_MAX_DOFS else 'iterative'
     if method == 'dense':
         values, vectors = _dense_spectrum(atoms, free, rigid)
         scale = np.abs(values).max(initial=0.0)
@@ -342,9 +339,16 @@ def _lowest_of_dense(atoms, free, rigid, k):
 def _lowest_spectrum(atoms, free, rigid, k, rtol, work=None):
     """Lowest ``k`` eigenpairs by preconditioned LOBPCG, and max|lambda|.
 
-    Iterates stay orthogonal to the rigid modes (LOBPCG's ``Y``). LOBPCG
-    stops when every residual ``|H x - lambda x|`` is below a tenth of the
-    zero tolerance, so each eigenvalue is that close to a true one.
+    Iterates stay orthogonal to the rigid modes (LOBPCG's ``Y``). A first
+    LOBPCG run stops at residuals ``r = |H x - lambda x|`` below
+    :data:`LOBPCG_FIRST_RTOL` of the largest eigenvalue; if that settles
+    what :func:`classify` counts for every Ritz pair, its sign (``r`` below
+    :data:`SIGN_MARGIN` times ``|lambda|`` less the zero tolerance
+    ``rtol max|lambda|``: a symmetric ``H`` has an eigenvalue within ``r`` of
+    ``lambda``) or that it is zero (``r`` below a tenth of that tolerance),
+    it is the answer; else a second run from its vectors goes on to residuals
+    below a tenth of the zero tolerance (a warning if a sign is still open
+    after it). A stiff scene then needs no digits its signs do not.
     """
     op = hessian_operator(atoms, free, rigid, work)
     flat = free.ravel()
@@ -355,18 +359,39 @@ def _lowest_spectrum(atoms, free, rigid, k, rtol, work=None):
     lu = splu(sp.csc_matrix(near + shift * sp.identity(near.shape[0])))
     precond = LinearOperator(near.shape, matvec=lu.solve, matmat=lu.solve,
                              dtype=float)
-    x0 = np.random.default_rng(0).standard_normal((op.shape[0], k))
+    vectors = np.random.default_rng(0).standard_normal((op.shape[0], k))
     top = eigsh(op, 1, which='LA', tol=0.1, ncv=min(10, op.shape[0]),
-                v0=x0[:, 0], return_eigenvectors=False)[0]  # a 1% scale
-    with warnings.catch_warnings():
-        warnings.filterwarnings('error', 'Failed at iteration', UserWarning)
-        values, vectors = lobpcg(op, x0, M=precond,
-                                 Y=rigid if rigid.size else None,
-                                 tol=0.1 * rtol * abs(top), maxiter=500,
-                                 largest=False)
+                v0=vectors[:, 0], return_eigenvectors=False)[0]  # a 1% scale
+    zero = rtol * abs(top)
+    for tol in (LOBPCG_FIRST_RTOL * abs(top), 0.1 * zero):
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', UserWarning)   # "not reaching the tol"
+            values, vectors = lobpcg(op, vectors, M=precond,
+                                     Y=rigid if rigid.size else None,
+                                     tol=tol, maxiter=LOBPCG_MAXITER, largest=False)
+        residuals = np.linalg.norm(op @ vectors - vectors * values, axis=0)
+        settled = ((residuals < 0.1 * zero)
+                   | (residuals < SIGN_MARGIN * (np.abs(values) - zero)))
+        if settled.all():
+            break
+    else:
+        warnings.warn(f'LOBPCG: the residuals '
+                      f'{np.array2string(residuals[~settled], precision=3)} of the '
+                      f'eigenvalues {np.array2string(values[~settled], precision=3)} '
+                      f'leave their sign open after {LOBPCG_MAXITER} iterations',
+                      stacklevel=3)
     order = np.argsort(values)
     values, vectors = values[order], vectors[:, order]
     return values, vectors, max(abs(values[0]), abs(top))
+
+
+#: LOBPCG's first run stops at residuals below this fraction of the largest
+#: eigenvalue, the second (if the first left a sign open) at a tenth of the
+#: zero tolerance; each at most this many iterations (:func:`_lowest_spectrum`).
+LOBPCG_FIRST_RTOL, LOBPCG_MAXITER = 1e-6, 500
+#: A Ritz value's sign is settled once its residual is below this fraction
+#: of its distance from the zero band (:func:`_lowest_spectrum`).
+SIGN_MARGIN = 0.5
 
 
 def near_field_stiffness(atoms: Atoms, cutoff: float = 1.5) -> sp.csr_matrix:

@@ -214,46 +214,53 @@ def hvp(positions: np.ndarray, v: np.ndarray) -> np.ndarray:
     return repulsion_hvp(x, u, numba.get_num_threads()).transpose(0, 2, 1)
 
 
-@numba.njit(parallel=True, fastmath=True, cache=True)
+@numba.njit(parallel=True, fastmath=True, error_model='numpy', cache=True)
 def repulsion_hvp(x: np.ndarray, v: np.ndarray, nchunks: int) -> np.ndarray:
     """Unit repulsion part of ``H v``: ``sum_j B_ij (v_i - v_j)`` with c = 1.
 
     ``x`` (3, N) positions, ``v`` (m, 3, N) vectors, ``B_ij`` the pair block.
     Each unordered pair is visited once (``B_ji = B_ij``): ``w = B_ij (v_i -
     v_j)`` goes to ``i`` and ``-w`` to ``j``. The geometry of row ``i`` is
-    computed once into buffers and reused for all m vectors. Rows go
-    round-robin to ``nchunks`` chunks, each with buffers of its own; the
-    chunks are summed at the end.
+    computed once into buffers (``1 / L`` in a loop of its own, the square
+    root and division alone, as :func:`_make_numba_kernel` does) and reused for all
+    m vectors; unsigned loop indices and ``error_model='numpy'`` let the
+    loops vectorise (3.2-3.5x the products of a plain loop at 556 and 2000
+    points, one vector, one thread). Rows go round-robin to ``nchunks``
+    chunks, each with buffers of its own; the chunks are summed at the end.
     """
     m, n = v.shape[0], x.shape[1]
     out = np.zeros((nchunks, m, 3, n))
     for t in numba.prange(nchunks):
         geo = np.empty((5, n))
         for i in range(t, n, nchunks):
-            for j in range(i + 1, n):
-                dx = x[0, i] - x[0, j]
-                dy = x[1, i] - x[1, j]
-                dz = x[2, i] - x[2, j]
-                inv3, three_inv2 = pair_law(1.0 / np.sqrt(dx * dx + dy * dy + dz * dz))
+            xi, yi, zi = x[0, i], x[1, i], x[2, i]
+            lo, hi = np.uint64(i + 1), np.uint64(n)
+            for j in range(lo, hi):
+                dx = xi - x[0, j]
+                dy = yi - x[1, j]
+                dz = zi - x[2, j]
                 geo[0, j] = dx
                 geo[1, j] = dy
                 geo[2, j] = dz
+                geo[4, j] = 1.0 / np.sqrt(dx * dx + dy * dy + dz * dz)
+            for j in range(lo, hi):
+                inv3, three_inv2 = pair_law(geo[4, j])
                 geo[3, j] = three_inv2
                 geo[4, j] = inv3
             for k in range(m):
                 ox, oy, oz = out[t, k, 0], out[t, k, 1], out[t, k, 2]
                 vx, vy, vz = v[k, 0], v[k, 1], v[k, 2]
+                vxi, vyi, vzi = vx[i], vy[i], vz[i]
                 ax = ay = az = 0.0
-                for j in range(i + 1, n):
+                for j in range(lo, hi):
                     dx, dy, dz = geo[0, j], geo[1, j], geo[2, j]
-                    ex = vx[i] - vx[j]
-                    ey = vy[i] - vy[j]
-                    ez = vz[i] - vz[j]
+                    ex = vxi - vx[j]
+                    ey = vyi - vy[j]
+                    ez = vzi - vz[j]
                     s = geo[3, j] * (dx * ex + dy * ey + dz * ez)
-                    ax, ay, az = share(ax, ay, az, ox, oy, oz, j,
-                                       geo[4, j] * (s * dx - ex),
-                                       geo[4, j] * (s * dy - ey),
-                                       geo[4, j] * (s * dz - ez), -1.0)
+                    c = geo[4, j]
+                    ax, ay, az = share(ax, ay, az, ox, oy, oz, j, c * (s * dx - ex),
+                                       c * (s * dy - ey), c * (s * dz - ez), -1.0)
                 ox[i] += ax
                 oy[i] += ay
                 oz[i] += az

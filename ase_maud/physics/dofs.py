@@ -27,6 +27,17 @@ def free_dofs(atoms: Atoms, dim: int) -> np.ndarray:
     return free[:, :dim] != 0
 
 
+def column_null_space(matrix: np.ndarray, rcond: float) -> np.ndarray:
+    """Orthonormal columns spanning the null space of ``matrix`` (m, r), its
+    singular values below ``rcond`` times the largest taken for zero (as
+    :func:`scipy.linalg.null_space`), from the thin SVD: r x r at most where
+    SciPy's would form an m x m factor (m is every coordinate of a large
+    scene, r at most 6 rigid-body modes)."""
+    _, values, vh = np.linalg.svd(matrix, full_matrices=matrix.shape[0] < matrix.shape[1])
+    rank = int(np.sum(values > rcond * values.max(initial=0.0)))
+    return vh[rank:].T
+
+
 def rigid_body_modes(positions: np.ndarray, free: np.ndarray, dim: int,
                      rcond: float = 1e-8) -> np.ndarray:
     """Orthonormal rigid-body modes on the free degrees of freedom.
@@ -49,7 +60,7 @@ def rigid_body_modes(positions: np.ndarray, free: np.ndarray, dim: int,
     modes = np.vstack([translations, rotations]).T
     flat = free.ravel()
     if (~flat).any():
-        modes = modes @ scipy.linalg.null_space(modes[~flat], rcond=rcond)
+        modes = modes @ column_null_space(modes[~flat], rcond)
     return scipy.linalg.orth(modes[flat], rcond=rcond)
 
 
@@ -91,7 +102,7 @@ def allowed_rigid_modes(positions: np.ndarray, dim: int,
     if basis is None:
         return rigid
     outside = rigid - basis @ (basis.T @ rigid)
-    return rigid @ scipy.linalg.null_space(outside, rcond=1e-8)
+    return rigid @ column_null_space(outside, 1e-8)
 
 
 def project_off(matrix: np.ndarray, modes: np.ndarray) -> np.ndarray:

@@ -12,8 +12,8 @@ from ase import Atoms
 from ase.filters import Filter
 from scipy.spatial import cKDTree
 
-from ase_maud.analysis.stationary import classify
-from ase_maud.counting import CallRecorder, Work, fresh_copy
+from ase_maud.analysis import stationary
+from ase_maud.counting import CallRecorder, fresh_copy
 from ase_maud.errors import MaudError
 from ase_maud.optimize.maud import Maud
 from ase_maud.optimize.models.exact import EXACT_MAX_DOFS
@@ -36,28 +36,6 @@ GROWTH = (2.0, 4.0)
 REGION_STEPS = 60
 
 
-#: The surroundings of a region's saddle are relaxed with the region held (to
-#: this fraction of the largest force before), and the region climbed again,
-#: in turn (at most this many times, each run at most this many steps),
-#: while each turn cuts the largest force by this factor at least.
-SETTLE_RATIO, SETTLE_CYCLES, SETTLE_STEPS, SETTLE_GAIN = 0.1, 40, 20, 0.8
-
-
-#: The whole scene is released from a region's saddle with the exact model
-#: (a dense Hessian and its eigen-decomposition a step) up to this many free
-#: coordinates, above it with the springs model after settling the
-#: surroundings (the measurements that set it: docs/dev/bench/saddles.md,
-#: "Released with the exact model" and "Above 1500 free coordinates").
-RELEASE_EXACT_MAX_DOFS = 3000
-
-
-#: Above this many free coordinates the exact release stops (outcome 'exact
-#: release steps') after this many steps: a step costs seconds there, so one
-#: that wanders would take hundreds within the budget (docs/dev/bench/saddles.md,
-#: "The exact release capped").
-RELEASE_CAP_DOFS, RELEASE_CAP_STEPS = 1500, 60
-
-
 #: An attempt whose region's saddle lies this close in direction (cosine of
 #: the moves from the minimum) to a saddle found is rejected.
 SAME_DIRECTION = 0.9
@@ -70,8 +48,7 @@ class Attempt:
     -1; 'local': an activation around point ``where``; 'path': a band to
     the second minimum given, :func:`~ase_maud.saddles.between_minima.saddle_between`), how it ended
     (``outcome``: 'saddle', 'known saddle', 'known direction', 'budget', 'no
-    local saddle', 'steps', 'exact release steps' (:data:`RELEASE_CAP_STEPS`),
-    or the error that stopped it), the points of its last region
+    local saddle', 'steps', or the error that stopped it), the points of its last region
     (``region``, local ones), what it computed (``calls``, ``hvp_vectors``,
     ``hessians``) and its CPU seconds, and the energy it ended at (a
     saddle's, or where it stopped)."""
@@ -117,8 +94,6 @@ class Tally:
 
     def __init__(self, attempt: Attempt, budget: int | None):
         self.attempt = attempt
-        #: the negative mode the attempt follows (N, 3), once it has one
-        self.mode: np.ndarray | None = None
         self.budget = np.inf if budget is None else budget
         self.cpu = time.process_time()
 
@@ -192,59 +167,18 @@ def climb_region(minimum: Atoms, centre: int, known: list[np.ndarray], fmax: flo
         why = tally.run(opt, atoms, fmax, REGION_STEPS)
         if why:
             return None, tally.end('no local saddle' if why == 'steps' else why, atoms)
-        mode, held = opt.found.modes[0], region
+        mode = opt.found.modes[0]
         if factor == 1.0 and along_known(atoms.positions - x, known):
             return None, tally.end('known direction', atoms)
-    exact = free.sum() <= RELEASE_EXACT_MAX_DOFS
-    if mode is not None and not exact:
-        saddle = _settle(atoms, tally, held, np.setdiff1d(np.flatnonzero(movable), held),
-                         mode, fmax)
-        if isinstance(saddle, str):
-            return None, tally.end(saddle, atoms)
-        if saddle is not None:
-            return atoms, tally.end('saddle', atoms)
-        mode = tally.mode
+    # the release: the whole scene from the region's saddle along its
+    # negative mode, on its dense Hessian up to the size classify takes
+    # every eigenvalue at, above it Hessian-free (the springs model: LOBPCG
+    # and truncated Newton on Hessian-vector products)
+    small = free.sum() <= stationary.DENSE_MAX_DOFS
     opt = Maud(atoms, target='saddle', mode=mode, logfile=None,
-               model='exact' if exact else 'auto')
-    cap = min(steps, RELEASE_CAP_STEPS) if exact and free.sum() > RELEASE_CAP_DOFS else steps
-    why = tally.run(opt, atoms, fmax, cap)
-    if why == 'steps' and cap < steps:
-        why = 'exact release steps'
+               model='exact' if small else 'auto')
+    why = tally.run(opt, atoms, fmax, steps)
     return (None if why else atoms), tally.end(why or 'saddle', atoms)
-
-
-def _settle(atoms: Atoms, tally: Tally, held: np.ndarray, rest: np.ndarray,
-            mode: np.ndarray, fmax: float) -> Atoms | str | None:
-    """From the saddle of the region ``held`` (its negative mode ``mode``),
-    the ``rest`` relaxed with the region held and the region climbed again,
-    in turn, at most :data:`SETTLE_CYCLES` times: ``atoms`` if that
-    converges (largest force below ``fmax``) on a verified index-1 saddle,
-    why not if it fails (the budget spent, the region's saddle lost), else
-    None (the whole scene is then released from there along
-    ``tally.mode``)."""
-    largest = np.linalg.norm(atoms.get_forces(), axis=1).max()
-    tally.mode = mode
-    for _ in range(SETTLE_CYCLES):
-        if tally.run(Maud(Filter(atoms, indices=rest), logfile=None), atoms,
-                     max(fmax, SETTLE_RATIO * largest), SETTLE_STEPS) == 'budget':
-            return 'budget'
-        opt = Maud(Filter(atoms, indices=held), target='saddle', mode=tally.mode[held],
-                   logfile=None)
-        why = tally.run(opt, atoms, fmax, SETTLE_STEPS)
-        if why:
-            return f'region lost while settling ({why})'
-        tally.mode = opt.found.modes[0]
-        settled = np.linalg.norm(atoms.get_forces(), axis=1).max()
-        if settled < fmax:
-            work = Work()
-            point = classify(atoms, ftol=fmax, work=work)
-            tally.attempt.hvp_vectors += work.hvp_vectors
-            tally.attempt.hessians += work.hessians
-            return atoms if point.index == 1 and not point.n_zero else None
-        if settled > SETTLE_GAIN * largest:   # no longer converging: release
-            return None
-        largest = settled
-    return None
 
 
 def path_to_partner(minimum: Atoms, partner: Atoms, fmax: float, relax: int | None = None,

@@ -25,17 +25,13 @@ minimum it makes, in order:
    while it has at most :data:`~ase_maud.optimize.models.exact.EXACT_MAX_DOFS` free
    coordinates), each time climbed again from where the last left off along
    its negative mode. The whole scene is then released from there along
-   that mode (``Maud(target='saddle', mode=...)``) and converged on a
-   verified index-1 saddle: with the exact model (eigenvector following on
-   the whole scene's dense Hessian: one call and one Hessian a step) while
-   the scene has at most :data:`RELEASE_EXACT_MAX_DOFS` free coordinates
-   (above :data:`RELEASE_CAP_DOFS`, at most :data:`RELEASE_CAP_STEPS` steps).
-   Above that, the rest of the scene is first relaxed with the region
-   held, and the region climbed again, in turn, while that converges: to a
-   saddle of the whole scene (verified: ``classify``), or else, where it
-   stops converging, released with the springs model (minimum-mode
-   following, its lowest modes from LOBPCG on Hessian-vector products,
-   started from the region's negative mode).
+   that mode (``Maud(target='saddle', mode=...)`` with its default model:
+   above :data:`~ase_maud.optimize.models.exact.EXACT_MAX_DOFS` free
+   coordinates the springs model, which follows the lowest modes by LOBPCG
+   on Hessian-vector products preconditioned by the springs' stiffness and
+   moves along the rest by truncated Newton: no dense Hessian of the scene)
+   and converged on a verified index-1 saddle (the verification too by
+   LOBPCG above :data:`~ase_maud.analysis.stationary.DENSE_MAX_DOFS`).
 
 With an energy ``window`` these two make a round, and the search goes on
 in rounds (the next ``modes`` modes, ``local`` more points) until
@@ -200,7 +196,7 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
     """The :class:`SaddleSearch` from the minimum ``minimum`` (a MaudCalculator
     scene relaxed to ``fmax``; see the module docstring): climbs along its
     lowest modes both ways, then local activations (a point's neighbourhood
-    climbed with the rest held, the rest settled, the whole released), each
+    climbed with the rest held, then the whole released), each
     attempt within a budget of force-call equivalents; every saddle found is
     verified index 1 from a fresh calculator.
 

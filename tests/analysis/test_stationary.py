@@ -293,7 +293,7 @@ def test_lowest_of_the_dense_hessian_matches_dense(random_points, dim, seed, mon
     """A minimum (two points fixed for seed 2: fewer rigid modes) and, in 2D,
     a saddle of high index (the ring buckling out of its plane): the lowest
     eigenvalues and counts of the dense path, for one Hessian; ``'auto'``
-    takes this path above the dense size."""
+    takes LOBPCG above the dense size, with the same counts and no Hessian."""
     flat = relaxed(chorded_ring(random_points, 40, seed, dim))
     if seed == 2:
         flat.set_constraint(FixAtoms([0, 7]))
@@ -301,7 +301,11 @@ def test_lowest_of_the_dense_hessian_matches_dense(random_points, dim, seed, mon
     monkeypatch.setattr(analysis, 'DENSE_MAX_DOFS', 10)
     for atoms in (flat, buckled):
         dense = classify(atoms, method='dense')
-        lowest = classify(atoms, k=dense.index + 4, work=(work := Work()))
+        auto = classify(atoms, k=dense.index + 4, work=(work := Work()))
+        assert auto.method == 'iterative' and work.hessians == 0 and work.hvp_vectors > 0
+        assert (auto.verdict, auto.index, auto.n_zero) == (dense.verdict, dense.index,
+                                                           dense.n_zero)
+        lowest = classify(atoms, method='lowest', k=dense.index + 4, work=(work := Work()))
         assert lowest.method == 'lowest' and work == Work(hessians=1)
         for name in ('verdict', 'index', 'n_zero', 'n_modes', 'n_rigid', 'n_fixed'):
             assert getattr(lowest, name) == getattr(dense, name)

@@ -64,9 +64,7 @@ from ase_maud.physics.topology import mean_spring_length
 RTOL = 1e-8
 #: ``method='auto'`` takes every eigenvalue up to this many free degrees of
 #: freedom (a dense Hessian of 8 MB), the lowest by LOBPCG above: no array
-#: of N x N there (a dense Hessian of 2000 points, 290 MB, took 5.7-8.5 CPU s
-#: where LOBPCG took 0.6 s on a net of 1440 points and 5.6-8.4 s on a tree
-#: and a cluster of 1419, 2026-12-06).
+#: of N x N there (docs/analysis.md compares the two above it).
 DENSE_MAX_DOFS = 1000
 #: Default force tolerance for "stationary", in units of ``Q a``.
 FTOL = 1e-6

@@ -282,11 +282,10 @@ class MaudPotential:
         """The rows and columns of :meth:`hessian` on the coordinates of the
         points ``index`` (n,), shape (dim n, dim n), units of ``Q``, without
         the whole: the repulsion's part in O(n N), compiled
-        (:func:`.direct.repulsion_hessian_block`, the law of
-        :func:`.physics.repulsion_hessian_block` to round-off), the springs' a
-        slice of their constant Hessian (the last one kept: a run asks for the
-        same points at every step). A ValueError names a bad index, the
-        closest pair of points, or an overflow."""
+        (:func:`.direct.repulsion_hessian_block`: :func:`.physics.repulsion_hessian_block`
+        to round-off), the springs' from their entries (the last block kept: a
+        run asks for the same points at every step). A ValueError names a bad
+        index, the closest pair of points, or an overflow."""
         index = check_indices(index, len(positions))
         block = self._spring_block(len(positions), index).copy()
         if self.repulsive:
@@ -302,22 +301,23 @@ class MaudPotential:
     def _spring_block(self, natoms: int, index: np.ndarray) -> np.ndarray:
         """The springs' dense Hessian on the points ``index`` (dim n, dim n), the last kept."""
         key = (natoms, index.tobytes())
-        kept = self._cache.get('spring block')
-        if kept is None or kept[0] != key:
+        if (kept := self._cache.get('spring block')) is None or kept[0] != key:   # no sparse slice
             coords = (self.dim * index[:, None] + np.arange(self.dim)).ravel()
-            kept = key, self.spring_hessian(natoms)[coords][:, coords].toarray()
+            kept = key, physics.entries_block(*self._entries(natoms), self.dim * natoms, coords)
             self._cache['spring block'] = kept
         return kept[1]
+
+    def _entries(self, n: int) -> tuple[np.ndarray, np.ndarray]:   # the springs' Hessian's, per N
+        return self._kept(('hessian entries', n), lambda: _flat_entries(
+            np.ascontiguousarray(self._springs_within(n), dtype=np.int64),
+            np.broadcast_to(np.asarray(self.Q * self.stiffnesses, float),
+                            len(self.springs)).copy(), self.dim, n))
 
     def whole_hessian(self, repulsion: np.ndarray) -> np.ndarray:
         """The dense Hessian from the unit repulsion's (dim N, dim N): ``Q``
         times it, plus the springs' (whose entries are kept in a flat index
         once per N, not converted at every call); ``repulsion`` is overwritten."""
-        n = len(repulsion) // self.dim
-        flat, data = self._kept(('hessian entries', n), lambda: _flat_entries(
-            np.ascontiguousarray(self._springs_within(n), dtype=np.int64),
-            np.broadcast_to(np.asarray(self.Q * self.stiffnesses, float),
-                            len(self.springs)).copy(), self.dim, n))
+        flat, data = self._entries(len(repulsion) // self.dim)
         repulsion *= self.Q
         repulsion.ravel()[flat] += data
         return repulsion

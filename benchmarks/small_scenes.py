@@ -18,8 +18,9 @@ process's (``time.process_time``), after every kernel was compiled and run once,
 of ``--repeat`` runs from fresh copies (default 3; the calls are the same each time). Every end
 point is checked to be a minimum by the analytic Hessian
 (``ase_maud.analysis.stationary.classify``).
-``--profile`` gives the share of Maud's run time spent in the kernel and the
-factorisations (timers around those calls over repeated unprofiled runs of one scene).
+``--profile`` gives Maud's CPU a step and its shares in the kernel (the Hessian,
+or a held net's block of it) and the factorisations (timers around those calls over
+repeated unprofiled runs of one scene; it runs on an older checkout too).
 Run with one thread and save the raw numbers::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
@@ -42,7 +43,8 @@ from ase_maud.analysis.stationary import classify
 from ase_maud.backends import direct
 from ase_maud.bench.optimizers import ScipyLBFGSB
 from ase_maud.counting import CallRecorder
-from ase_maud.optimize.models import base as stiffness
+from ase_maud.optimize.models import exact as stiffness
+from ase_maud.physics import pair_law
 from ase_maud.physics.pair_law import spring_terms
 from ase_maud.scenes.catalogue import build
 
@@ -166,9 +168,10 @@ def measure(name, size, seed, fmax, steps, repeat=3):
 
 @contextmanager
 def timed(module, names, totals, key):
-    """Within: each function ``names`` of ``module`` adds its process CPU
-    seconds to ``totals[key]`` (restored after)."""
-    kept = {name: getattr(module, name) for name in names}
+    """Within: each function ``names`` of ``module`` (those it has: an older
+    version may lack one) adds its process CPU seconds to ``totals[key]``
+    (restored after)."""
+    kept = {name: getattr(module, name) for name in names if hasattr(module, name)}
 
     def timer(function):
         def wrapper(*args, **kwargs):
@@ -199,16 +202,19 @@ def profile(name, size, seed, fmax, repeats=20):
     run_maud(fresh(atoms), fmax, 5000)   # every kernel compiled and loaded
     copies = [fresh(atoms) for _ in range(repeats)]
     totals = {'kernel': 0.0, 'factorisations': 0.0}
-    with timed(direct, ['repulsion_hessian'], totals, 'kernel'), \
+    steps = 0
+    with timed(direct, ['repulsion_hessian', 'repulsion_hessian_block'], totals, 'kernel'), \
+            timed(pair_law, ['repulsion_hessian_block'], totals, 'kernel'), \
             timed(stiffness, ['dpotrf', 'dpotrs', 'dsyevd'], totals, 'factorisations'):
         start = time.process_time()
         for copy in copies:
             with Maud(copy, logfile=None) as opt:
                 opt.run(fmax=fmax)
+            steps += opt.nsteps
         total = time.process_time() - start
     shares = {key: value / total for key, value in totals.items()}
     return {'scene': f'{name}:{size}', 'seed': seed, **shares,
-            'rest': 1 - sum(shares.values())}
+            'rest': 1 - sum(shares.values()), 'us a step': 1e6 * total / steps}
 
 
 def main() -> None:
@@ -244,10 +250,11 @@ def main() -> None:
             writer.writeheader()
             writer.writerows(rows)
     if args.profile:
-        for name, size in (('all_pairs', 12), ('random_graph', 40), ('all_pairs', 30)):
+        for name, size in (('all_pairs', 12), ('random_graph', 40), ('all_pairs', 30),
+                           ('hanging_net', 5)):
             shares = profile(name, size, args.seeds[0], args.fmax)
-            print('profile', shares['scene'], ' '.join(
-                f'{k} {v:.0%}' for k, v in shares.items() if k not in ('scene', 'seed')))
+            print('profile', shares['scene'], f"{shares['us a step']:.0f} us a step:", ' '.join(
+                f'{k} {shares[k]:.0%}' for k in ('kernel', 'factorisations', 'rest')))
 
 
 if __name__ == '__main__':

@@ -312,3 +312,43 @@ BACKEND = Backend(
     name='numba', evaluate=evaluate, cost='N^2', hvp=hvp, hessian=hessian,
     summary='compiled direct sum over every pair, parallel over '
     'NUMBA_NUM_THREADS')
+
+
+@numba.njit(error_model='numpy', cache=True)
+def repulsion_hessian_block(x: np.ndarray, index: np.ndarray, dim: int) -> np.ndarray:
+    """:func:`ase_maud.physics.pair_law.repulsion_hessian_block` compiled: the
+    unit repulsion's Hessian on the coordinates of the points ``index`` (n,)
+    of ``x`` (N, 3), shape (dim n, dim n), in O(n N) time and O(n**2)
+    memory, with the reference's arithmetic in its order (no fastmath: the
+    length as ``norm``'s sum of squares, ``L**-3`` as ``pow``, each nodal
+    block summed over the points in their order), so that a block is that
+    function's to the last bit on a small scene, without its dozens of
+    array calls. Coincident points give non-finite entries, never an error."""
+    n, count = index.shape[0], x.shape[0]
+    hessian = np.zeros((n, dim, n, dim))
+    where = np.full(count, -1)
+    for r in range(n):
+        where[index[r]] = r
+    d = np.empty(dim)
+    for r in range(n):
+        i = index[r]
+        for j in range(count):
+            if j == i:
+                continue
+            square = 0.0
+            for a in range(dim):
+                d[a] = x[i, a] - x[j, a]
+                square += d[a] * d[a]
+            inv = 1.0 / np.sqrt(square)
+            inv3 = inv ** 3.0
+            column = where[j]
+            for a in range(dim):
+                for b in range(dim):
+                    block = 3.0 * inv * inv * (d[a] * d[b])
+                    if a == b:
+                        block -= 1.0
+                    block = inv3 * block
+                    hessian[r, a, r, b] += block
+                    if column >= 0:
+                        hessian[r, a, column, b] = -block
+    return hessian.reshape(dim * n, dim * n)

@@ -15,6 +15,7 @@ formed and every result is finite wherever it is representable.
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 
 import numba
@@ -24,6 +25,7 @@ from ase import Atoms
 from numpy.typing import ArrayLike
 
 from ase_maud import backends
+from ase_maud.backends import direct
 from ase_maud.checks import check, check_each, check_indices
 from ase_maud.physics import pair_law as physics
 from ase_maud.physics import topology
@@ -160,12 +162,12 @@ class MaudPotential:
         (N, 3), with ``z = 0`` for ``dim=2``; a ValueError names an atom whose
         ``x / a`` overflows."""
         given = np.asarray(positions, dtype=float)
-        if given.ndim == 2 and given.shape[1] == 3:
-            with np.errstate(over='ignore'):
+        # x / a overflows only for a < 1 (numpy's error state costs more than x / a at small N)
+        with np.errstate(over='ignore') if self.a < 1.0 else nullcontext():
+            if given.ndim == 2 and given.shape[1] == 3:
                 scaled = given / self.a
-        else:
-            scaled = np.zeros((len(given), 3))
-            with np.errstate(over='ignore'):
+            else:
+                scaled = np.zeros((len(given), 3))
                 np.divide(given, self.a, out=scaled[:, :given.shape[1]])
         if not np.isfinite(scaled).all():
             bad = np.flatnonzero(~np.isfinite(scaled).all(axis=1))[0]
@@ -279,15 +281,15 @@ class MaudPotential:
     def hessian_block(self, positions: np.ndarray, index: np.ndarray) -> np.ndarray:
         """The rows and columns of :meth:`hessian` on the coordinates of the
         points ``index`` (n,), shape (dim n, dim n), units of ``Q``, without
-        the whole: the repulsion's part in O(n N)
-        (:func:`.physics.repulsion_hessian_block`), the springs' a slice of
-        their constant Hessian. A ValueError names a bad index, the closest
-        pair of points, or an overflow."""
+        the whole: the repulsion's part in O(n N), compiled
+        (:func:`.direct.repulsion_hessian_block`: :func:`.physics.repulsion_hessian_block`
+        to round-off), the springs' from their entries (the last block kept: a
+        run asks for the same points at every step). A ValueError names a bad
+        index, the closest pair of points, or an overflow."""
         index = check_indices(index, len(positions))
-        coords = (self.dim * index[:, None] + np.arange(self.dim)).ravel()
-        block = self.spring_hessian(len(positions))[coords][:, coords].toarray()
+        block = self._spring_block(len(positions), index).copy()
         if self.repulsive:
-            block += self.Q * physics.repulsion_hessian_block(
+            block += self.Q * direct.repulsion_hessian_block(
                 self.reduced(positions), index, self.dim)
         if not np.isfinite(block).all():
             if self.repulsive:
@@ -296,15 +298,26 @@ class MaudPotential:
                              'choose units nearer the scene')
         return block
 
+    def _spring_block(self, natoms: int, index: np.ndarray) -> np.ndarray:
+        """The springs' dense Hessian on the points ``index`` (dim n, dim n), the last kept."""
+        key = (natoms, index.tobytes())
+        if (kept := self._cache.get('spring block')) is None or kept[0] != key:   # no sparse slice
+            coords = (self.dim * index[:, None] + np.arange(self.dim)).ravel()
+            kept = key, physics.entries_block(*self._entries(natoms), self.dim * natoms, coords)
+            self._cache['spring block'] = kept
+        return kept[1]
+
+    def _entries(self, n: int) -> tuple[np.ndarray, np.ndarray]:   # the springs' Hessian's, per N
+        return self._kept(('hessian entries', n), lambda: _flat_entries(
+            np.ascontiguousarray(self._springs_within(n), dtype=np.int64),
+            np.broadcast_to(np.asarray(self.Q * self.stiffnesses, float),
+                            len(self.springs)).copy(), self.dim, n))
+
     def whole_hessian(self, repulsion: np.ndarray) -> np.ndarray:
         """The dense Hessian from the unit repulsion's (dim N, dim N): ``Q``
         times it, plus the springs' (whose entries are kept in a flat index
         once per N, not converted at every call); ``repulsion`` is overwritten."""
-        n = len(repulsion) // self.dim
-        flat, data = self._kept(('hessian entries', n), lambda: _flat_entries(
-            np.ascontiguousarray(self._springs_within(n), dtype=np.int64),
-            np.broadcast_to(np.asarray(self.Q * self.stiffnesses, float),
-                            len(self.springs)).copy(), self.dim, n))
+        flat, data = self._entries(len(repulsion) // self.dim)
         repulsion *= self.Q
         repulsion.ravel()[flat] += data
         return repulsion

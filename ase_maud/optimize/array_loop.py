@@ -54,7 +54,9 @@ def applies(opt: Any) -> bool:
 
 def log_line(logfile: IO | None, name: str, step: int, energy: float, fmax: float) -> None:
     """The line ASE's ``Optimizer.log`` writes for ``step`` (with its header
-    before step 0)."""
+    before step 0); none for no ``logfile`` (:func:`run` gives None for ASE's
+    log of ``logfile=None``, which writes nothing: no clock read and no line
+    formatted for it, a few microseconds of a small scene's step)."""
     if logfile is None:
         return
     if step == 0:
@@ -99,7 +101,7 @@ def relax(atoms: Atoms, model: StiffnessModel, strategy: Strategy, state: MaudSt
         return held_results()
 
     def local_at(x: np.ndarray) -> Any:
-        here = np.array_equal(x, positions)   # where the calculator's results are
+        here = bool((x == positions).all())   # where the calculator's results are
         positions[:] = x   # (elsewhere: where a resumed run's step began)
         try:
             return (model.of_results(atoms, calc.results, state.model) if here
@@ -117,7 +119,7 @@ def relax(atoms: Atoms, model: StiffnessModel, strategy: Strategy, state: MaudSt
         if holds:
             x[held] = positions[held]
         strategy.moved(state, x)
-        moved = not np.array_equal(x, positions)
+        moved = not (x == positions).all()
         positions[:] = x
         accuracy.ask(calc, fmax, fmax_now)
         energy, forces = evaluate(moved)
@@ -152,14 +154,15 @@ def run(opt: Any, steps: int, no_step: Callable[[str], None],
     steps_made = relax(opt.atoms, opt.model, opt.strategy, opt.state, opt.monitor, opt.fmax,
                        lambda: opt.nsteps, no_step)
     name = type(opt).__name__
+    logfile = None if getattr(opt.logfile, '_logfile', '') is None else opt.logfile
     try:
         energy, opt.fmax_now = next(steps_made)
         if opt.nsteps == 0:
-            log_line(opt.logfile, name, 0, energy, opt.fmax_now)
+            log_line(logfile, name, 0, energy, opt.fmax_now)
         while opt.fmax_now >= opt.fmax and opt.nsteps < opt.max_steps:
             energy, opt.fmax_now = next(steps_made)
             opt.nsteps += 1
-            log_line(opt.logfile, name, opt.nsteps, energy, opt.fmax_now)
+            log_line(logfile, name, opt.nsteps, energy, opt.fmax_now)
     except MaudError as error:
         stop(error)
     return opt.fmax_now < opt.fmax

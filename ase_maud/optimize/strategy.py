@@ -214,9 +214,9 @@ class Minimise(Strategy):
         seen = state.noise_seen
         change, slack = merit_change(last.merit, max(last.noise, seen), last.forces, move,
                                      merit, forces, max(noise, seen), energy)
-        trapezoid = work_change(last.forces, move, forces)[0]   # < 0: a fall, by the forces
         if (self.learns_noise and energy and change > slack and np.vdot(last.forces, move) > 0
-                and np.vdot(forces, move) > 0 and change > -trapezoid
+                and np.vdot(forces, move) > 0
+                and change > -work_change(last.forces, move, forces)[0]   # < 0: a fall
                 and change < NOISE_MAX * abs(last.merit)):
             state.disagreements += 1
             rise = change / max(abs(last.merit), 1e-300)

@@ -84,9 +84,9 @@ def allowed_basis(atoms: Atoms, dim: int) -> np.ndarray:
         projector[:, :, k] = unit
     values, vectors = np.linalg.eigh(projector[:, :dim, :dim])
     atom, column = np.nonzero(values > 0.5)   # eigenvalues are 0 or 1
-    basis = np.zeros((dim * len(atoms), len(atom)))
-    for j, (i, c) in enumerate(zip(atom, column, strict=True)):
-        basis[dim * i:dim * (i + 1), j] = vectors[i, :, c]
+    basis = np.zeros((dim * len(atoms), len(atom)))   # column j: atom[j]'s eigenvector
+    rows = dim * atom[:, None] + np.arange(dim)
+    basis[rows, np.arange(len(atom))[:, None]] = vectors[atom, :, column]
     return basis
 
 

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from scipy.spatial import cKDTree
-from scipy.spatial.distance import cdist
 
 #: Images of at most this many points get their distances from a full
 #: distance matrix, larger ones from a k-d tree.
@@ -41,6 +41,22 @@ def _nearest(points: np.ndarray) -> np.ndarray:
     """Each point's distance to its nearest other point (N >= 2)."""
     if len(points) > DENSE_MAX_POINTS:
         return cKDTree(points).query(points, k=2)[0][:, 1]
-    distances = cdist(points, points)
-    np.fill_diagonal(distances, np.inf)
-    return distances.min(axis=1)
+    return _nearest_dense(np.asarray(points, dtype=float))
+
+
+@numba.njit(cache=True)
+def _nearest_dense(points: np.ndarray) -> np.ndarray:
+    """Each point's distance to its nearest other point over every pair
+    (SciPy's ``cdist`` formula, the squares summed in order, the same digits,
+    compiled: a step of a small scene asks once)."""
+    n = points.shape[0]
+    nearest = np.full(n, np.inf)
+    for i in range(n):
+        for j in range(n):
+            if j != i:
+                square = 0.0
+                for k in range(points.shape[1]):
+                    d = points[i, k] - points[j, k]
+                    square += d * d
+                nearest[i] = min(nearest[i], np.sqrt(square))
+    return nearest

@@ -223,6 +223,20 @@ def spring_hessian_entries(springs: np.ndarray, Q: float | np.ndarray,
     return rows.ravel(), cols.ravel(), data.ravel()
 
 
+def entries_block(flat: np.ndarray, data: np.ndarray, size: int,
+                  coords: np.ndarray) -> np.ndarray:
+    """The dense block on the coordinates ``coords`` (m,) of a (size, size)
+    matrix given by its entries as flat indices ``flat``, each once, and
+    their values ``data``: (m, m), without the matrix."""
+    where = np.full(size, -1)
+    where[coords] = np.arange(len(coords))
+    rows, columns = where[flat // size], where[flat % size]
+    inside = (rows >= 0) & (columns >= 0)
+    block = np.zeros((len(coords), len(coords)))
+    block[rows[inside], columns[inside]] = data[inside]
+    return block
+
+
 def pair_chunks(natoms: int,
                 chunk_pairs: int = 1_000_000) -> Iterator[tuple[np.ndarray,
                                                                 np.ndarray]]:

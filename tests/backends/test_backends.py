@@ -186,3 +186,20 @@ def test_kernel_variants_have_their_own_cache_entries():
     keys = {tuple(cell.cell_contents for cell in kernel.py_func.__closure__)
             for kernel in direct._KERNELS.values()}
     assert len(keys) == len(direct._KERNELS) == 4
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('seed', range(6))
+def test_compiled_hessian_block_is_the_reference_to_round_off(dim, seed):
+    """The compiled block (what a MaudCalculator's ``get_hessian_block``
+    sums) against :func:`physics.repulsion_hessian_block` on a fresh random
+    scene and subset: the same law, only ``pow``'s rounding differs."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 40))
+    points = rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-1, 1)
+    if dim == 2:
+        points[:, 2] = 0.0
+    index = rng.permutation(n)[:int(rng.integers(1, n + 1))]
+    block = direct.repulsion_hessian_block(points, index, dim)
+    assert_close(block, physics.repulsion_hessian_block(points, index, dim), rtol=1e-14)
+    assert np.array_equal(block, block.T)

@@ -23,6 +23,7 @@ from ase_maud.optimize.models.registry import MODELS
 from ase_maud.optimize.state import MaudState, Point
 from ase_maud.optimize.step_length import (
     DAMPING_TOLERANCE,
+    bound,
     damping,
     lengths,
     merit_change,
@@ -637,6 +638,22 @@ def test_lengths_are_numpys_norm_to_the_last_bit(seed):
     x = rng.standard_normal((40, 3)) * 10.0 ** rng.integers(-150, 150, size=(40, 1))
     x[:3] = [[0.0, 0.0, 0.0], [-0.0, 0.0, -0.0], [-0.0, 2.0, 0.0]]
     assert lengths(x).tobytes() == np.linalg.norm(x, axis=1).tobytes()
+
+
+@pytest.mark.parametrize('seed', range(3))
+@pytest.mark.parametrize('whole', [False, True])
+def test_bound_is_numpys_formula_to_the_last_bit(seed, whole):
+    """The compiled per-point scales of :func:`bound` give the moves of its
+    numpy formula exactly (limits above, below and at a move's length)."""
+    rng = np.random.default_rng(seed)
+    step = rng.standard_normal((30, 3)) * 10.0 ** rng.uniform(-3, 3)
+    length = np.linalg.norm(step, axis=1)
+    limit = length * rng.choice([0.5, 1.0, 2.0], size=30)
+    limit[:2] = [np.inf, 0.0]
+    step[2] = 0.0
+    scale = np.divide(limit, length, out=np.ones_like(length), where=length > limit)
+    expected = step * (scale.min(initial=1.0) if whole else scale[:, None])
+    assert bound(step, limit, whole).tobytes() == expected.tobytes()
 
 
 def test_exact_models_solver_is_cholesky_where_definite_and_eigen_where_not():

@@ -215,7 +215,8 @@ class DofSolver(Solver):
 
     def _gather(self, move: np.ndarray) -> np.ndarray:
         """The free components (n,) of a move (N, 3)."""
-        return np.asarray(move, dtype=float).reshape(-1).take(self.index)
+        flat = np.asarray(move, dtype=float).reshape(-1)
+        return flat.copy() if self.every else flat.take(self.index)
 
     def _scatter(self, v: np.ndarray) -> np.ndarray:
         """Free components (n,) or (n, k) as moves (N, 3) or (k, N, 3), zero

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 from ase import Atoms
+from ase.constraints import FixAtoms, FixCartesian
 from scipy.linalg.lapack import dpotrf, dpotrs, dsyevd
 
 from ase_maud.calculator.maud_calculator import MaudCalculator
@@ -152,8 +153,7 @@ class ExactModel(StiffnessModel):
         Hessian's rows and columns in place of products; :attr:`_free` is
         the solvers' free mask (N, dim: every coordinate but those held) and
         :attr:`free_index` its components (:func:`free_index`)."""
-        key = (len(atoms), dim, [(type(c).__name__, repr(c.todict()))
-                                 for c in atoms.constraints])
+        key = (len(atoms), dim, [_constraint_key(c) for c in atoms.constraints])
         if self._basis is None or self._basis[0] != key:
             basis = allowed_basis(atoms, dim) if atoms.constraints else None
             self._basis, self._held = (key, basis), None
@@ -165,6 +165,17 @@ class ExactModel(StiffnessModel):
                           else ~self._held)
             self._free_index = free_index(self._free)
         return self._basis[1]
+
+
+def _constraint_key(constraint: Any) -> tuple:
+    """What tells a constraint from another: FixAtoms' and FixCartesian's
+    index and mask arrays as bytes (their ``todict``'s lists cost a step's
+    work at each call), any other's ``todict``."""
+    if isinstance(constraint, (FixAtoms, FixCartesian)):
+        arrays = (constraint.index, getattr(constraint, 'mask', None))
+        return type(constraint).__name__, *((a.dtype.str, a.shape, a.tobytes())
+                                             for a in arrays if a is not None)
+    return type(constraint).__name__, repr(constraint.todict())
 
 
 class _DenseSolver(DofSolver):
@@ -229,7 +240,7 @@ def _cholesky(matrix: np.ndarray, shift: float) -> np.ndarray | None:
     wrapper, which cost as much as the factorisation on tens of unknowns), or
     None if not definite."""
     shifted = matrix + 0.0   # a copy with positive zeros, as matrix + shift I has them
-    shifted.flat[::len(matrix) + 1] += shift
+    shifted.reshape(-1)[::len(matrix) + 1] += shift   # its diagonal, a view (.flat is slower)
     factor, info = dpotrf(shifted, lower=False, clean=False, overwrite_a=True)
     return factor if info == 0 else None
 

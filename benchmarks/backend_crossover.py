@@ -38,7 +38,7 @@ import numpy as np
 from ase_maud.backends import direct, fmm
 from ase_maud.scenes.catalogue import build
 
-EPS = (1e-3, 1e-6, 1e-9, 1e-12)
+EPS = (1e-3, 1e-5, 1e-6, 1e-8, 1e-9, 1e-12)
 SIZES = (2000, 4000, 8000, 16000, 32000, 64000)
 
 

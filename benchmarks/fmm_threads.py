@@ -223,16 +223,20 @@ def split(sizes, eps_list, repeats, geometries, writer):
                     print(row, flush=True)
 
 
-def goal(n, tol, repeats):
-    """Wall s of ``auto`` at ``tol`` and of the numba direct sum (E+F) on
-    ``n`` random points in a cube, best of ``repeats``."""
-    p = scene('cube', n, 0)
+def goal(geometry, n, tol, repeats):
+    """Wall s of ``auto`` at ``tol``, of the numba direct sum and of the
+    ``fmm`` backend at ``fmm_eps = tol`` (E+F) on ``n`` points of
+    ``geometry``, best of ``repeats`` interleaved, and the backend auto
+    took."""
+    p = scene(geometry, n, 0)
     auto.evaluate(p, False, tol=tol)
-    best = {'auto': np.inf, 'numba': np.inf}
+    best = {'auto': np.inf, 'numba': np.inf, 'fmm': np.inf}
     for _ in range(repeats):
         best['auto'] = min(best['auto'], timed(auto.evaluate, p, False, tol)[1])
         best['numba'] = min(best['numba'], timed(direct.evaluate, p, False)[1])
-    return best
+        best['fmm'] = min(best['fmm'], timed(fmm.evaluate, p, False, tol)[1])
+    dim = 2 if np.ptp(p[:, 2]) == 0 else 3
+    return best, auto.choose(len(p), dim, False, tol)[0].backend.name
 
 
 def main():
@@ -289,13 +293,14 @@ def main():
             split(args.sizes, args.split_eps, args.repeats, args.geometries, writer)
         lines.append('Split: see split.csv (wall and CPU seconds, one process '
                      'against two).\n')
-    if args.goal:
-        best = goal(args.goal, 1e-4, args.repeats)
-        lines.append(f'Goal: N = {args.goal} random points, E+F, tol 1e-4: auto '
-                     f'{best["auto"]:.3g} s wall, numba direct sum on '
+    for geometry in args.geometries if args.goal else ():
+        best, took = goal(geometry, args.goal, 1e-4, args.repeats)
+        lines.append(f'Goal: {geometry}, N = {args.goal}, E+F, tol 1e-4: auto '
+                     f'({took}) {best["auto"]:.3g} s wall, numba direct sum on '
                      f'{numba.get_num_threads()} threads {best["numba"]:.3g} s: '
-                     f'{best["auto"] / best["numba"]:.2f}x (fmm threads '
-                     f'{fmm.threads()}).\n')
+                     f'{best["auto"] / best["numba"]:.2f}x; the fmm backend at fmm_eps '
+                     f'1e-4 {best["fmm"]:.3g} s, {best["fmm"] / best["numba"]:.2f}x (fmm threads '
+                     f'{fmm.threads()}, load {open("/proc/loadavg").read().split()[:3]}).\n')
     lines.append(f'Load at end: {open("/proc/loadavg").read().split()[:3]}')
     text = '\n'.join(lines) + '\n'
     (args.out / 'summary.md').write_text(text)

@@ -199,3 +199,24 @@ def test_auto_keeps_its_promise_at_scale(kind, tol):
     # the net's error grows with N: 2x10^4 points, with room to spare
     points = promise_scene(kind, 20000, 21)
     assert assert_promise(points, tol, crossover=1000) <= tol / 3
+
+
+@pytest.mark.parametrize('count', [2, 3])
+@pytest.mark.parametrize('kind, seed', [('cube', 31), ('net', 32)])
+def test_split_across_processes_is_one_call_to_round_off(monkeypatch, kind, seed,
+                                                         count):
+    points = promise_scene(kind, 3000, seed)
+    monkeypatch.setattr(fmm, 'POOL_MIN_POINTS', 1000)
+    monkeypatch.setattr(fmm, '_can_fork', lambda: True)
+    results = {}
+    for workers in (1, count):
+        monkeypatch.setenv(fmm.WORKERS_VARIABLE, str(workers))
+        results[workers] = fmm.evaluate(points, True, fmm_eps=1e-6)
+    (e1, f1, b1), (e2, f2, b2) = results[1], results[count]
+    assert fmm._POOL['count'] == count
+    assert e2 == pytest.approx(e1, rel=1e-13)
+    assert rel_err(f2, f1) < 1e-13 and rel_err(b2, b1) < 1e-13
+    fmm.shutdown()
+    assert not fmm._POOL
+    assert fmm.evaluate(points, False, fmm_eps=1e-6)[0] == pytest.approx(e1, rel=1e-13)
+    fmm.shutdown()

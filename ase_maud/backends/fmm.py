@@ -154,9 +154,12 @@ def threads() -> int:
 
 def _can_fork() -> bool:
     """Whether worker processes are forked (Linux: no re-import of the
-    user's script; elsewhere the calls stay in this process)."""
+    user's script; elsewhere, and in a daemonic process such as a
+    ``multiprocessing.Pool`` worker, which may have no children, the calls
+    stay in this process)."""
     return (sys.platform.startswith('linux') and hasattr(os, 'sched_getaffinity')
-            and 'fork' in multiprocessing.get_all_start_methods())
+            and 'fork' in multiprocessing.get_all_start_methods()
+            and not multiprocessing.current_process().daemon)
 
 
 _POOL: dict = {}
@@ -204,7 +207,7 @@ def _pooled(p, eps, order, count):
     slabs = np.array_split(np.argsort(p[:, axis], kind='stable'), count)
     try:
         parts = list(_pool(count).map(_targets, [(p, s, eps, order) for s in slabs]))
-    except BrokenProcessPool:
+    except (BrokenProcessPool, OSError):   # a worker died, or no fork here
         shutdown()
         return None
     grad = np.empty((3, len(p)))

@@ -1,5 +1,6 @@
 """The fast multipole backend against the direct sums, and in the calculator."""
 
+import multiprocessing
 import sys
 
 import numpy as np
@@ -219,4 +220,23 @@ def test_split_across_processes_is_one_call_to_round_off(monkeypatch, kind, seed
     fmm.shutdown()
     assert not fmm._POOL
     assert fmm.evaluate(points, False, fmm_eps=1e-6)[0] == pytest.approx(e1, rel=1e-13)
+    fmm.shutdown()
+
+
+def _daemon_evaluate(points):
+    """In a daemonic process (a multiprocessing.Pool worker): the workers
+    it would use, and the energy."""
+    return fmm.workers(), fmm.evaluate(points, False, fmm_eps=1e-6)[0]
+
+
+def test_a_daemonic_process_sums_in_itself(monkeypatch):
+    # a Pool worker may have no children: the call stays in it
+    monkeypatch.setattr(fmm, 'POOL_MIN_POINTS', 1000)
+    monkeypatch.delenv(fmm.WORKERS_VARIABLE, raising=False)
+    monkeypatch.delenv(fmm.THREADS_VARIABLE, raising=False)
+    points = promise_scene('cube', 1500, 41)
+    with multiprocessing.get_context('fork').Pool(1) as pool:
+        count, energy = pool.apply(_daemon_evaluate, (points,))
+    assert count == 1
+    assert energy == pytest.approx(fmm.evaluate(points, False, fmm_eps=1e-6)[0], rel=1e-13)
     fmm.shutdown()

@@ -122,7 +122,8 @@ RULES: dict[str, Rule] = {
     'crossover': Rule('None (the measured table) or the number of points from '
                       'which the FMM is used, an integer >= 0',
                       lambda v: v >= 0, whole=True, none=True),
-    'fmm_eps': Rule('a number in (0, 1), the requested relative precision',
+    'fmm_eps': Rule('a number in (0, 1), the force error allowed relative to '
+                    'the largest force',
                     lambda v: 0 < v < 1),
     # the landscape (ase_maud.saddles.landscape)
     'modes': Rule('a whole number >= 0 (the lowest modes climbed, each both ways, '

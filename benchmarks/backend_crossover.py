@@ -8,8 +8,9 @@ N random points of unit density in a cube (dim 3) or a square (dim 2). The
 direct sum is timed up to ``--direct-max`` points and fitted as ``alpha
 N**2`` beyond; the crossover is the N where the FMM's time (interpolated
 log-log, extrapolated linearly past the last N) meets it. The clock is CPU
-time when both run on one thread (``NUMBA_NUM_THREADS=1`` and
-``ASE_MAUD_FMM_THREADS`` unset: the numbers of ``auto.CROSSOVER``), else
+time when both run on one thread (``NUMBA_NUM_THREADS=1``,
+``ASE_MAUD_FMM_WORKERS=1`` and ``ASE_MAUD_FMM_THREADS`` unset: the numbers
+of ``auto.CROSSOVER``), else
 wall time (to check how the crossover moves with threads).
 
 Errors (``--errors``): the FMM's largest force error (norm over points),
@@ -20,7 +21,7 @@ size and two clusters far apart; the largest ratio to ``fmm_eps`` sets
 FORCE_ERROR_PER_EPS.
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \
-        python benchmarks/backend_crossover.py --errors \
+        ASE_MAUD_FMM_WORKERS=1 python benchmarks/backend_crossover.py --errors \
         --out docs/dev/bench/crossover_backends.md
     NUMBA_NUM_THREADS=2 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \
         python benchmarks/backend_crossover.py --out crossover_2threads.md
@@ -38,7 +39,7 @@ import numpy as np
 from ase_maud.backends import direct, fmm
 from ase_maud.scenes.catalogue import build
 
-EPS = (1e-3, 1e-6, 1e-9, 1e-12)
+EPS = (1e-3, 1e-5, 1e-6, 1e-8, 1e-9, 1e-12)
 SIZES = (2000, 4000, 8000, 16000, 32000, 64000)
 
 
@@ -222,11 +223,11 @@ def main():
     if not args.no_timing:
         lines += timing_section(*timing(args.sizes, args.direct_max,
                                         args.repeats, args.dims))
-    threads, fmm_threads = numba.get_num_threads(), fmm.threads()
+    threads, fmm_threads = numba.get_num_threads(), fmm.library_threads()
     declared = (f'{fmm.THREADS_VARIABLE}={fmm_threads} ' if fmm_threads > 1
-                else '')
+                else '') + f'{fmm.WORKERS_VARIABLE}={fmm.workers()} '
     header = (f'# Backend crossovers\n\nMeasured {time.strftime("%Y-%m-%d")}, '
-              f'numba threads {threads}, FMM threads {fmm_threads}: '
+              f'numba threads {threads}, FMM threads {fmm.threads()}: '
               f'`NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={fmm_threads} '
               f'{declared}OPENBLAS_NUM_THREADS=1 python '
               f'benchmarks/backend_crossover.py {" ".join(sys.argv[1:])}`\n\n')

@@ -27,6 +27,7 @@ INTEGRATION_MODULES = {
     'workflows/test_ase_drivers.py', 'workflows/test_ase_filters.py',
     'workflows/test_examples.py', 'test_kernel_cache.py', 'benchmarks/test_ase_systems.py',
     'benchmarks/test_basin_hopping.py', 'benchmarks/test_kernel_throughput.py',
+    'benchmarks/test_fmm_threads.py',
     'ase_suite/test_ase_restart.py'}
 
 TESTS = Path(__file__).resolve().parent

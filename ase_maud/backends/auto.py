@@ -36,17 +36,24 @@ from ase_maud.backends.base import Backend, Choice, Result, evaluate_first
 #: on large scenes (docs/calculator.md gives the crossovers).
 DEFAULT_TOL = 1e-8
 
-#: Points from which the FMM (rows: its ``fmm_eps``) is faster than the numba
-#: direct sum, both on one thread, by (dim, with blocks), in CPU seconds, as
+#: Points from which the FMM (rows: its ``fmm_eps``, FMM3D handed
+#: :func:`.fmm.library_eps` of it) is faster than the numba direct sum, both
+#: on one thread, by (dim, with blocks), in CPU seconds, as
 #: ``python benchmarks/backend_crossover.py`` measures them (docs/calculator.md
-#: gives the table, its date and the command; a faster kernel moves them).
+#: gives the table, its date and the command; a faster kernel, or a change of
+#: :data:`.fmm.LIBRARY_EPS`, moves them). The rows 1e-3 and 1e-5 hand FMM3D
+#: the same eps, as do 1e-6 and 1e-8: their differences are the clock's noise.
 #: Between two rows the crossover is interpolated in log-log; below the last
 #: row the FMM is never used.
 CROSSOVER: dict[tuple[int, bool], dict[float, int]] = {
-    (3, False): {0.001: 12100, 1e-06: 29200, 1e-09: 66400, 1e-12: 280400},
-    (3, True): {0.001: 13600, 1e-06: 36700, 1e-09: 83300, 1e-12: 367900},
-    (2, False): {0.001: 11100, 1e-06: 28200, 1e-09: 55700},
-    (2, True): {0.001: 13800, 1e-06: 28800, 1e-09: 59600},
+    (3, False): {1e-3: 36500, 1e-5: 35100, 1e-6: 72400, 1e-8: 73200,
+                 1e-9: 90500, 1e-12: 392900},
+    (3, True): {1e-3: 46700, 1e-5: 48800, 1e-6: 82600, 1e-8: 80900,
+                1e-9: 110900, 1e-12: 479500},
+    (2, False): {1e-3: 25100, 1e-5: 25200, 1e-6: 49600, 1e-8: 49300,
+                 1e-9: 60800},
+    (2, True): {1e-3: 32200, 1e-5: 35000, 1e-6: 64500, 1e-8: 64300,
+                1e-9: 88000},
 }
 #: The finest ``fmm_eps`` asked of the FMM (a ``tol`` below 10 times it, even
 #: with ``crossover`` set, takes the direct sum: FMM3D cannot promise it).

@@ -12,11 +12,16 @@ kernel is ``1/(4 pi r)`` and it drops each point's own term; with unit charges
   ``x_i``, ``sum_j (3 d d^T / L**5 - I / L**3)``, in the same xx, yy, zz, xy,
   xz, yz order as :mod:`.base`.
 
-Accuracy. ``fmm_eps`` is FMM3D's requested relative precision. The backend
-promises a force error, relative to the largest force, of
-:data:`FORCE_ERROR_PER_EPS` ``* fmm_eps`` (:func:`force_tolerance`), the
-bound that ``python benchmarks/backend_crossover.py --errors`` checks on random
-scenes in 3D and on a plane, with near pairs and far clusters
+Accuracy. ``fmm_eps`` is the accuracy asked: the backend promises a force
+error, relative to the largest force, of :data:`FORCE_ERROR_PER_EPS` ``*
+fmm_eps`` (:func:`force_tolerance`). FMM3D's own ``eps`` is not that error:
+its error depends on the scene (a grid without close pairs, whose largest
+force is small, is the worst seen) and moves in steps (its expansion orders),
+and its time is not monotone in it. So FMM3D is handed
+:func:`library_eps` ``(fmm_eps)``, the fastest of its ``eps`` whose worst
+measured error, ten times over, is within ``fmm_eps`` (:data:`LIBRARY_EPS`);
+``python benchmarks/backend_crossover.py --errors`` checks the promise on
+random scenes in 3D and on a plane, with near pairs and far clusters
 (docs/calculator.md gives the figures).
 
 Near pairs. FMM3D maps the scene into its unit box, which rounds every
@@ -32,19 +37,30 @@ apart than the radius). More than :data:`MAX_NEAR_POINTS` such points is a
 :class:`~.base.BeyondTolerance` error (a ValueError) naming the closest pair
 and the exact backend. Finding them costs a k-d tree per call.
 
-Cost is O(N), with a fixed cost per call; the fmm3dpy wheel from PyPI is
+Cost is O(N), with a fixed cost per call. The fmm3dpy wheel from PyPI is
 built without OpenMP and runs on one thread (a source build with OpenMP
-follows ``OMP_NUM_THREADS``). Nothing in fmm3dpy says how it was built, so
-the threads it runs on are what the user declares in the environment
-variable ``ASE_MAUD_FMM_THREADS`` (:func:`threads`; unset: 1, the wheel),
-which the ``auto`` backend's crossovers take into account. The crossovers
-against the numba direct sum are in docs/calculator.md. Below a few hundred
-points FMM3D sums directly and the result is exact to rounding.
+follows ``OMP_NUM_THREADS``; declare its threads in
+``ASE_MAUD_FMM_THREADS``, :func:`library_threads`), and it holds Python's
+GIL. So a call of at least :data:`POOL_MIN_POINTS` points is split across
+:func:`workers` processes (default: the cores available, at most
+:data:`MAX_WORKERS`; ``ASE_MAUD_FMM_WORKERS`` sets it, 1 for none; one for a
+declared OpenMP build; Linux only, where they are forked): each gets every
+point as a source and the points of one slab along the longest axis as
+targets, and the sums are one call's to round-off. The workers start at the
+first such call and stay (:func:`shutdown` stops them, as does the exit).
+:func:`threads`, a call's threads times the workers, is what the ``auto``
+backend's crossovers count; they are in docs/calculator.md. Below a few
+hundred points FMM3D sums directly and the result is exact to rounding.
 """
 
 from __future__ import annotations
 
+import atexit
+import multiprocessing
 import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -66,31 +82,157 @@ NEAR_ROUNDING = 1e-15
 #: Most points summed exactly with one another (:data:`NEAR_ROUNDING`), a
 #: direct sum over them at every call.
 MAX_NEAR_POINTS = 4096
+#: The ``eps`` handed to FMM3D for a promised force error: ``{promise:
+#: library eps}``, the fastest library eps (by summed CPU time) whose worst
+#: error (force relative to the largest force, energy, blocks) times 10 is
+#: within the promise, over random points in a cube, on a curved sheet and on
+#: a plane and the start of a hanging net (a grid: the worst), 2x10^4 and
+#: 6x10^4 points, seeds 0-1; measured 2026-12-06 by
+#: ``OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 NUMBA_NUM_THREADS=2 python
+#: benchmarks/fmm_threads.py --out ...`` (docs/dev/bench/fmm_eps_split/).
+#: A promise between two rows takes the tighter row's eps; a promise tighter
+#: than every row is handed to FMM3D as it is (its error at an eps of 1e-9
+#: and below stays under a third of it: docs/calculator.md).
+LIBRARY_EPS: dict[float, float] = {
+    1e-2: 3e-3, 1e-3: 1e-4, 1e-4: 1e-4, 1e-5: 1e-4, 1e-6: 1e-7, 1e-7: 1e-7,
+    1e-8: 1e-7}
 #: The environment variable that declares the threads FMM3D runs on: unset
 #: or 1 for the PyPI wheel; an OpenMP build's ``OMP_NUM_THREADS``.
 THREADS_VARIABLE = 'ASE_MAUD_FMM_THREADS'
+#: The environment variable that sets the processes a large call is split
+#: across (:func:`workers`; 1: none).
+WORKERS_VARIABLE = 'ASE_MAUD_FMM_WORKERS'
+#: Most worker processes by default: two measured 1.56-1.77x one on free
+#: cores at 6x10^4 points (benchmarks/fmm_threads.py, docs/calculator.md);
+#: more were not measured.
+MAX_WORKERS = 2
+#: Points from which a call is split across the workers (measured from
+#: 2x10^4: 1.3-1.6x on free cores by the workers' CPU).
+POOL_MIN_POINTS = 20000
 
 
-def threads() -> int:
-    """The threads the installed FMM3D runs on, as declared in
-    :data:`THREADS_VARIABLE` (1 if unset: the PyPI wheel has no OpenMP);
-    ValueError naming the variable unless it is a positive integer."""
-    value = os.environ.get(THREADS_VARIABLE, '1')
+def _positive(variable: str, default: str, meaning: str) -> int:
+    """The positive integer in the environment variable, or ValueError
+    naming it."""
+    value = os.environ.get(variable, default)
     try:
         count = int(value)
     except ValueError:
         count = 0
     if count < 1:
-        raise ValueError(f'{THREADS_VARIABLE} must be a positive integer '
-                         '(the threads of an OpenMP build of fmm3dpy, 1 for '
-                         f'the PyPI wheel), got {value!r}')
+        raise ValueError(f'{variable} must be a positive integer ({meaning}), '
+                         f'got {value!r}')
     return count
+
+
+def library_threads() -> int:
+    """The threads one FMM3D call runs on, as declared in
+    :data:`THREADS_VARIABLE` (1 if unset: the PyPI wheel has no OpenMP)."""
+    return _positive(THREADS_VARIABLE, '1', 'the threads of an OpenMP build '
+                     'of fmm3dpy, 1 for the PyPI wheel')
+
+
+def workers() -> int:
+    """The processes a large call is split across (module docstring):
+    :data:`WORKERS_VARIABLE` if set; else 1 for a declared OpenMP build
+    (it threads itself) or where processes cannot be forked (not Linux);
+    else the cores this process may run on, at most :data:`MAX_WORKERS`."""
+    if WORKERS_VARIABLE in os.environ:
+        return _positive(WORKERS_VARIABLE, '1', 'the processes an FMM call is '
+                         'split across, 1: none')
+    if library_threads() > 1 or not _can_fork():
+        return 1
+    return max(1, min(MAX_WORKERS, len(os.sched_getaffinity(0))))
+
+
+def threads() -> int:
+    """The threads the FMM runs on: an FMM3D call's
+    (:func:`library_threads`) times the processes a large call is split
+    across (:func:`workers`); what the ``auto`` backend's crossovers count."""
+    return library_threads() * workers()
+
+
+def _can_fork() -> bool:
+    """Whether worker processes are forked (Linux: no re-import of the
+    user's script; elsewhere, and in a daemonic process such as a
+    ``multiprocessing.Pool`` worker, which may have no children, the calls
+    stay in this process)."""
+    return (sys.platform.startswith('linux') and hasattr(os, 'sched_getaffinity')
+            and 'fork' in multiprocessing.get_all_start_methods()
+            and not multiprocessing.current_process().daemon)
+
+
+_POOL: dict = {}
+
+
+def _pool(count: int) -> ProcessPoolExecutor:
+    """The worker processes, created on first use (forked; each imports
+    nothing new) and again after :func:`shutdown`, a fork of this process
+    or a broken pool."""
+    pool = _POOL.get('pool')
+    if pool is None or _POOL['pid'] != os.getpid() or _POOL['count'] != count:
+        shutdown()
+        pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context('fork'))
+        _POOL.update(pool=pool, pid=os.getpid(), count=count)
+    return pool
+
+
+def shutdown() -> None:
+    """Stop the worker processes, if any (also at exit); the next large
+    call starts them again."""
+    pool = _POOL.pop('pool', None)
+    if pool is not None and _POOL.get('pid') == os.getpid():
+        pool.shutdown(wait=True, cancel_futures=True)
+    _POOL.clear()
+
+
+atexit.register(shutdown)
+
+
+def _targets(args):
+    """A worker's share: FMM3D with every point a source and ``targets``
+    (indices) the targets; their potentials, gradients and Hessians."""
+    p, targets, eps, order = args
+    out = _lfmm3d()(eps=eps, sources=np.ascontiguousarray(p.T), charges=np.ones(len(p)),
+                    targets=np.ascontiguousarray(p[targets].T), pgt=order)
+    return out.pottarg, out.gradtarg, out.hesstarg if order == 3 else None
+
+
+def _pooled(p, eps, order, count):
+    """The sums over all points by ``count`` workers, each with the targets
+    of one slab along the longest axis (the same sums as one call, to
+    round-off), as ``(pot sum, grad, hess or None)``; None if the pool
+    broke (the caller sums in this process)."""
+    axis = int(np.argmax(np.ptp(p, axis=0)))
+    slabs = np.array_split(np.argsort(p[:, axis], kind='stable'), count)
+    try:
+        parts = list(_pool(count).map(_targets, [(p, s, eps, order) for s in slabs]))
+    except (BrokenProcessPool, OSError):   # a worker died, or no fork here
+        shutdown()
+        return None
+    grad = np.empty((3, len(p)))
+    hess = np.empty((6, len(p))) if order == 3 else None
+    pot = 0.0
+    for slab, (pot_part, grad_part, hess_part) in zip(slabs, parts, strict=True):
+        pot += pot_part.sum()
+        grad[:, slab] = grad_part
+        if order == 3:
+            hess[:, slab] = hess_part
+    return pot, grad, hess
 
 
 def force_tolerance(fmm_eps: float) -> float:
     """The force error promised at ``fmm_eps``, relative to the largest
     force: ``FORCE_ERROR_PER_EPS * fmm_eps``."""
     return FORCE_ERROR_PER_EPS * fmm_eps
+
+
+def library_eps(fmm_eps: float) -> float:
+    """The ``eps`` handed to FMM3D for a promised error of ``fmm_eps``:
+    the :data:`LIBRARY_EPS` row at or below ``fmm_eps`` (``fmm_eps`` itself
+    below the tightest row)."""
+    rows = [promise for promise in LIBRARY_EPS if promise <= fmm_eps]
+    return LIBRARY_EPS[max(rows)] if rows else fmm_eps
 
 
 def eps_for(tol: float) -> float:
@@ -128,19 +270,25 @@ def evaluate(positions: np.ndarray, want_blocks: bool = False,
     if n < 2:  # FMM3D gives NaN for a lone point
         return 0.0, np.zeros((n, 3)), np.zeros((n, 6)) if want_blocks else None
     near = _near_points(p, fmm_eps)
+    eps = library_eps(fmm_eps)
+    order = 3 if want_blocks else 2
+    count = workers() if n >= POOL_MIN_POINTS and near.size == 0 else 1
+    pooled = _pooled(p, eps, order, count) if count > 1 else None
+    if pooled is not None:
+        return _unscale(0.5 * pooled[0], *pooled[1:])
     if near.size == 0:
-        out = lfmm3d(eps=fmm_eps, sources=np.ascontiguousarray(p.T),
-                     charges=np.ones(n), pg=3 if want_blocks else 2)
+        out = lfmm3d(eps=eps, sources=np.ascontiguousarray(p.T),
+                     charges=np.ones(n), pg=order)
         return _unscale(0.5 * out.pot.sum(), out.grad,
                         out.hess if want_blocks else None)
     far = np.setdiff1d(np.arange(n), near)
     if far.size < 2:
         return direct.evaluate(p, want_blocks)
-    return _split(lfmm3d, p, near, far, want_blocks, fmm_eps)
+    return _split(lfmm3d, p, near, far, want_blocks, eps)
 
 
 def _split(lfmm3d, p, near, far, want_blocks, eps):
-    """FMM over the far points, each group's field at the other group's
+    """FMM (at library ``eps``) over the far points, each group's field at the other group's
     points by FMM (sources and targets apart), and the near points among
     themselves by the exact direct sum."""
     order = 3 if want_blocks else 2
@@ -207,5 +355,6 @@ BACKEND = Backend(
     parameters={'fmm_eps': 1e-6}, requires=('fmm3dpy',),
     force_tolerance=force_tolerance,
     summary="FMM3D's fast multipole method, O(N), forces to fmm_eps; "
-    'one thread with the PyPI wheel (an OpenMP build: declare its threads '
-    f'in {THREADS_VARIABLE})')
+    f'large calls split across {WORKERS_VARIABLE} processes (default: the '
+    f'cores, at most {MAX_WORKERS}; an OpenMP build: declare its threads in '
+    f'{THREADS_VARIABLE})')

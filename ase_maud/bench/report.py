@@ -49,7 +49,7 @@ def environment(argv=None):
     return {'date': datetime.now(timezone.utc).isoformat(timespec='seconds'),
             'command': ' '.join(['ase-maud', *(argv or [])]),
             'numba_threads': numba.get_num_threads(),
-            'fmm_threads': fmm.threads(),
+            'fmm_threads': fmm.library_threads(), 'fmm_workers': fmm.workers(),
             **{v: os.environ.get(v, 'unset') for v in THREAD_VARIABLES},
             'cpu_count': os.cpu_count(), 'machine': platform.platform(),
             'processor': platform.processor(),

@@ -95,7 +95,9 @@ class MaudCalculator(LockedCalculator):
         ``crossover`` (``auto``: the points from which the FMM is used
         whatever ``tol``; None: the measured
         :data:`~ase_maud.backends.auto.CROSSOVER`), ``fmm_eps`` (the ``fmm``
-        backend's relative precision, default 1e-6), and ASE's keywords.
+        backend's force error allowed relative to the largest force, default
+        1e-6; FMM3D is handed the eps measured to meet it,
+        :data:`~ase_maud.backends.fmm.LIBRARY_EPS`), and ASE's keywords.
 
     Raises
     ------

@@ -1,5 +1,6 @@
 """backend='auto': the cheapest backend that meets tol, in O(N) memory."""
 
+import os
 import sys
 import tracemalloc
 
@@ -78,6 +79,7 @@ def test_choices_follow_n_tol_and_threads(monkeypatch):
     monkeypatch.setattr(auto, 'CROSSOVER', {
         (3, False): {1e-3: 100, 1e-9: 1000}, (3, True): {1e-3: 50}})
     monkeypatch.setattr(numba, 'get_num_threads', lambda: 2)
+    monkeypatch.setenv(fmm.WORKERS_VARIABLE, '1')   # the wheel in one process
 
     def picked(n, dim=3, blocks=False, **options):
         return [(c.backend.name, c.options) for c in
@@ -104,27 +106,37 @@ def test_choices_follow_n_tol_and_threads(monkeypatch):
     assert picked(10**9, tol=1e-4) == [exact]
 
 
-@pytest.mark.parametrize('numba_threads, fmm_threads, start', [
-    (1, '1', 16230), (2, '1', 32460), (2, '2', 16230), (1, '2', 8115)])
+@pytest.mark.parametrize('numba_threads, fmm_threads, processes, start', [
+    (1, '1', '1', 35793), (2, '1', '1', 71586), (2, '1', '2', 35793),
+    (2, '2', None, 35793), (1, '2', None, 17896.5)])
 def test_choice_at_tol_1e4_follows_the_measured_table(
-        monkeypatch, numba_threads, fmm_threads, start):
-    """docs/calculator.md: in 3D at tol 1e-4 (E+F) the FMM wins from 16230
-    points with one thread each (log-log between the 1e-3 and 1e-6 rows),
-    twice that with the direct sum on 2 threads and the wheel on one; a
-    6x10^4-point net takes the FMM in either case."""
+        monkeypatch, numba_threads, fmm_threads, processes, start):
+    """docs/calculator.md: in 3D at tol 1e-4 (E+F) the FMM wins from 35793
+    points with one thread each (log-log between the 1e-5 and 1e-3 rows),
+    twice that with the direct sum on 2 threads and the wheel in one process
+    (a 6x10^4-point net keeps the direct sum), 35793 again with the wheel in
+    two (the default on 2 cores) or an OpenMP build on 2 threads (which
+    keeps one process)."""
     monkeypatch.setattr(numba, 'get_num_threads', lambda: numba_threads)
     monkeypatch.setenv(fmm.THREADS_VARIABLE, fmm_threads)
+    monkeypatch.setattr(fmm, '_can_fork', lambda: True)
+    if processes is None:
+        monkeypatch.delenv(fmm.WORKERS_VARIABLE, raising=False)
+    else:
+        monkeypatch.setenv(fmm.WORKERS_VARIABLE, processes)
     assert auto.crossover_points(1e-4, 3, False) == pytest.approx(start)
     below = auto.choose(int(start) - 1, 3, False, tol=1e-4)
     above = auto.choose(int(start) + 1, 3, False, tol=1e-4)
     assert [c.backend.name for c in below] == ['numba']
     assert [c.backend.name for c in above] == ['fmm', 'numba']
     assert above[0].options == {'fmm_eps': 1e-4}
-    assert auto.choose(60025, 3, False, tol=1e-4)[0].backend.name == 'fmm'
+    net = auto.choose(60025, 3, False, tol=1e-4)[0].backend.name
+    assert net == ('fmm' if start < 60025 else 'numba')
 
 
 @pytest.mark.parametrize('value, threads', [(None, 1), ('1', 1), ('3', 3)])
 def test_fmm_threads_as_declared(monkeypatch, value, threads):
+    monkeypatch.setenv(fmm.WORKERS_VARIABLE, '1')
     if value is None:
         monkeypatch.delenv(fmm.THREADS_VARIABLE, raising=False)
     else:
@@ -132,10 +144,28 @@ def test_fmm_threads_as_declared(monkeypatch, value, threads):
     assert fmm.threads() == threads
 
 
+def test_fmm_workers_default_to_the_cores_at_most_two(monkeypatch):
+    monkeypatch.delenv(fmm.WORKERS_VARIABLE, raising=False)
+    monkeypatch.delenv(fmm.THREADS_VARIABLE, raising=False)
+    monkeypatch.setattr(fmm, '_can_fork', lambda: True)
+    cores = len(os.sched_getaffinity(0))
+    assert fmm.workers() == min(2, cores) == fmm.threads()
+    monkeypatch.setenv(fmm.THREADS_VARIABLE, '3')       # an OpenMP build
+    assert (fmm.workers(), fmm.threads()) == (1, 3)
+    monkeypatch.setenv(fmm.WORKERS_VARIABLE, '3')       # as set
+    assert (fmm.workers(), fmm.threads()) == (3, 9)
+    monkeypatch.delenv(fmm.WORKERS_VARIABLE)
+    monkeypatch.delenv(fmm.THREADS_VARIABLE)
+    monkeypatch.setattr(fmm, '_can_fork', lambda: False)   # not Linux
+    assert fmm.workers() == 1
+
+
+@pytest.mark.parametrize('variable', ['THREADS_VARIABLE', 'WORKERS_VARIABLE'])
 @pytest.mark.parametrize('bad', ['0', '-2', '1.5', 'two', ''])
-def test_bad_fmm_threads_name_the_variable(monkeypatch, bad):
-    monkeypatch.setenv(fmm.THREADS_VARIABLE, bad)
-    with pytest.raises(ValueError, match=f'{fmm.THREADS_VARIABLE} must be '
+def test_bad_fmm_threads_name_the_variable(monkeypatch, bad, variable):
+    variable = getattr(fmm, variable)
+    monkeypatch.setenv(variable, bad)
+    with pytest.raises(ValueError, match=f'{variable} must be '
                        f'a positive integer .* got {bad!r}'):
         auto.choose(10**6, 3, False, tol=1e-4)
 

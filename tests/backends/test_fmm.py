@@ -1,5 +1,6 @@
 """The fast multipole backend against the direct sums, and in the calculator."""
 
+import multiprocessing
 import sys
 
 import numpy as np
@@ -7,10 +8,12 @@ import pytest
 from ase import Atoms
 
 from ase_maud import Maud
-from ase_maud.backends import direct, fmm
+from ase_maud.backends import auto, direct, fmm
 from ase_maud.bench.backends import measure_backends
 from ase_maud.calculator.maud_calculator import MaudCalculator
 from ase_maud.scenes.catalogue import build
+
+import helpers
 
 pytest.importorskip('fmm3dpy')
 
@@ -134,3 +137,106 @@ def test_measure_backends_reports_each_eps():
     for row in rows:
         if row['backend'].startswith('fmm'):
             assert row['rel_error'] < 10 * float(row['backend'][8:])
+
+
+def test_library_eps_is_the_tighter_row():
+    rows = sorted(fmm.LIBRARY_EPS.items())   # tightest promise first
+    for promise, eps in rows:
+        assert fmm.library_eps(promise) == eps
+        assert fmm.library_eps(promise * 1.5) == eps   # between rows: this one
+    # a tighter promise never gets a looser eps
+    assert all(a[1] <= b[1] for a, b in zip(rows, rows[1:], strict=False))
+    tightest = rows[0][0]
+    assert fmm.library_eps(tightest / 10) == tightest / 10
+    assert fmm.library_eps(0.5) == rows[-1][1]
+
+
+def promise_scene(kind, n, seed):
+    """``n`` points of a fresh seeded scene: random points about 1 apart in
+    3D or on a plane (helpers.random_points: no close pair, so the largest
+    force is modest), on a curved sheet, or the start of a hanging net (a
+    grid: the FMM's worst relative error)."""
+    if kind == 'net':
+        return build('hanging_net', round(np.sqrt(n)), seed=seed).positions
+    points = helpers.random_points(n, 3 if kind == 'cube' else 2, seed)
+    if kind == 'sheet':
+        centre = points[:, :2].mean(axis=0)
+        side = np.ptp(points[:, 0])
+        points[:, 2] = 0.1 * side * (1 - ((points[:, :2] - centre) ** 2).sum(1)
+                                     / (side / 2) ** 2 / 2)
+    return points
+
+
+def assert_promise(points, tol, crossover):
+    """``auto`` at ``tol`` (taking the FMM) against the exact sum: the
+    force error within ``tol`` of the largest force, the energy's within
+    ``tol``, the blocks' within ``10 tol`` of the largest entry."""
+    dim = 2 if np.ptp(points[:, 2]) == 0 else 3
+    choice = auto.choose(len(points), dim, True, tol, crossover)[0]
+    assert choice.backend.name == 'fmm'
+    energy, forces, blocks = auto.evaluate(points, True, tol, crossover)
+    e0, f0, b0 = direct.evaluate(points, True)
+    norm = np.linalg.norm
+    force_error = norm(forces - f0, axis=1).max() / norm(f0, axis=1).max()
+    assert force_error <= choice.tolerance
+    assert choice.tolerance == fmm.force_tolerance(min(tol, auto.MAX_EPS))
+    assert abs(energy / e0 - 1) <= tol
+    assert rel_err(blocks, b0) <= 10 * tol
+    return force_error
+
+
+@pytest.mark.parametrize('tol', [1e-3, 1e-4, 1e-6, 1e-8])
+@pytest.mark.parametrize('kind', ['cube', 'plane', 'sheet', 'net'])
+@pytest.mark.parametrize('seed', [11, 12])
+def test_auto_keeps_its_promise(kind, tol, seed):
+    # 2500 points: FMM3D's multipoles at work, the direct sum instant
+    assert_promise(promise_scene(kind, 2500, seed), tol, crossover=1000)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('tol', [1e-4, 1e-8])
+@pytest.mark.parametrize('kind', ['cube', 'net'])
+def test_auto_keeps_its_promise_at_scale(kind, tol):
+    # the net's error grows with N: 2x10^4 points, with room to spare
+    points = promise_scene(kind, 20000, 21)
+    assert assert_promise(points, tol, crossover=1000) <= tol / 3
+
+
+@pytest.mark.parametrize('count', [2, 3])
+@pytest.mark.parametrize('kind, seed', [('cube', 31), ('net', 32)])
+def test_split_across_processes_is_one_call_to_round_off(monkeypatch, kind, seed,
+                                                         count):
+    points = promise_scene(kind, 3000, seed)
+    monkeypatch.setattr(fmm, 'POOL_MIN_POINTS', 1000)
+    monkeypatch.setattr(fmm, '_can_fork', lambda: True)
+    results = {}
+    for workers in (1, count):
+        monkeypatch.setenv(fmm.WORKERS_VARIABLE, str(workers))
+        results[workers] = fmm.evaluate(points, True, fmm_eps=1e-6)
+    (e1, f1, b1), (e2, f2, b2) = results[1], results[count]
+    assert fmm._POOL['count'] == count
+    assert e2 == pytest.approx(e1, rel=1e-13)
+    assert rel_err(f2, f1) < 1e-13 and rel_err(b2, b1) < 1e-13
+    fmm.shutdown()
+    assert not fmm._POOL
+    assert fmm.evaluate(points, False, fmm_eps=1e-6)[0] == pytest.approx(e1, rel=1e-13)
+    fmm.shutdown()
+
+
+def _daemon_evaluate(points):
+    """In a daemonic process (a multiprocessing.Pool worker): the workers
+    it would use, and the energy."""
+    return fmm.workers(), fmm.evaluate(points, False, fmm_eps=1e-6)[0]
+
+
+def test_a_daemonic_process_sums_in_itself(monkeypatch):
+    # a Pool worker may have no children: the call stays in it
+    monkeypatch.setattr(fmm, 'POOL_MIN_POINTS', 1000)
+    monkeypatch.delenv(fmm.WORKERS_VARIABLE, raising=False)
+    monkeypatch.delenv(fmm.THREADS_VARIABLE, raising=False)
+    points = promise_scene('cube', 1500, 41)
+    with multiprocessing.get_context('fork').Pool(1) as pool:
+        count, energy = pool.apply(_daemon_evaluate, (points,))
+    assert count == 1
+    assert energy == pytest.approx(fmm.evaluate(points, False, fmm_eps=1e-6)[0], rel=1e-13)
+    fmm.shutdown()

@@ -115,6 +115,7 @@ def test_bench_smoke(tmp_path, pinned):
     text = (out / 'summary.md').read_text()
     assert '- OMP_NUM_THREADS: 1' in text and '| ring | 5 |' in text
     assert '- fmm_threads: 1' in text          # ASE_MAUD_FMM_THREADS unset
+    assert '- fmm_workers: ' in text
     assert '| CPU s to 0.001 | x best ASE | x L-BFGS-B |' in text
     assert '| FIRE | worst | 2 | 1.00 | 1.00 |' in text
     for stem in PLOTS:

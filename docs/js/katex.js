@@ -1,4 +1,4 @@
-// Formulas typeset in the browser by KaTeX, vendored in js/katex/ so the site needs no
+// Formulas typeset in the browser by KaTeX, served from js/katex/ so the site needs no
 // network (also opened from file://). pymdownx.arithmatex (generic mode) wraps each
 // formula as <span class="arithmatex">\(...\)</span> or <div class="arithmatex">\[...\]</div>;
 // each is replaced by KaTeX's rendering, on every page Material shows (document$). The
@@ -7,7 +7,8 @@
 // js/katex/ holds KaTeX 0.19.1 (MIT, its LICENSE beside it) from the npm package
 // `katex`: dist/katex.min.js, dist/fonts/*.woff2 and dist/katex.min.css with the
 // woff and ttf fallbacks of each @font-face removed (every browser that runs this
-// site reads woff2), 0.6 MB in all.
+// site reads woff2), 0.6 MB in all, fetched by dev/katex_assets.py (a MkDocs hook)
+// before the first build rather than kept in the repository.
 const typeset = (tex, element, displayMode) =>
   katex.render(tex, element, { displayMode, throwOnError: false });
 

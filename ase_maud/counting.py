@@ -1,6 +1,7 @@
 """What a computation cost, counted: calculator calls (:class:`CallRecorder`)
 and the work beyond them (:class:`Work`: Hessian-vector products and dense
-Hessians), and :func:`fresh_copy`, a start with a calculator of its own.
+Hessians), the CPU seconds spent (:func:`cpu_seconds`, worker processes
+included), and :func:`fresh_copy`, a start with a calculator of its own.
 """
 
 from __future__ import annotations
@@ -11,6 +12,29 @@ from dataclasses import dataclass
 import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import Calculator
+
+#: CPU seconds that worker processes spent on this process's calls (the
+#: FMM's, :mod:`ase_maud.backends.fmm`): ``time.process_time`` leaves them out.
+_worker_cpu_s = 0.0
+
+
+def add_worker_cpu(seconds: float) -> None:
+    """Count ``seconds`` of CPU a worker process spent on a call of this one."""
+    global _worker_cpu_s
+    _worker_cpu_s += seconds
+
+
+def worker_cpu_seconds() -> float:
+    """CPU seconds so far of the worker processes that served this process's
+    calls."""
+    return _worker_cpu_s
+
+
+def cpu_seconds() -> float:
+    """CPU seconds so far of this process (``time.process_time``: every
+    thread) and of the worker processes that served its calls: the clock of
+    every CPU figure (differences of two readings)."""
+    return time.process_time() + _worker_cpu_s
 
 
 @dataclass
@@ -49,7 +73,7 @@ class CallRecorder:
     @staticmethod
     def _clocks() -> np.ndarray:
         """(wall, process CPU) seconds now."""
-        return np.array([time.perf_counter(), time.process_time()])
+        return np.array([time.perf_counter(), cpu_seconds()])
 
     def __enter__(self):
         self._calculate = self.calc.calculate

@@ -12,7 +12,7 @@ numbers: the same hops, applied to the minima each optimiser found. In 2D a
 ``FixCartesian`` on z keeps BasinHopping's displacements (drawn in 3D) in the plane.
 
 Counted (``ase_maud.counting.CallRecorder``): every calculator call, line searches
-included, of the whole run, and its CPU seconds (``time.process_time``). Reported per
+included, of the whole run, and its CPU seconds (``ase_maud.counting.cpu_seconds``). Reported per
 run: the number of distinct minima visited (by energy, within ``--energy-rtol``), the
 lowest energy found (``Q a^2``), the calls spent, the calls until the run first found
 its own lowest energy, and until it first found the lowest energy of all the runs from
@@ -31,7 +31,6 @@ import argparse
 import csv
 import math
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -41,7 +40,7 @@ from ase.optimize.basin import BasinHopping
 from ase.optimize.optimize import Optimizer
 
 from ase_maud import Maud
-from ase_maud.counting import CallRecorder
+from ase_maud.counting import CallRecorder, cpu_seconds
 from ase_maud.scenes.catalogue import build
 
 #: The compared local optimisers, by name.
@@ -76,7 +75,7 @@ def hop(dim: int, size: int, seed: int, name: str, hops: int, fmax: float, dr: f
     optimizer = capped(OPTIMIZERS[name], relax_steps)
     trace, error = [], ''
     np.random.seed(seed)            # BasinHopping's moves and acceptance
-    cpu = time.process_time()
+    cpu = cpu_seconds()
     with CallRecorder(atoms.calc) as recorder:
         try:
             bh = BasinHopping(atoms, temperature=kt, optimizer=optimizer, fmax=fmax, dr=dr,
@@ -88,7 +87,7 @@ def hop(dim: int, size: int, seed: int, name: str, hops: int, fmax: float, dr: f
             bh.run(hops)
         except Exception as exc:    # a failed run is a result: keep what it found
             error = f'{type(exc).__name__}: {exc}'
-    cpu = time.process_time() - cpu
+    cpu = cpu_seconds() - cpu
     return {'dim': dim, 'size': size, 'seed': seed, 'optimiser': name, 'hops': hops,
             'calls': len(recorder.samples), 'cpu_s': cpu,
             'lowest_energy': min((e for _, e in trace), default=math.nan),

@@ -34,7 +34,7 @@ completeness (:attr:`ase_maud.saddles.search.SaddleSearch.coverage`, from its at
 over every saddle they reach, counted or not). Cost:
 :attr:`ase_maud.saddles.landscape.Landscape.cost`, every calculator call, Hessian-vector product
 vector and Hessian of the whole map (the start's classification, the attempts, the saddles'
-classifications and descents), in force-call equivalents, and ``time.process_time`` CPU
+classifications and descents), in force-call equivalents, and ``ase_maud.counting.cpu_seconds`` CPU
 seconds (every thread: run with one), both also per counted saddle found. Each saddle the
 default missed is printed with its barrier and the reference attempt that found it. Rows
 go to ``OUT/landscape_completeness.csv``. Run::
@@ -49,7 +49,6 @@ import argparse
 import math
 import os
 import sys
-import time
 from pathlib import Path
 
 from ase import Atoms
@@ -57,6 +56,7 @@ from ase import Atoms
 from ase_maud import Maud
 from ase_maud.analysis.stationary import classify, same_point
 from ase_maud.bench.report import write_csv
+from ase_maud.counting import cpu_seconds
 from ase_maud.physics.dofs import free_dofs
 from ase_maud.saddles.attempts import Attempt
 from ase_maud.saddles.landscape import Landscape, landscape
@@ -109,9 +109,9 @@ def counted(found: Landscape, window: float) -> list[tuple[Atoms, float, Attempt
 
 def timed(start: Atoms, fmax: float, **kwargs) -> tuple[Landscape, float]:
     """The landscape from ``start`` with ``kwargs`` and its CPU seconds."""
-    cpu = time.process_time()
+    cpu = cpu_seconds()
     found = landscape(start, fmax=fmax, **kwargs)
-    return found, time.process_time() - cpu
+    return found, cpu_seconds() - cpu
 
 
 def compare(scene: str, size: int, seed: int, window: float, factor: int, ref_seed: int,

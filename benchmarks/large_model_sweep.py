@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import datetime
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +33,7 @@ from scipy.spatial import cKDTree
 
 from ase_maud import Maud
 from ase_maud.bench.runner import calls_and_cpu
+from ase_maud.counting import cpu_seconds
 from ase_maud.optimize.models.base import Solver
 from ase_maud.optimize.models.springs import SpringsModel
 from ase_maud.physics import pair_law as physics
@@ -154,13 +154,13 @@ def main() -> None:
         for variant in args.variants:
             model, keywords = VARIANTS[variant](args.cutoff)
             atoms = build(name, int(size))
-            start = time.process_time()
+            start = cpu_seconds()
             try:
                 calls, cpu, done = calls_and_cpu(
                     atoms, Maud(atoms, model=model, logfile=None, **keywords),
                     args.fmax, args.steps)
             except Exception as error:   # a variant that fails is a row too
-                calls, cpu, done = '-', time.process_time() - start, type(error).__name__
+                calls, cpu, done = '-', cpu_seconds() - start, type(error).__name__
             products = getattr(model, 'products', '')
             row = (f'| {name} {size} | {len(atoms)} | {variant} | {done} | {calls} | '
                    f'{products} | {cpu:.2f} | {atoms.get_potential_energy():.10g} |')

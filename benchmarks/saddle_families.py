@@ -8,8 +8,8 @@ a minimum, or whose relaxation stops with an error, is left out, and said so), o
 energy-and-forces call timed (the unit), the default search for one saddle (its seed the
 scene's), and the saddle it returns verified by a fresh
 calculator and ``classify`` (index 1 and forces below 1e-6). Counted per search: calls,
-Hessian-vector product vectors, Hessians, CPU seconds (``time.process_time``: run with one
-thread) and the headline, CPU in units of one force call of the scene; the process's peak
+Hessian-vector product vectors, Hessians, CPU seconds (``counting.cpu_seconds``: run with
+one thread) and the headline, CPU in units of one force call of the scene; the process's peak
 resident memory after the search. Printed a row a search, then a table per family; written to
 ``--out`` (``rows.csv``, ``summary.md``; an existing file is never replaced)::
 
@@ -23,14 +23,13 @@ import argparse
 import csv
 import resource
 import sys
-import time
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from ase_maud import Maud, MaudError, classify, search_saddles
-from ase_maud.counting import fresh_copy
+from ase_maud.counting import cpu_seconds, fresh_copy
 from ase_maud.scenes.families import FAMILIES
 
 #: A saddle counts as found if its forces are below this (``Q a``).
@@ -53,9 +52,9 @@ def one(family: str, seed: int, sizes: tuple[int, int]) -> dict | None:
     if point.verdict != 'minimum':
         print(f'{family:12s} {seed:3d} left out: relaxed to a {point.verdict}', flush=True)
         return None
-    cpu = time.process_time()
+    cpu = cpu_seconds()
     found = search_saddles(atoms, wanted=1, seed=seed)
-    cpu = time.process_time() - cpu
+    cpu = cpu_seconds() - cpu
     row = {'family': family, 'seed': seed, 'natoms': len(atoms),
            'dim': atoms.calc.parameters['dim'], 'verified': False, 'index': '', 'fmax': '',
            'barrier': '', 'found_by': '', 'calls': sum(a.calls for a in found.attempts),

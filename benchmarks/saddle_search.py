@@ -19,7 +19,8 @@ energy-and-forces call of the scene (``SaddleSearch.force_call_cpu_s``).
 
 Counted per search: the calculator's calls, the Hessian-vector product vectors and the Hessians
 (:class:`ase_maud.counting.Work`, the minimum's modes included), their sum (force-call
-equivalents), CPU seconds (``time.process_time``, every thread: run with one), the attempts and
+equivalents), CPU seconds (``ase_maud.counting.cpu_seconds``, every thread: run with one),
+the attempts and
 how each ended. The saddle found is classified again from a fresh calculator (index, fmax).
 Rows go to ``OUT/activation.csv`` and the table to ``OUT/activation.md``. Run::
 
@@ -32,7 +33,6 @@ from __future__ import annotations
 import argparse
 import csv
 import sys
-import time
 import warnings
 from pathlib import Path
 
@@ -40,7 +40,7 @@ import numpy as np
 
 from ase_maud import Maud
 from ase_maud.analysis.stationary import classify
-from ase_maud.counting import fresh_copy
+from ase_maud.counting import cpu_seconds, fresh_copy
 from ase_maud.saddles.search import search_saddles
 from ase_maud.scenes.catalogue import build
 from ase_maud.scenes.saddle_scenes import SADDLE_SCENES
@@ -67,11 +67,11 @@ def one(start: str, seed: int, args: argparse.Namespace) -> dict:
     """The row of one search from ``start`` with ``seed``."""
     scene, size = start.split(':')
     atoms, point = minimum(scene, int(size), seed)
-    cpu = time.process_time()
+    cpu = cpu_seconds()
     found = search_saddles(atoms, modes=args.modes, local=args.local, wanted=1,
                            budget=args.budget, fmax=args.fmax, steps=args.steps, seed=seed,
                            mirror=True if args.mirror and scene in MIRRORED else None)
-    cpu = time.process_time() - cpu
+    cpu = cpu_seconds() - cpu
     row = {'start': start, 'seed': seed, 'natoms': len(atoms), 'found': bool(found.saddles),
            'calls': sum(a.calls for a in found.attempts),
            'hvp_vectors': sum(a.hvp_vectors for a in found.attempts) + found.work.hvp_vectors,

@@ -42,7 +42,8 @@ finite-difference force calls included; beside them, for Maud, what its ``work``
 force-call equivalent) and the Hessians it computed (each one, though its cost is larger: it
 is in the CPU seconds), the verification of the end point's index included; ``cost`` is the
 sum of the three (Sella-H's analytic Hessians are not counted). CPU seconds are
-``time.process_time`` over the optimiser's construction and run (every thread; run with one).
+``ase_maud.counting.cpu_seconds`` over the optimiser's construction and run (every
+thread; run with one).
 Each optimiser is run once on a small cage before the table, so imports and first compilations
 are not counted. Each end point is classified (dense Hessian, a fresh calculator): index,
 energy, fmax; ``same as Sella`` when its energy is within ``--energy-rtol`` (relative) of
@@ -60,7 +61,6 @@ import argparse
 import csv
 import runpy
 import sys
-import time
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -72,7 +72,7 @@ from ase.optimize.optimize import Optimizer
 
 from ase_maud import Maud
 from ase_maud.analysis.stationary import StationaryPoint, classify
-from ase_maud.counting import CallRecorder, Work, fresh_copy
+from ase_maud.counting import CallRecorder, Work, cpu_seconds, fresh_copy
 from ase_maud.saddles.landscape import same_point
 from ase_maud.saddles.starts import DISPLACEMENTS, displaced_minimum, saddle_start
 
@@ -143,7 +143,7 @@ def search(start: Atoms, optimiser: str, fmax: float, steps: int
     error) and its classification."""
     atoms = fresh_copy(start)
     converged, error = False, ''
-    cpu = time.process_time()
+    cpu = cpu_seconds()
     with CallRecorder(atoms.calc) as recorder:
         opt = None
         try:
@@ -151,7 +151,7 @@ def search(start: Atoms, optimiser: str, fmax: float, steps: int
             converged = bool(opt.run(fmax=fmax, steps=steps))
         except Exception as exc:  # a failed search is a result
             error = f'{type(exc).__name__}: {str(exc).splitlines()[0][:120]}'
-    cpu = time.process_time() - cpu
+    cpu = cpu_seconds() - cpu
     work = opt.work if isinstance(opt, Maud) else Work()
     calls = len(recorder.samples)
     with warnings.catch_warnings():

@@ -17,9 +17,8 @@ verdict. Three paths give the same counts:
   (:func:`_lowest_spectrum`). The
   preconditioner is :func:`near_field_stiffness`, a sparse positive model of
   ``H`` (springs and close pairs), factorised once: the near field carries
-  the conditioning, so the number of products hardly grows with N.
-  ``eigsh`` with a shift-invert needs a factorisation of
-  ``H``, which is dense.
+  the conditioning, so the number of products hardly grows with N (``eigsh``
+  with a shift-invert needs a factorisation of ``H``, which is dense).
 
 Removed modes. Fixed degrees of freedom (:class:`~ase.constraints.FixAtoms`,
 :class:`~ase.constraints.FixCartesian`) are projected out by keeping only the
@@ -309,10 +308,7 @@ def _free_hessian(atoms, free):
 def _dense_spectrum(atoms, free, rigid):
     """All eigenpairs of ``H`` on the free dofs orthogonal to ``rigid``."""
     hessian = _free_hessian(atoms, free)
-    if rigid.size:
-        basis = scipy.linalg.null_space(rigid.T)
-    else:
-        basis = np.eye(len(hessian))
+    basis = scipy.linalg.null_space(rigid.T) if rigid.size else np.eye(len(hessian))
     values, vectors = np.linalg.eigh(basis.T @ hessian @ basis)
     return values, basis @ vectors
 
@@ -337,16 +333,13 @@ def _lowest_of_dense(atoms, free, rigid, k):
 def _lowest_spectrum(atoms, free, rigid, k, rtol, work=None):
     """Lowest ``k`` eigenpairs by preconditioned LOBPCG, and max|lambda|.
 
-    Iterates stay orthogonal to the rigid modes (LOBPCG's ``Y``). A first
-    LOBPCG run stops at residuals ``r = |H x - lambda x|`` below
-    :data:`LOBPCG_FIRST_RTOL` of the largest eigenvalue; if that settles
-    what :func:`classify` counts for every Ritz pair, its sign (``r`` below
-    :data:`SIGN_MARGIN` times ``|lambda|`` less the zero tolerance
-    ``rtol max|lambda|``: a symmetric ``H`` has an eigenvalue within ``r`` of
-    ``lambda``) or that it is zero (``r`` below a tenth of that tolerance),
-    it is the answer; else a second run from its vectors goes on to residuals
-    below a tenth of the zero tolerance (a warning if a sign is still open
-    after it). A stiff scene then needs no digits its signs do not.
+    Iterates stay orthogonal to the rigid modes (LOBPCG's ``Y``). A first run
+    stops at residuals ``r = |H x - lambda x|`` below :data:`LOBPCG_FIRST_RTOL`
+    of the largest eigenvalue; it is the answer if every ``r`` settles a sign
+    (below :data:`SIGN_MARGIN` times ``|lambda|`` less the zero tolerance
+    ``rtol max|lambda|``: an eigenvalue lies within ``r`` of ``lambda``) or a
+    zero (below a tenth of that tolerance), else a second run goes on to a
+    tenth of the zero tolerance (a warning if a sign is still open).
     """
     op = hessian_operator(atoms, free, rigid, work)
     flat = free.ravel()
@@ -355,8 +348,7 @@ def _lowest_spectrum(atoms, free, rigid, k, rtol, work=None):
     # down to 1e-4 of the stiffest
     shift = 1e-4 * abs(near).sum(axis=1).max()
     lu = splu(sp.csc_matrix(near + shift * sp.identity(near.shape[0])))
-    precond = LinearOperator(near.shape, matvec=lu.solve, matmat=lu.solve,
-                             dtype=float)
+    precond = LinearOperator(near.shape, matvec=lu.solve, matmat=lu.solve, dtype=float)
     vectors = np.random.default_rng(0).standard_normal((op.shape[0], k))
     top = eigsh(op, 1, which='LA', tol=0.1, ncv=min(10, op.shape[0]),
                 v0=vectors[:, 0], return_eigenvectors=False)[0]  # a 1% scale
@@ -373,23 +365,18 @@ def _lowest_spectrum(atoms, free, rigid, k, rtol, work=None):
         if settled.all():
             break
     else:
-        warnings.warn(f'LOBPCG: the residuals '
-                      f'{np.array2string(residuals[~settled], precision=3)} of the '
-                      f'eigenvalues {np.array2string(values[~settled], precision=3)} '
-                      f'leave their sign open after {LOBPCG_MAXITER} iterations',
-                      stacklevel=3)
+        warnings.warn(f'LOBPCG: residuals {np.array2string(residuals[~settled], precision=3)}'
+                      f' leave the signs of {np.array2string(values[~settled], precision=3)}'
+                      f' open after {LOBPCG_MAXITER} iterations', stacklevel=3)
     order = np.argsort(values)
     values, vectors = values[order], vectors[:, order]
     return values, vectors, max(abs(values[0]), abs(top))
 
 
-#: LOBPCG's first run stops at residuals below this fraction of the largest
-#: eigenvalue, the second (if the first left a sign open) at a tenth of the
-#: zero tolerance; each at most this many iterations (:func:`_lowest_spectrum`).
-LOBPCG_FIRST_RTOL, LOBPCG_MAXITER = 1e-6, 500
-#: A Ritz value's sign is settled once its residual is below this fraction
-#: of its distance from the zero band (:func:`_lowest_spectrum`).
-SIGN_MARGIN = 0.5
+#: :func:`_lowest_spectrum`: the first run's residuals relative to the largest
+#: eigenvalue, each run's iterations, and the share of a Ritz value's distance
+#: from the zero band its residual must be below to settle its sign.
+LOBPCG_FIRST_RTOL, LOBPCG_MAXITER, SIGN_MARGIN = 1e-6, 500, 0.5
 
 
 def near_field_stiffness(atoms: Atoms, cutoff: float = 1.5) -> sp.csr_matrix:

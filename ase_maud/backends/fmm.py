@@ -59,6 +59,7 @@ import atexit
 import multiprocessing
 import os
 import sys
+import time
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 
@@ -67,6 +68,7 @@ from scipy.spatial import cKDTree
 
 from ase_maud.backends import direct
 from ase_maud.backends.base import Backend, BeyondTolerance, Result
+from ase_maud.counting import add_worker_cpu
 from ase_maud.physics.pair_law import closest_pair
 
 #: FMM3D's Laplace kernel is ``1 / (4 pi r)``; the repulsion's is ``1 / r``.
@@ -191,11 +193,14 @@ atexit.register(shutdown)
 
 def _targets(args):
     """A worker's share: FMM3D with every point a source and ``targets``
-    (indices) the targets; their potentials, gradients and Hessians."""
+    (indices) the targets; their potentials, gradients and Hessians, and the
+    CPU seconds the worker spent on them."""
     p, targets, eps, order = args
+    start = time.process_time()
     out = _lfmm3d()(eps=eps, sources=np.ascontiguousarray(p.T), charges=np.ones(len(p)),
                     targets=np.ascontiguousarray(p[targets].T), pgt=order)
-    return out.pottarg, out.gradtarg, out.hesstarg if order == 3 else None
+    return (out.pottarg, out.gradtarg, out.hesstarg if order == 3 else None,
+            time.process_time() - start)
 
 
 def _pooled(p, eps, order, count):
@@ -213,7 +218,8 @@ def _pooled(p, eps, order, count):
     grad = np.empty((3, len(p)))
     hess = np.empty((6, len(p))) if order == 3 else None
     pot = 0.0
-    for slab, (pot_part, grad_part, hess_part) in zip(slabs, parts, strict=True):
+    for slab, (pot_part, grad_part, hess_part, cpu) in zip(slabs, parts, strict=True):
+        add_worker_cpu(cpu)
         pot += pot_part.sum()
         grad[:, slab] = grad_part
         if order == 3:

@@ -11,7 +11,7 @@ call of ``calc.calculate``:
   products, the optimiser's own linear algebra) is no call and shows only in
   the seconds.
 - ``time_s`` is wall time and ``cpu_s`` the CPU time of the whole process
-  (``time.process_time``: every thread of it, so with numba or BLAS running
+  (``ase_maud.counting.cpu_seconds``: every thread of it, so with numba or BLAS running
   on k threads it can grow up to k times faster than the wall time), both
   since the run began: the optimiser's construction included, the sampling
   itself left out.
@@ -21,7 +21,6 @@ call of ``calc.calculate``:
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -30,7 +29,7 @@ import numpy as np
 from ase import Atoms
 
 from ase_maud.bench.optimizers import OPTIMIZERS
-from ase_maud.counting import CallRecorder, fresh_copy
+from ase_maud.counting import CallRecorder, cpu_seconds, fresh_copy
 from ase_maud.old_paths import old_names
 
 #: Fields of one sample, the columns of :attr:`Run.samples`.
@@ -86,10 +85,10 @@ def calls_and_cpu(atoms: Atoms, optimizer: Any, fmax: float,
     """Run ``optimizer`` (built on ``atoms``) to ``fmax``: its calculator
     calls, process CPU seconds and whether it converged (the tools' one-line
     measurement; :func:`run_optimizer` keeps every sample)."""
-    start = time.process_time()
+    start = cpu_seconds()
     with CallRecorder(atoms.calc) as recorder:
         converged = bool(optimizer.run(fmax=fmax, steps=steps))
-    return len(recorder.samples), time.process_time() - start, converged
+    return len(recorder.samples), cpu_seconds() - start, converged
 
 
 def run_optimizer(start: Atoms, optimiser: str, fmax: float,

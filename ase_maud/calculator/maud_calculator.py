@@ -96,8 +96,7 @@ class MaudCalculator(LockedCalculator):
         whatever ``tol``; None: the measured
         :data:`~ase_maud.backends.auto.CROSSOVER`), ``fmm_eps`` (the ``fmm``
         backend's force error allowed relative to the largest force, default
-        1e-6; FMM3D is handed the eps measured to meet it,
-        :data:`~ase_maud.backends.fmm.LIBRARY_EPS`), and ASE's keywords.
+        1e-6; FMM3D gets :data:`~ase_maud.backends.fmm.LIBRARY_EPS`'s), and ASE's.
 
     Raises
     ------

@@ -4,7 +4,6 @@ climb and release, or the path to a partner minimum.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,7 +12,7 @@ from ase.filters import Filter
 from scipy.spatial import cKDTree
 
 from ase_maud.analysis import stationary
-from ase_maud.counting import CallRecorder, fresh_copy
+from ase_maud.counting import CallRecorder, cpu_seconds, fresh_copy
 from ase_maud.errors import MaudError
 from ase_maud.optimize.maud import Maud
 from ase_maud.optimize.models.exact import EXACT_MAX_DOFS
@@ -95,7 +94,7 @@ class Tally:
     def __init__(self, attempt: Attempt, budget: int | None):
         self.attempt = attempt
         self.budget = np.inf if budget is None else budget
-        self.cpu = time.process_time()
+        self.cpu = cpu_seconds()
 
     def run(self, opt: Maud, atoms: Atoms, fmax: float, steps: int) -> str:
         """Run ``opt`` to ``fmax`` in at most ``steps`` steps within the
@@ -120,7 +119,7 @@ class Tally:
     def end(self, outcome: str, atoms: Atoms) -> Attempt:
         attempt = self.attempt
         attempt.outcome = outcome
-        attempt.cpu_s = time.process_time() - self.cpu
+        attempt.cpu_s = cpu_seconds() - self.cpu
         attempt.energy = atoms.get_potential_energy()
         return attempt
 
@@ -193,10 +192,10 @@ def path_to_partner(minimum: Atoms, partner: Atoms, fmax: float, relax: int | No
     :func:`~ase_maud.analysis.stationary.same_point` cannot tell them apart)."""
     attempt = Attempt('path', 0)
     if relax is not None:
-        cpu = time.process_time()
+        cpu = cpu_seconds()
         with CallRecorder(partner.calc) as calls:
             relaxed = Maud(partner, logfile=None).run(fmax=fmax, steps=relax)
-        attempt.calls, attempt.cpu_s = len(calls.samples), time.process_time() - cpu
+        attempt.calls, attempt.cpu_s = len(calls.samples), cpu_seconds() - cpu
         if not relaxed:
             attempt.outcome = f'the mirror image did not relax to fmax {fmax:g} in {relax} steps'
             return None, attempt

@@ -29,7 +29,6 @@ then relaxed.
 
 from __future__ import annotations
 
-import time
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 
@@ -39,7 +38,7 @@ from ase.mep import NEB
 
 from ase_maud.calculator.maud_calculator import MaudCalculator
 from ase_maud.checks import check_all
-from ase_maud.counting import CallRecorder, Work, fresh_copy
+from ase_maud.counting import CallRecorder, Work, cpu_seconds, fresh_copy
 from ase_maud.errors import MaudError
 from ase_maud.optimize.maud import Maud
 from ase_maud.physics.dofs import free_dofs
@@ -211,7 +210,7 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
         raise ValueError(f'band_steps must be a whole number >= 1, got {band_steps!r}')
     if interpolation not in ('linear', 'idpp'):
         raise ValueError(f"interpolation must be 'linear' or 'idpp', got {interpolation!r}")
-    cpu = time.process_time()
+    cpu = cpu_seconds()
     band = [fresh_copy(first), *(fresh_copy(first) for _ in range(images)), fresh_copy(second)]
     neb = NEB(band, k=spring, method='improvedtangent')
     neb.interpolate(method=interpolation)
@@ -242,7 +241,7 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
         found.band_calls = sum(len(r.samples) for r in recorders)
     found.climbing = max(image.get_potential_energy() for image in band[1:-1]) - (
         first.get_potential_energy())
-    found.cpu_s = time.process_time() - cpu
+    found.cpu_s = cpu_seconds() - cpu
     return found
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from ase import Atoms
 
-from ase_maud import Maud
+from ase_maud import Maud, counting
 from ase_maud.backends import auto, direct, fmm
 from ase_maud.bench.backends import measure_backends
 from ase_maud.calculator.maud_calculator import MaudCalculator
@@ -212,7 +212,11 @@ def test_split_across_processes_is_one_call_to_round_off(monkeypatch, kind, seed
     results = {}
     for workers in (1, count):
         monkeypatch.setenv(fmm.WORKERS_VARIABLE, str(workers))
+        before = counting.worker_cpu_seconds()
         results[workers] = fmm.evaluate(points, True, fmm_eps=1e-6)
+        workers_cpu = counting.worker_cpu_seconds() - before
+        # the workers' CPU is counted (time.process_time leaves it out); none without them
+        assert (workers_cpu > 0) == (workers > 1)
     (e1, f1, b1), (e2, f2, b2) = results[1], results[count]
     assert fmm._POOL['count'] == count
     assert e2 == pytest.approx(e1, rel=1e-13)

@@ -89,7 +89,7 @@ MAX_NEAR_POINTS = 4096
 #: error (force relative to the largest force, energy, blocks) times 10 is
 #: within the promise, over random points in a cube, on a curved sheet and on
 #: a plane and the start of a hanging net (a grid: the worst), 2x10^4 and
-#: 6x10^4 points, seeds 0-1; measured 2026-12-06 by
+#: 6x10^4 points, seeds 0-1; measured by
 #: ``OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 NUMBA_NUM_THREADS=2 python
 #: benchmarks/fmm_threads.py --out ...`` (docs/dev/bench/fmm_eps_split/).
 #: A promise between two rows takes the tighter row's eps; a promise tighter

@@ -159,7 +159,7 @@ def _can_fork() -> bool:
     user's script; elsewhere, and in a daemonic process such as a
     ``multiprocessing.Pool`` worker, which may have no children, the calls
     stay in this process)."""
-    return (sys.platform.startswith('linux') and hasattr(os, 'sched_getaffinity')
+    return (sys.platform.startswith('linux')
             and 'fork' in multiprocessing.get_all_start_methods()
             and not multiprocessing.current_process().daemon)
 
@@ -294,9 +294,9 @@ def evaluate(positions: np.ndarray, want_blocks: bool = False,
 
 
 def _split(lfmm3d, p, near, far, want_blocks, eps):
-    """FMM (at library ``eps``) over the far points, each group's field at the other group's
-    points by FMM (sources and targets apart), and the near points among
-    themselves by the exact direct sum."""
+    """FMM (at the library's ``eps``) over the far points, each group's field
+    at the other group's points by FMM (sources and targets apart), and the
+    near points among themselves by the exact direct sum."""
     order = 3 if want_blocks else 2
     far_far = lfmm3d(eps=eps, sources=np.ascontiguousarray(p[far].T),
                      charges=np.ones(far.size),

@@ -33,11 +33,10 @@ Tolerance. An eigenvalue counts as zero when ``|lambda| <= rtol * max|lambda|``
 eigensolver leaves errors near ``1e-16 * max|lambda| * sqrt(dim N)``, about
 1e-14 of the largest here; a configuration relaxed to a small ``fmax`` has
 eigenvalues of order ``fmax / L`` wrong. 1e-8 sits well above the first and
-still resolves modes a hundred million times softer than the stiffest.
-
-Maxima do not occur unless FixCartesian holds only some coordinates of a
-point: every nodal block has trace ``3 Q deg(m) >= 0`` in 3D (``1/L`` is
-harmonic) and more in 2D, and a maximum needs a negative trace.
+still resolves modes a hundred million times softer than the stiffest. Maxima
+do not occur unless FixCartesian holds only some coordinates of a point: every
+nodal block has trace ``3 Q deg(m) >= 0`` in 3D (``1/L`` is harmonic) and more
+in 2D, and a maximum needs a negative trace.
 """
 
 from __future__ import annotations
@@ -71,20 +70,13 @@ FTOL = 1e-6
 
 @dataclass(frozen=True)
 class StationaryPoint:
-    """What the Hessian says about a configuration.
+    """What the Hessian says about a configuration (built by :func:`classify`).
 
-    ``eigenvalues`` (ascending, units of ``Q``) and ``modes`` (unit vectors,
-    shape (len(eigenvalues), N, 3), zero on fixed degrees of freedom) cover
-    every mode (``method='dense'``) or the lowest ``k`` (``'lowest'``,
-    ``'iterative'``);
-    the counts always cover all ``n_modes`` free, non-rigid modes.
-    ``verdict`` is 'minimum', 'saddle' (of order ``index``), 'maximum' or
-    'degenerate' (some non-rigid eigenvalue within ``tolerance`` of zero).
-    ``tolerance`` is ``rtol * max|lambda|``. ``stationary`` is
-    ``fmax <= ftol`` (force units, the ``ftol`` used); if it is False the
-    verdict describes the curvature at a point that is not stationary.
-
-    Built by :func:`classify`; a frozen record.
+    ``eigenvalues`` and ``modes`` cover every mode (``method='dense'``) or the
+    lowest ``k`` (``'lowest'``, ``'iterative'``); the counts always cover all
+    ``n_modes`` free, non-rigid modes. 'degenerate': some non-rigid eigenvalue
+    within ``tolerance`` of zero. If ``stationary`` is False the verdict
+    describes the curvature at a point that is not stationary.
 
     Parameters
     ----------
@@ -197,7 +189,7 @@ def hessian_operator(atoms: Atoms, free: np.ndarray | None = None,
 
 def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
              rtol: float = RTOL, ftol: float | None = None,
-             work: Work | None = None) -> StationaryPoint:
+             work: Work | None = None, guess: np.ndarray | None = None) -> StationaryPoint:
     """Classify ``atoms`` (with a MaudCalculator) by its Hessian.
 
     Parameters
@@ -207,7 +199,7 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
         constraints (fixed coordinates are left out).
     method : 'auto', 'dense', 'lowest' or 'iterative'
         ``auto`` is dense up to :data:`DENSE_MAX_DOFS` free degrees of freedom,
-        iterative above.
+        iterative above; iterative is lowest below ``5 k`` modes (LOBPCG's need).
     k : int
         Eigenvalues the lowest and iterative paths compute (the lowest). If all are
         negative the index is not known and a ValueError asks for a larger k.
@@ -218,6 +210,9 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
         about as not stationary; default :data:`FTOL` ``* Q a``.
     work : Work
         If given, counts the dense Hessian or the Hessian-vector products.
+    guess : ndarray of shape (m, N, 3), m <= k, or None
+        Moves the iterative path starts from (modes a climb followed, say; the
+        rest random): its cost depends on them, not its answer. Dense: unused.
 
     Returns
     -------
@@ -248,12 +243,14 @@ def classify(atoms: Atoms, method: str = 'auto', k: int = 6,
     n_modes = int(free.sum()) - rigid.shape[1]
     if method == 'auto':
         method = 'dense' if free.sum() <= DENSE_MAX_DOFS else 'iterative'
+    if method == 'iterative' and n_modes < 5 * k:   # too few coordinates for LOBPCG
+        method = 'lowest'
     if method == 'dense':
         values, vectors = _dense_spectrum(atoms, free, rigid)
         scale = np.abs(values).max(initial=0.0)
     elif method == 'iterative':
         values, vectors, scale = _lowest_spectrum(atoms, free, rigid, k,
-                                                  rtol, work)
+                                                  rtol, work, guess)
     elif method == 'lowest':
         values, vectors, scale = _lowest_of_dense(atoms, free, rigid, k)
     else:
@@ -330,8 +327,9 @@ def _lowest_of_dense(atoms, free, rigid, k):
     return values, vectors, scale
 
 
-def _lowest_spectrum(atoms, free, rigid, k, rtol, work=None):
-    """Lowest ``k`` eigenpairs by preconditioned LOBPCG, and max|lambda|.
+def _lowest_spectrum(atoms, free, rigid, k, rtol, work=None, guess=None):
+    """Lowest ``k`` eigenpairs by preconditioned LOBPCG (its first vectors
+    ``guess`` if given, see :func:`classify`), and max|lambda|.
 
     Iterates stay orthogonal to the rigid modes (LOBPCG's ``Y``). A first run
     stops at residuals ``r = |H x - lambda x|`` below :data:`LOBPCG_FIRST_RTOL`
@@ -352,6 +350,9 @@ def _lowest_spectrum(atoms, free, rigid, k, rtol, work=None):
     vectors = np.random.default_rng(0).standard_normal((op.shape[0], k))
     top = eigsh(op, 1, which='LA', tol=0.1, ncv=min(10, op.shape[0]),
                 v0=vectors[:, 0], return_eigenvectors=False)[0]  # a 1% scale
+    if guess is not None:
+        start = np.asarray(guess, dtype=float)[:k, :, :free.shape[1]][:, free].T
+        vectors[:, :start.shape[1]] = start
     zero = rtol * abs(top)
     for tol in (LOBPCG_FIRST_RTOL * abs(top), 0.1 * zero):
         with warnings.catch_warnings():

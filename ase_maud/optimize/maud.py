@@ -363,7 +363,8 @@ class Maud(Optimizer):
         """For ``target='saddle'``: the point found, classified (:attr:`found`)."""
         if self.target == 'saddle':
             self.found, error = self.strategy.verify(self._atoms(), max(self.fmax, self.fmax_now),
-                                                 self.nsteps, self.work)
+                                                 self.nsteps, self.work, None if self._subset
+                                                 else self.state.modes)
             self.logfile.write(f'Maud: converged on a {self.found.verdict} of index '
                                f'{self.found.index} (order {self.rule.order} sought)\n')
             if error is not None:

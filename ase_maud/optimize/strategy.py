@@ -345,17 +345,18 @@ class Saddle(Strategy):
         values = local().eigenpairs(order + 1, guess)[0]
         return int(np.sum(values < -RTOL * np.abs(values).max(initial=0.0))) == order
 
-    def verify(self, atoms: Atoms, ftol: float, step: int,
-               work: Any = None) -> tuple[Any, WrongIndexError | None]:
+    def verify(self, atoms: Atoms, ftol: float, step: int, work: Any = None,
+               guess: np.ndarray | None = None) -> tuple[Any, WrongIndexError | None]:
         """The converged point of ``atoms`` classified from the analytic
         Hessian (:func:`ase_maud.analysis.stationary.classify`, forces below ``ftol``,
         its products or Hessian counted in ``work`` if given, unless the
         model had the calculator compute the Hessian with the forces, counted
         already), and a WrongIndexError
         (else None) if its index is not ``order`` or a zero curvature leaves
-        it unknown (``step``: where it converged)."""
+        it unknown (``step``: where it converged). An iterative
+        classification starts from the modes ``guess`` (those followed)."""
         work = None if self.model.needs(atoms) == 'hessian' else work
-        point, order = classify(atoms, ftol=ftol, work=work), self.rule.order
+        point, order = classify(atoms, ftol=ftol, work=work, guess=guess), self.rule.order
         if point.index == order and not point.n_zero:
             return point, None
         zero = f' and {point.n_zero} zero curvatures' if point.n_zero else ''

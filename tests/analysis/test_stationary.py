@@ -287,6 +287,25 @@ def test_iterative_matches_dense_at_a_saddle(random_points):
         classify(atoms, method='iterative', k=dense.index - 2)
 
 
+@pytest.mark.parametrize('seed', [3, 4])
+def test_iterative_started_from_modes_gives_the_same_answer_for_fewer_products(
+        random_points, seed):
+    """A chorded ring's minimum: started from its own lowest modes, LOBPCG
+    finds the same verdict, index and eigenvalues with fewer Hessian-vector
+    products than from a random start; from a random move, still the same
+    answer."""
+    atoms, k = relaxed(chorded_ring(random_points, 40, seed, 3)), 6
+    cold = classify(atoms, method='iterative', k=k, work=(cold_work := Work()))
+    warm = classify(atoms, method='iterative', k=k, work=(warm_work := Work()),
+                    guess=cold.modes[:2])
+    other = np.random.default_rng(seed).standard_normal((1, len(atoms), 3))
+    for point in (warm, classify(atoms, method='iterative', k=k, guess=other)):
+        assert (point.verdict, point.index, point.n_zero) == (cold.verdict, cold.index,
+                                                              cold.n_zero)
+        np.testing.assert_allclose(point.eigenvalues, cold.eigenvalues, atol=cold.tolerance)
+    assert warm_work.hvp_vectors < cold_work.hvp_vectors
+
+
 @pytest.mark.parametrize('dim', [2, 3])
 @pytest.mark.parametrize('seed', [0, 1, 2])
 def test_lowest_of_the_dense_hessian_matches_dense(random_points, dim, seed, monkeypatch):
@@ -315,6 +334,19 @@ def test_lowest_of_the_dense_hessian_matches_dense(random_points, dim, seed, mon
         assert overlap[0] == pytest.approx(1.0, abs=1e-6)
         assert lowest.tolerance == pytest.approx(dense.tolerance, rel=0.05)
     assert dim == 3 or dense.index > 5   # a plane ring buckles; a 3D one is the minimum
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_iterative_on_a_scene_too_small_for_lobpcg_takes_the_dense_lowest(random_points,
+                                                                           seed):
+    """LOBPCG needs five times as many coordinates as vectors: below, the
+    lowest eigenpairs come from the dense Hessian, with the dense answer."""
+    atoms = relaxed(chorded_ring(random_points, 8, seed, 3))
+    dense = classify(atoms, method='dense')
+    small = classify(atoms, method='iterative', k=6)
+    assert small.method == 'lowest'
+    assert (small.verdict, small.index) == (dense.verdict, dense.index)
+    np.testing.assert_allclose(small.eigenvalues, dense.eigenvalues[:6], atol=dense.tolerance)
 
 
 def test_not_stationary_is_flagged(random_points):

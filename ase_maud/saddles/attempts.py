@@ -4,7 +4,7 @@ climb and release, or the path to a partner minimum.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from ase import Atoms
@@ -65,6 +65,9 @@ class Attempt:
     #: the index in :attr:`SaddleSearch.saddles` of the saddle it reached
     #: ('saddle' or 'known saddle'; None otherwise)
     saddle: int | None = None
+    #: the positions (N, 3) where an attempt that reached no saddle stopped
+    #: (None otherwise): where :func:`path_to_neighbour` looks for another minimum
+    end: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def cost(self) -> int:
@@ -121,6 +124,8 @@ class Tally:
         attempt.outcome = outcome
         attempt.cpu_s = cpu_seconds() - self.cpu
         attempt.energy = atoms.get_potential_energy()
+        if outcome != 'saddle':
+            attempt.end = atoms.positions.copy()
         return attempt
 
 
@@ -210,6 +215,36 @@ def path_to_partner(minimum: Atoms, partner: Atoms, fmax: float, relax: int | No
     attempt.cpu_s += found.cpu_s
     if saddle is not None:
         attempt.energy = saddle.get_potential_energy()
+    return saddle, attempt
+
+
+def path_to_neighbour(minimum: Atoms, ends: list[np.ndarray], fmax: float, steps: int,
+                      energy_rtol: float) -> tuple[Atoms | None, Attempt]:
+    """Where no attempt reached a saddle: the points they stopped at
+    (``ends``, tried in the order given) relaxed by Maud in at most ``steps``
+    steps, one after another, until one relaxes into another minimum (its
+    energy apart from the minimum's by more than ``energy_rtol``, relative:
+    not the minimum moved rigidly, nor along a flat valley), then the path
+    to it (:func:`path_to_partner`). The relaxations' calls and CPU seconds
+    are the attempt's."""
+    cpu, calls, energy = cpu_seconds(), 0, minimum.get_potential_energy()
+    for end in ends:
+        partner = fresh_copy(minimum)
+        partner.positions = end
+        with CallRecorder(partner.calc) as recorded:
+            try:
+                relaxed = Maud(partner, logfile=None).run(fmax=fmax, steps=steps)
+            except MaudError:
+                relaxed = False
+        calls += len(recorded.samples)
+        if relaxed and abs(partner.get_potential_energy() - energy) > energy_rtol * abs(energy):
+            saddle, attempt = path_to_partner(minimum, partner, fmax)
+            break
+    else:
+        saddle, attempt = None, Attempt('path', 0, outcome=(
+            f'none of the {len(ends)} points the attempts stopped at relaxed into another minimum'))
+    attempt.calls += calls
+    attempt.cpu_s = cpu_seconds() - cpu
     return saddle, attempt
 
 

@@ -51,6 +51,12 @@ that the next will not.
    snap-through, a whole-scene path no local push reaches. Where the
    refinement reached a verified saddle that is not the band's (another
    barrier), that saddle is the attempt's.
+4. **A path to a neighbouring minimum**, if still none
+   (:func:`ase_maud.saddles.attempts.path_to_neighbour`): the points where the
+   attempts stopped, the highest first, relaxed one after another until one
+   falls into another minimum (its energy apart from this one's by more than
+   ``energy_rtol``), and the band to it: a free cluster or tree whose climbs
+   all ran out of budget still gets the saddle between two of its minima.
 
 An attempt is rejected, and said so, when the region's saddle lies along the
 direction of a saddle already found (the cosine between the two moves from
@@ -80,7 +86,13 @@ from ase_maud.analysis.stationary import StationaryPoint, classify, same_point
 from ase_maud.checks import check, check_all
 from ase_maud.counting import Work, cpu_seconds, fresh_copy
 from ase_maud.physics.dofs import free_dofs
-from ase_maud.saddles.attempts import Attempt, climb_mode, climb_region, path_to_partner
+from ase_maud.saddles.attempts import (
+    Attempt,
+    climb_mode,
+    climb_region,
+    path_to_neighbour,
+    path_to_partner,
+)
 from ase_maud.saddles.between_minima import check_same_scene, reflection
 
 #: Default budget of one attempt, force-call equivalents (calls, Hessians,
@@ -233,7 +245,9 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
         A second minimum of the same scene (a dome's mirror image,
         :func:`~ase_maud.saddles.between_minima.mirrored`, say): if the
         attempts found no saddle, a last one joins the two by a band of
-        images (:func:`~ase_maud.saddles.between_minima.saddle_between`).
+        images (:func:`~ase_maud.saddles.between_minima.saddle_between`);
+        if that finds none either, a minimum next to this one is looked for
+        where the attempts stopped, and joined (module docstring, 4).
     mirror : bool or None, default None
         Take as partner the mirror image of ``minimum`` through the plane of
         its fixed points (relaxed only if the attempts found nothing); None:
@@ -340,6 +354,9 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
             break
     if partner is not None and not found.saddles:
         merge([path_to_partner(minimum, partner, fmax, steps if mirror else None, distance_atol)])
+    ends = sorted((a for a in found.attempts if a.end is not None), key=lambda a: -a.energy)
+    if ends and not found.saddles:   # the highest first: the likeliest past a ridge
+        merge([path_to_neighbour(minimum, [a.end for a in ends], fmax, steps, energy_rtol)])
     return found
 
 

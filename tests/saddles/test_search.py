@@ -132,15 +132,20 @@ def test_a_search_above_1000_coordinates_forms_no_array_of_the_scene_s_square(se
 
 
 def test_a_search_that_finds_nothing_says_what_it_tried():
-    """With a budget of one equivalent every attempt stops at once: no
-    saddle, each attempt reported with its outcome and cost."""
+    """With a budget of one equivalent every attempt stops at once, at the
+    minimum's side: no saddle, and no other minimum where they stopped (the
+    path to a neighbour says so); each attempt reported with its outcome and
+    cost."""
     start = relaxed('chords', 24, 0)
     search = search_saddles(start, modes=1, local=2, budget=1, seed=0)
     assert not search.saddles
-    assert [a.kind for a in search.attempts] == ['mode', 'mode', 'local', 'local']
-    assert all(a.outcome == 'budget' and a.cost >= 1 for a in search.attempts)
+    assert [a.kind for a in search.attempts] == ['mode', 'mode', 'local', 'local', 'path']
+    assert all(a.outcome == 'budget' and a.cost >= 1 for a in search.attempts[:4])
+    assert search.attempts[4].outcome == ('none of the 4 points the attempts stopped at '
+                                          'relaxed into another minimum')
+    assert search.attempts[4].calls >= 4   # a relaxation from each, counted
     report = search.report()
-    assert report.startswith('no index-1 saddle found in 4 attempts')
+    assert report.startswith('no index-1 saddle found in 5 attempts')
     assert report.count('budget') == 4
     assert search.cost == sum(a.cost for a in search.attempts) + search.work.total
 

@@ -1,5 +1,6 @@
 """search_saddles' defaults find what its options find: a net held at points
-that span a plane gets the path to its mirror image by itself; and every
+that span a plane gets the path to its mirror image by itself, a free scene
+whose climbs found nothing the path to a neighbouring minimum; and every
 search reports its CPU in units of one force call of the scene."""
 
 import numpy as np
@@ -7,8 +8,10 @@ import pytest
 from ase.constraints import FixAtoms
 
 from ase_maud import Maud, classify, search_saddles
+from ase_maud.analysis.stationary import displace_along_mode
 from ase_maud.counting import fresh_copy
 from ase_maud.scenes import build
+from ase_maud.scenes.families import FAMILIES
 
 
 def corner_net(size: int, seed: int):
@@ -53,3 +56,32 @@ def test_a_search_reports_its_cpu_in_force_calls(seed):
     lines = found.report().splitlines()
     assert "force calls' CPU" in lines[0]
     assert all("force calls' CPU" in line for line in lines[1:])
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize('family, seed', [('random_tree', 1), ('random_tree', 3),
+                                          ('knn_cluster', 1)])
+def test_a_free_scene_whose_attempts_ran_out_gets_the_path_to_a_neighbouring_minimum(
+        family, seed):
+    """Free scenes of 30-50 points (no mirror: nothing held) where every
+    climb runs out of a budget of 20 equivalents: the default call relaxes
+    where the attempts stopped into another minimum and takes the band to it.
+    The saddle is index 1 from a fresh calculator, and pushed both ways along
+    its negative mode it relaxes into the minimum (its energy) on one side and
+    into another minimum (another energy) on the other."""
+    minimum = FAMILIES[family](seed, (30, 50))
+    assert Maud(minimum, logfile=None).run(fmax=1e-8, steps=5000)
+    found = search_saddles(minimum, modes=1, local=2, budget=20, seed=seed, wanted=1)
+    assert [a.kind for a in found.found_by] == ['path'], found.report()
+    assert all(a.outcome != 'saddle' for a in found.attempts[:-1])
+    saddle = fresh_copy(found.saddles[0])
+    point = classify(saddle, method='dense')
+    assert (point.index, point.n_zero, point.stationary) == (1, 0, True)
+    energies = []
+    for side in displace_along_mode(saddle, point):
+        assert Maud(side, logfile=None).run(fmax=1e-8, steps=5000)
+        energies.append(side.get_potential_energy())
+    start = minimum.get_potential_energy()
+    near = [abs(e - start) <= 1e-7 * abs(start) for e in energies]
+    assert sorted(near) == [False, True], (energies, start)
+    assert saddle.get_potential_energy() > max(energies)

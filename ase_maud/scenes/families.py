@@ -17,6 +17,10 @@ that judge it.
   nearest (drawn), the graph joined into one; nothing held.
 - :func:`random_tree`: :func:`~ase_maud.scenes.builders.tree` of a random
   size.
+- :func:`hub_net`: a polar cable net (rings and spokes, drawn) around a hub
+  of one to twelve points, its outer ring held on a wave of a random height
+  and order, under a random self-weight in half the draws (none in the
+  others: the repulsion then sets its shape and crowds the points at the hub).
 
 :data:`FAMILIES` holds them by name: ``draw(seed, sizes) -> Atoms``; every
 scene has ``a = Q = 1`` and starts away from any symmetry (jittered).
@@ -161,7 +165,45 @@ def random_tree(seed: int, sizes: tuple[int, int] = SIZES) -> Atoms:
     return tree(_size(rng, sizes), seed=int(rng.integers(2**31)))
 
 
+def hub_net(seed: int, sizes: tuple[int, int] = SIZES) -> Atoms:
+    """Rings of ``spokes`` points (about the square root of the size drawn,
+    times 0.6 to 1.6, at least 8) a apart, the first at the radius where its
+    points are a apart, around a hub of ``h`` points (1 to 12; a ring of them
+    a apart, sprung around, for ``h`` > 1), each first-ring point sprung to
+    the hub point nearest its angle; springs along the rings and spokes. The
+    outer ring held on ``z = H cos(k phi)`` (``H`` up to 0.3 times the rings,
+    ``k`` 0 to 3); in half the draws a self-weight (0.01 to 0.1) on every
+    free point; free points moved by up to 0.2 a."""
+    rng = np.random.default_rng(seed)
+    n = _size(rng, sizes)
+    spokes, hub = max(8, round(np.sqrt(n) * rng.uniform(0.6, 1.6))), int(rng.integers(1, 13))
+    rings = max(2, (n - hub) // spokes)
+    height, order = rng.uniform(0.0, 0.3) * rings, int(rng.integers(0, 4))
+    weight = rng.uniform(0.01, 0.1) if rng.uniform() < 0.5 else 0.0
+    phi = 2 * np.pi * np.arange(spokes) / spokes
+    hub_radius = 0.5 / np.sin(np.pi / hub) if hub > 1 else 0.0   # hub points a apart
+    radius = np.repeat(max(spokes / (2 * np.pi), hub_radius + 1) + np.arange(rings), spokes)
+    angle = np.concatenate([2 * np.pi * np.arange(hub) / hub, np.tile(phi, rings)])
+    radius = np.concatenate([np.full(hub, hub_radius), radius])
+    positions = np.column_stack([radius * np.cos(angle), radius * np.sin(angle),
+                                 np.zeros(len(angle))])
+    index = hub + np.arange(rings * spokes).reshape(rings, spokes)
+    around = (np.column_stack([np.arange(hub), (np.arange(hub) + 1) % hub]) if hub > 2
+              else np.array([[0, 1]])[:hub - 1])   # h = 2: one spring; h = 1: none
+    springs = np.concatenate([
+        around, np.column_stack([np.round(phi / (2 * np.pi) * hub).astype(int) % hub, index[0]]),
+        np.column_stack([index.ravel(), np.roll(index, -1, axis=1).ravel()]),
+        np.column_stack([index[:-1].ravel(), index[1:].ravel()])])
+    held = index[-1]
+    positions[held, 2] = height * np.cos(order * phi)
+    free = np.setdiff1d(np.arange(len(positions)), held)
+    positions[free] += rng.uniform(-0.2, 0.2, (len(free), 3))
+    loads = np.zeros_like(positions)
+    loads[free, 2] = -weight
+    return _scene(positions, springs, held, loads)
+
+
 #: The families by name: ``draw(seed, sizes) -> Atoms``.
 FAMILIES: dict[str, Callable[..., Atoms]] = {
     'sagging_net': sagging_net, 'saddle_dome': saddle_dome, 'chord_ring': chord_ring,
-    'knn_cluster': knn_cluster, 'random_tree': random_tree}
+    'knn_cluster': knn_cluster, 'random_tree': random_tree, 'hub_net': hub_net}

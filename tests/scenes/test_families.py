@@ -3,10 +3,12 @@ scene, sizes stay in range, and each family's draw relaxes to a minimum."""
 
 import numpy as np
 import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from ase_maud import Maud, classify
 from ase_maud.physics.dofs import free_dofs
-from ase_maud.scenes.families import FAMILIES, sagging_net
+from ase_maud.scenes.families import FAMILIES, hub_net, sagging_net
 
 SEEDS = np.random.default_rng(20261206).integers(0, 2**31, size=3).tolist()
 
@@ -42,3 +44,20 @@ def test_a_sagging_net_is_loaded_on_its_free_points_only():
 def test_sizes_out_of_order_are_refused():
     with pytest.raises(ValueError, match='sizes'):
         sagging_net(0, (500, 100))
+
+
+def test_a_hub_net_holds_its_outer_ring_and_ties_every_point_to_the_hub():
+    """One spring component, the held points the outer ring (each sprung to
+    its two neighbours and its spoke), loads on the free points only, all
+    equal or none."""
+    for seed in SEEDS:
+        net = hub_net(seed, (200, 400))
+        springs, n = net.calc.parameters['springs'], len(net)
+        assert connected_components(coo_matrix((np.ones(len(springs)), springs.T),
+                                               shape=(n, n)), directed=False)[0] == 1
+        free = free_dofs(net, 3).all(axis=1)
+        degree = np.bincount(np.ravel(springs), minlength=n)
+        assert (degree[~free] == 3).all() and 8 <= (~free).sum() < n // 2
+        loads = net.calc.parameters['loads']
+        assert not loads[~free].any() and len(np.unique(loads[free, 2])) == 1
+        assert (loads[free, 2] <= 0).all() and not loads[:, :2].any()

@@ -215,19 +215,26 @@ def path_to_partner(minimum: Atoms, partner: Atoms, fmax: float, relax: int | No
     attempt.cpu_s += found.cpu_s
     if saddle is not None:
         attempt.energy = saddle.get_potential_energy()
+    else:   # where it stopped: the band's highest moving image
+        top = max(found.band[1:-1], key=lambda image: image.get_potential_energy())
+        attempt.energy, attempt.end = top.get_potential_energy(), top.positions.copy()
     return saddle, attempt
 
 
 def path_to_neighbour(minimum: Atoms, ends: list[np.ndarray], fmax: float, steps: int,
-                      energy_rtol: float) -> tuple[Atoms | None, Attempt]:
+                      energy_rtol: float, tried: tuple[float, ...] = ()
+                      ) -> tuple[Atoms | None, Attempt]:
     """Where no attempt reached a saddle: the points they stopped at
-    (``ends``, tried in the order given) relaxed by Maud in at most ``steps``
-    steps, one after another, until one relaxes into another minimum (its
-    energy apart from the minimum's by more than ``energy_rtol``, relative:
-    not the minimum moved rigidly, nor along a flat valley), then the path
-    to it (:func:`path_to_partner`). The relaxations' calls and CPU seconds
-    are the attempt's."""
+    (``ends``, tried in the order given; a failed path's band its highest
+    image) relaxed by Maud in at most ``steps`` steps, one after another,
+    until one relaxes into another minimum (its energy apart from the
+    minimum's, and from each of the energies ``tried``, a partner's whose
+    path failed, by more than ``energy_rtol``, relative: not the minimum
+    moved rigidly, nor along a flat valley), then the path to it
+    (:func:`path_to_partner`). The relaxations' calls and CPU seconds are the
+    attempt's."""
     cpu, calls, energy = cpu_seconds(), 0, minimum.get_potential_energy()
+    known = (energy, *tried)
     for end in ends:
         partner = fresh_copy(minimum)
         partner.positions = end
@@ -237,7 +244,8 @@ def path_to_neighbour(minimum: Atoms, ends: list[np.ndarray], fmax: float, steps
             except MaudError:
                 relaxed = False
         calls += len(recorded.samples)
-        if relaxed and abs(partner.get_potential_energy() - energy) > energy_rtol * abs(energy):
+        if relaxed and all(abs(partner.get_potential_energy() - e) > energy_rtol * abs(e)
+                           for e in known):
             saddle, attempt = path_to_partner(minimum, partner, fmax)
             break
     else:

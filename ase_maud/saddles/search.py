@@ -53,10 +53,12 @@ that the next will not.
    barrier), that saddle is the attempt's.
 4. **A path to a neighbouring minimum**, if still none
    (:func:`ase_maud.saddles.attempts.path_to_neighbour`): the points where the
-   attempts stopped, the highest first, relaxed one after another until one
-   falls into another minimum (its energy apart from this one's by more than
+   attempts stopped (a failed path: its band's highest image), the highest
+   first, relaxed one after another until one falls into another minimum
+   (its energy apart from this one's, and the partner's, by more than
    ``energy_rtol``), and the band to it: a free cluster or tree whose climbs
-   all ran out of budget still gets the saddle between two of its minima.
+   all ran out of budget, or a dome whose path to its mirror image failed,
+   still gets the saddle between two of its minima.
 
 An attempt is rejected, and said so, when the region's saddle lies along the
 direction of a saddle already found (the cosine between the two moves from
@@ -356,7 +358,9 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
         merge([path_to_partner(minimum, partner, fmax, steps if mirror else None, distance_atol)])
     ends = sorted((a for a in found.attempts if a.end is not None), key=lambda a: -a.energy)
     if ends and not found.saddles:   # the highest first: the likeliest past a ridge
-        merge([path_to_neighbour(minimum, [a.end for a in ends], fmax, steps, energy_rtol)])
+        tried = () if partner is None else (partner.get_potential_energy(),)
+        merge([path_to_neighbour(minimum, [a.end for a in ends], fmax, steps, energy_rtol,
+                                 tried)])
     return found
 
 

@@ -8,7 +8,8 @@ Moves and forces are (N, 3) arrays (forces with ASE's sign, ``-dE/dr``);
 - :func:`lbfgs`: the L-BFGS two-loop recursion over secant pairs
   ``s = x_new - x_old``, ``y = f_old - f_new`` with ``K^-1`` as its initial
   inverse Hessian; with no pairs, the Newton move ``K^-1 f``;
-  :func:`keeps_pair` says which pairs are safe to keep.
+  :func:`keeps_pair` says which pairs are safe to keep, :class:`PairRows`
+  holds them as rows from step to step.
 - :func:`momentum_weight`: Day's dynamic relaxation carries the last move
   over with the weight ``min(k / (k + 3), beta_max)``.
 - :func:`mode_steps`, :func:`truncated_newton`, :func:`off`: eigenvector
@@ -50,54 +51,89 @@ def keeps_pair(s: np.ndarray, y: np.ndarray) -> bool:
                 * np.vdot(y, y) ** 0.5)
 
 
+class PairRows:
+    """The L-BFGS pairs as rows of two arrays that outlive a step: each pair
+    is copied in once, when it joins the memory, into a row a dropped pair
+    left (stacking the whole memory at every step copied it all: 15 % of a
+    run's CPU on a free graph of 2000 points). ``rows(pairs)`` gives the
+    rows of ``pairs`` (oldest first), for the pairs as they are now; the
+    pairs themselves stay the run's state (a restart file holds them). A
+    row knows its pair by the pair's ``s`` itself (held, so never mistaken
+    for a new array at a freed address)."""
+
+    def __init__(self) -> None:
+        self.s = self.y = np.empty((0, 0))
+        self.held: list[np.ndarray | None] = []   # the s of the pair in each row
+
+    def rows(self, pairs: Sequence[Pair]) -> np.ndarray:
+        """The row of each of ``pairs`` (oldest first), new ones copied in."""
+        size = np.asarray(pairs[0][0]).size
+        if self.s.shape[1] != size or len(self.held) < len(pairs):
+            self.s = np.empty((len(pairs), size))
+            self.y = np.empty((len(pairs), size))
+            self.held = [None] * len(pairs)
+        kept = [next((r for r, h in enumerate(self.held) if h is s), -1) for s, _ in pairs]
+        self.held = [h if r in kept else None for r, h in enumerate(self.held)]
+        for p, (s, y) in enumerate(pairs):
+            if kept[p] < 0:
+                kept[p] = next(r for r, h in enumerate(self.held) if h is None)
+                self.s[kept[p]], self.y[kept[p]] = np.ravel(s), np.ravel(y)
+                self.held[kept[p]] = s
+        return np.array(kept)
+
+
 def lbfgs(solve: Callable[[np.ndarray], np.ndarray], forces: np.ndarray,
-          pairs: Sequence[Pair]) -> np.ndarray:
+          pairs: Sequence[Pair], memory: PairRows | None = None) -> np.ndarray:
     """The L-BFGS direction over ``pairs`` (oldest first) with ``solve``
-    (``K^-1``) as the initial inverse Hessian; ``K^-1 f`` with no pairs. The
-    two loops are compiled (:func:`_newest_first`, :func:`_oldest_first`):
+    (``K^-1``) as the initial inverse Hessian; ``K^-1 f`` with no pairs.
+    ``memory`` keeps the pairs' rows from call to call (None: fresh rows).
+    The two loops are compiled (:func:`_newest_first`, :func:`_oldest_first`):
     in numpy each pair would cost four calls."""
     if not pairs:
         return solve(forces)
-    s = np.stack([pair[0] for pair in pairs]).reshape(len(pairs), -1)
-    y = np.stack([pair[1] for pair in pairs]).reshape(len(pairs), -1)
-    q, alphas = _newest_first(s, y, np.asarray(forces, dtype=float).ravel())
+    memory = PairRows() if memory is None else memory
+    rows = memory.rows(pairs)
+    q, alphas = _newest_first(memory.s, memory.y, rows,
+                              np.asarray(forces, dtype=float).ravel())
     z = np.asarray(solve(q.reshape(forces.shape)), dtype=float).ravel()
-    return _oldest_first(s, y, alphas, z).reshape(forces.shape)
+    return _oldest_first(memory.s, memory.y, rows, alphas, z).reshape(forces.shape)
 
 
 @numba.njit(cache=True)
-def _newest_first(s: np.ndarray, y: np.ndarray,
+def _newest_first(s: np.ndarray, y: np.ndarray, rows: np.ndarray,
                   forces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The two-loop recursion's first loop, pairs (rows of ``s`` and ``y``)
-    newest first: ``alpha_i = s_i.q / s_i.y_i``, ``q -= alpha_i y_i``;
-    returns ``q`` and the ``alpha``s (by row)."""
+    """The two-loop recursion's first loop, pairs (rows ``rows`` of ``s``
+    and ``y``, oldest first) newest first: ``alpha_i = s_i.q / s_i.y_i``,
+    ``q -= alpha_i y_i``; returns ``q`` and the ``alpha``s (in ``rows``' order)."""
     q = forces.copy()
-    alphas = np.empty(s.shape[0])
-    for i in range(s.shape[0] - 1, -1, -1):
+    alphas = np.empty(rows.size)
+    for i in range(rows.size - 1, -1, -1):
+        r = rows[i]
         sq = sy = 0.0
         for k in range(s.shape[1]):
-            sq += s[i, k] * q[k]
-            sy += s[i, k] * y[i, k]
+            sq += s[r, k] * q[k]
+            sy += s[r, k] * y[r, k]
         alphas[i] = sq / sy
         for k in range(s.shape[1]):
-            q[k] -= alphas[i] * y[i, k]
+            q[k] -= alphas[i] * y[r, k]
     return q, alphas
 
 
 @numba.njit(cache=True)
-def _oldest_first(s: np.ndarray, y: np.ndarray, alphas: np.ndarray,
+def _oldest_first(s: np.ndarray, y: np.ndarray, rows: np.ndarray, alphas: np.ndarray,
                   z: np.ndarray) -> np.ndarray:
     """The second loop, oldest first, from ``z = K^-1 q``: ``z += s_i
     (alpha_i - y_i.z / s_i.y_i)``; returns ``z`` (a new array)."""
     z = z.copy()
-    for i in range(s.shape[0]):
+    for i in range(rows.size):
+        r = rows[i]
         yz = sy = 0.0
         for k in range(s.shape[1]):
-            yz += y[i, k] * z[k]
-            sy += s[i, k] * y[i, k]
+            yz += y[r, k] * z[k]
+            sy += s[r, k] * y[r, k]
         beta = alphas[i] - yz / sy
         for k in range(s.shape[1]):
-            z[k] += beta * s[i, k]
+            z[k] += beta * s[r, k]
     return z
 
 

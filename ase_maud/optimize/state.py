@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from ase_maud.optimize.directions import PairRows
 from ase_maud.optimize.models.base import Solver
 
 
@@ -59,6 +60,8 @@ class MaudState:
     pairs: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
     model: dict[str, Any] = field(default_factory=dict)
     solver: Solver | None = None
+    #: the pairs as rows (:class:`~ase_maud.optimize.directions.PairRows`; not saved)
+    rows: PairRows = field(default_factory=PairRows)
     modes: np.ndarray | None = None
     predicted: float | None = None
     #: energy noise learnt from steps whose energy disagreed with the forces

@@ -272,7 +272,7 @@ class Minimise(Strategy):
     def _move(self, state: MaudState) -> np.ndarray:
         """The bounded move from ``state.last`` (with ``state.solver``)."""
         here, rule, solver = state.last, self.rule, state.solver
-        direction = lbfgs(solver.solve, here.forces, state.pairs)
+        direction = lbfgs(solver.solve, here.forces, state.pairs, state.rows)
         if (state.pairs and self.model.target != 'stationary'
                 and not np.vdot(direction, here.forces) > 0):
             state.pairs = []

@@ -1,0 +1,43 @@
+"""The L-BFGS memory as rows kept from step to step
+(ase_maud.optimize.directions.PairRows): the same direction, to the last bit,
+as a memory stacked afresh, through a run's appends, drops and resets."""
+
+import numpy as np
+import pytest
+
+from ase_maud.optimize.directions import PairRows, lbfgs
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_kept_rows_give_the_direction_of_a_fresh_memory(seed):
+    rng = np.random.default_rng(seed)
+    n, memory = int(rng.integers(2, 40)), int(rng.integers(1, 8))
+    scale = rng.uniform(0.5, 2.0, (n, 3))
+
+    def solve(forces):
+        return forces / scale
+
+    rows, pairs = PairRows(), []
+    for step in range(60):
+        if rng.random() < 0.1:
+            pairs = []   # a reset (the direction was uphill)
+        s = rng.normal(size=(n, 3))
+        pairs = [*pairs, (s, s * scale + 0.1 * rng.normal(size=(n, 3)))][-memory:]
+        if rng.random() < 0.05 and len(pairs) > 1:
+            pairs = pairs[:-2] + pairs[-1:]   # a pair dropped from the middle
+        forces = rng.normal(size=(n, 3))
+        kept = lbfgs(solve, forces, pairs, rows)
+        fresh = lbfgs(solve, forces, pairs)
+        assert np.array_equal(kept, fresh), step
+
+
+def test_a_new_array_is_never_taken_for_a_dropped_pair():
+    """A pair's row is known by the array itself, not by an address a freed
+    array may leave to a new one."""
+    rows, n = PairRows(), 5
+    for step in range(200):
+        s = np.full((n, 3), float(step))
+        y = np.full((n, 3), 2.0 * step + 1.0)
+        r = rows.rows([(s, y)])
+        assert rows.s[r[0]][0] == step and rows.y[r[0]][0] == 2.0 * step + 1.0
+        del s, y   # freed: the next step's arrays may take their addresses

@@ -45,7 +45,9 @@ class Attempt:
     """One attempt of a :func:`search_saddles`: its ``kind`` ('mode': a
     whole-scene climb along mode ``where`` of the minimum, ``sign`` +1 or
     -1; 'local': an activation around point ``where``; 'path': a band to
-    the second minimum given, :func:`~ase_maud.saddles.between_minima.saddle_between`), how it ended
+    the second minimum given, :func:`~ase_maud.saddles.between_minima.saddle_between`;
+    'neighbour': a band to a minimum found where the others stopped,
+    :func:`path_to_neighbour`), how it ended
     (``outcome``: 'saddle', 'known saddle', 'known direction', 'budget', 'no
     local saddle', 'steps', or the error that stopped it), the points of its last region
     (``region``, local ones), what it computed (``calls``, ``hvp_vectors``,
@@ -79,7 +81,8 @@ class Attempt:
         """One line: what was tried, how it ended and what it cost (its CPU
         also in force calls of ``force_call_cpu_s`` CPU seconds, if given)."""
         what = {'mode': f"mode {self.where} {'+' if self.sign > 0 else '-'}",
-                'path': 'path to the second minimum'}.get(
+                'path': 'path to the second minimum',
+                'neighbour': 'path to a neighbouring minimum'}.get(
                     self.kind, f'local at point {self.where} ' + (
                         f'({self.region} points)' if self.region else
                         '(no region smaller than the net: the whole net climbed)'))
@@ -251,6 +254,7 @@ def path_to_neighbour(minimum: Atoms, ends: list[np.ndarray], fmax: float, steps
     else:
         saddle, attempt = None, Attempt('path', 0, outcome=(
             f'none of the {len(ends)} points the attempts stopped at relaxed into another minimum'))
+    attempt.kind = 'neighbour'
     attempt.calls += calls
     attempt.cpu_s = cpu_seconds() - cpu
     return saddle, attempt

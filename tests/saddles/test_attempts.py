@@ -63,8 +63,9 @@ def test_the_path_to_a_neighbour_skips_the_minima_already_tried(seed, monkeypatc
     _, skipped = path_to_neighbour(net, [net.positions.copy(), shaken], 1e-6, 2000, 1e-8,
                                    tried=(image.get_potential_energy(),))
     assert not paths and skipped.outcome.startswith('none of the 2 points')
+    assert skipped.kind == 'neighbour' and 'neighbouring minimum' in skipped.describe()
     assert skipped.calls > 0 and skipped.cpu_s > 0
     _, taken = path_to_neighbour(net, [net.positions.copy(), shaken], 1e-6, 2000, 1e-8)
-    assert taken.outcome == 'stand-in' and len(paths) == 1
+    assert (taken.kind, taken.outcome, len(paths)) == ('neighbour', 'stand-in', 1)
     assert paths[0].get_potential_energy() == pytest.approx(image.get_potential_energy(),
                                                             rel=1e-8)

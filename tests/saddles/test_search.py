@@ -139,7 +139,8 @@ def test_a_search_that_finds_nothing_says_what_it_tried():
     start = relaxed('chords', 24, 0)
     search = search_saddles(start, modes=1, local=2, budget=1, seed=0)
     assert not search.saddles
-    assert [a.kind for a in search.attempts] == ['mode', 'mode', 'local', 'local', 'path']
+    assert [a.kind for a in search.attempts] == ['mode', 'mode', 'local', 'local',
+                                                  'neighbour']
     assert all(a.outcome == 'budget' and a.cost >= 1 for a in search.attempts[:4])
     assert search.attempts[4].outcome == ('none of the 4 points the attempts stopped at '
                                           'relaxed into another minimum')

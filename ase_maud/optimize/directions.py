@@ -54,8 +54,8 @@ def keeps_pair(s: np.ndarray, y: np.ndarray) -> bool:
 class PairRows:
     """The L-BFGS pairs as rows of two arrays that outlive a step: each pair
     is copied in once, when it joins the memory, into a row a dropped pair
-    left (stacking the whole memory at every step copied it all: 15 % of a
-    run's CPU on a free graph of 2000 points). ``rows(pairs)`` gives the
+    left, where stacking the memory at every step would copy it all
+    (docs/performance.md). ``rows(pairs)`` gives the
     rows of ``pairs`` (oldest first), for the pairs as they are now; the
     pairs themselves stay the run's state (a restart file holds them). A
     row knows its pair by the pair's ``s`` itself (held, so never mistaken

@@ -364,7 +364,7 @@ class Maud(Optimizer):
         if self.target == 'saddle':
             self.found, error = self.strategy.verify(self._atoms(), max(self.fmax, self.fmax_now),
                                                  self.nsteps, self.work, None if self._subset
-                                                 else self.state.modes)
+                                                 is not None else self.state.modes)
             self.logfile.write(f'Maud: converged on a {self.found.verdict} of index '
                                f'{self.found.index} (order {self.rule.order} sought)\n')
             if error is not None:

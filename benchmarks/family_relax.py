@@ -22,7 +22,7 @@ from pathlib import Path
 
 from ase_maud import Maud
 from ase_maud.bench.optimizers import ScipyLBFGSB
-from ase_maud.counting import cpu_seconds
+from ase_maud.counting import CallRecorder, cpu_seconds
 from ase_maud.scenes.catalogue import build
 from ase_maud.scenes.families import FAMILIES
 
@@ -31,29 +31,14 @@ FIELDS = ['scene', 'seed', 'natoms', 'optimizer', 'calls', 'converged', 'energy'
 
 
 def relax(atoms, optimizer: str, fmax: float, steps: int) -> tuple[int, bool, float]:
-    """Calls (the start's included), convergence and CPU seconds of one run."""
+    """Calculator calls (the start's included), convergence and CPU seconds of one run."""
     cpu = cpu_seconds()
-    if optimizer == 'Maud':
-        opt = Maud(atoms, logfile=None)
-        converged = opt.run(fmax=fmax, steps=steps)
-        calls = opt.nsteps + 1
-    else:
-        counted = Counted(atoms)
-        converged = counted.run(fmax=fmax, steps=steps)
-        calls = counted.evaluations
-    return calls, bool(converged), cpu_seconds() - cpu
-
-
-class Counted(ScipyLBFGSB):
-    """SciPy's L-BFGS-B that counts its energy-and-gradient evaluations."""
-
-    def __init__(self, atoms):
-        super().__init__(atoms)
-        self.evaluations = 0
-
-    def _energy_gradient(self, x, fmax):
-        self.evaluations += 1
-        return super()._energy_gradient(x, fmax)
+    with CallRecorder(atoms.calc) as calls:
+        if optimizer == 'Maud':
+            converged = Maud(atoms, logfile=None).run(fmax=fmax, steps=steps)
+        else:
+            converged = ScipyLBFGSB(atoms).run(fmax=fmax, steps=steps)
+    return len(calls.samples), bool(converged), cpu_seconds() - cpu
 
 
 def scenes(args) -> list[tuple[str, int | str, object]]:

@@ -24,7 +24,8 @@ COMMAND_MODULES = {'relax', 'show', 'classify', 'saddles', 'bench', 'backends'}
 REMOVED = {'ase_maud.activation': {'RELEASE_CAP_DOFS', 'RELEASE_CAP_STEPS',
                                    'RELEASE_EXACT_MAX_DOFS', 'SETTLE_CYCLES', 'SETTLE_GAIN',
                                    'SETTLE_RATIO', 'SETTLE_STEPS'},
-           'ase_maud.analysis': {'LOWEST_MAX_DOFS'}}
+           'ase_maud.analysis': {'LOWEST_MAX_DOFS'},
+           'ase_maud.transition': {'BAND_GAMMA_MAX'}}
 
 
 def _quietly(module: str):

@@ -1,21 +1,23 @@
-"""The saddle between two minima: a band of images relaxed loosely with a
-climbing image, its highest image refined to a verified index-1 saddle.
+"""The saddle between two minima: a band of images relaxed loosely as a
+preconditioned string with a climbing image, its highest image refined to a
+verified index-1 saddle.
 
 :func:`saddle_between` joins two minima of one scene (a MaudCalculator scene
-each: the same points, springs and constraints) by ASE's NEB (``images``
-moving images, interpolated linearly or by ASE's ``'idpp'``, the improved
-tangent, a climbing image) relaxed by :class:`~ase_maud.Maud` until the
-band's largest force is below ``band_fmax`` (a band need not be converged:
-it only has to bring its highest image near the saddle). The highest moving
-image is then refined by ``Maud(target='saddle', mode=tangent)``, the
-tangent being the band's chord through that image's two neighbours, to
-``fmax``; the optimizer verifies the point it converges on from the Hessian
-(index 1, no zero curvature), or raises
-:class:`~ase_maud.errors.WrongIndexError`. The saddle is the band's if its
-barrier is within :data:`AGREE` of the highest image's. Should the
-refinement fail or reach another saddle, the band is relaxed on to a tenth
-of its force and the refinement tried again, at most :data:`RETRIES` times.
-A :class:`Transition` reports the saddle, both barriers, the climbing
+each: the same points, springs and constraints) by a band of ``images``
+moving images (interpolated linearly or by ASE's ``'idpp'``), relaxed as a
+string preconditioned by each image's stiffness model
+(:class:`~ase_maud.saddles.string_method.PreconditionedString`) until the
+band's largest residual force is below ``band_fmax`` (a band need not be
+converged: it only has to bring its highest image near the saddle), first
+without and then with a climbing image. The highest moving image is then
+refined by ``Maud(target='saddle', mode=tangent)``, the tangent being the
+band's chord through that image's two neighbours, to ``fmax``; the optimizer
+verifies the point it converges on from the Hessian (index 1, no zero
+curvature), or raises :class:`~ase_maud.errors.WrongIndexError`. The saddle
+is the band's if its barrier is within :data:`AGREE` of the highest image's.
+Should the refinement fail or reach another saddle, the band is relaxed on to
+a tenth of its force and the refinement tried again, at most :data:`RETRIES`
+times. A :class:`Transition` reports the saddle, both barriers, the climbing
 image's energy and what the search computed: calculator calls of the band
 (summed over its moving images) and of the refinement, Hessian-vector
 product vectors and Hessians (each one force-call equivalent, as
@@ -42,6 +44,7 @@ from ase_maud.counting import CallRecorder, Work, cpu_seconds, fresh_copy
 from ase_maud.errors import MaudError
 from ase_maud.optimize.maud import Maud
 from ase_maud.physics.dofs import free_dofs
+from ase_maud.saddles.string_method import PreconditionedString
 
 #: The largest force of a relaxed band (``band_fmax``), in units of ``Q a``.
 BAND_FMAX = 0.1
@@ -50,9 +53,6 @@ BAND_FMAX = 0.1
 #: 4.2 % on 8x8; a refinement that led elsewhere 26-49 % apart:
 #: docs/dev/bench/saddles.md).
 AGREE = 0.05
-#: The band's largest step factor (the secant model's default, 1.5, let a
-#: climbing image run away on 1 of 8 domes of 6x6 points: docs/dev/bench/saddles.md).
-BAND_GAMMA_MAX = 1.0
 #: The interpolated images' free coordinates are moved by up to this many
 #: ``a`` (seeded): between two mirror images the band is nearly symmetric,
 #: and its middle image would stay on the mirror plane, at the flat
@@ -147,15 +147,13 @@ class Transition:
 def saddle_between(first: Atoms, second: Atoms, images: int = 7,
                    band_fmax: float | None = None,
                    fmax: float = 1e-6, steps: int = 200, band_steps: int = 2000,
-                   spring: float | None = None, interpolation: str = 'linear',
-                   seed: int = 0) -> Transition:
+                   interpolation: str = 'linear', seed: int = 0) -> Transition:
     """The :class:`Transition` between the minima ``first`` and ``second``
-    (module docstring): a band of ``images`` moving images, springs of
-    ``spring`` (force per length; None: the scene's ``Q``) between them,
-    interpolated by ``interpolation`` ('linear' or ASE's 'idpp'), their
-    free coordinates moved by up to :data:`JITTER` ``a`` (seeded by
-    ``seed``), relaxed without and then with a climbing image until its
-    largest force is below ``band_fmax`` (force units; None:
+    (module docstring): a band of ``images`` moving images interpolated by
+    ``interpolation`` ('linear' or ASE's 'idpp'), their free coordinates
+    moved by up to :data:`JITTER` ``a`` (seeded by ``seed``), relaxed as a
+    string without and then with a climbing image until its largest
+    residual force is below ``band_fmax`` (force units; None:
     :data:`BAND_FMAX` ``Q a``; at most ``band_steps`` steps each time), then
     its highest image refined to ``fmax`` in at most ``steps`` steps.
     Neither minimum is changed. A ValueError names a bad argument, or what
@@ -169,15 +167,14 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
     images : int, default 7
         Moving images of the band.
     band_fmax : float or None, default None
-        The band's convergence, ``Q a`` (None: :data:`BAND_FMAX` ``Q a``).
+        The band's convergence (its largest residual force), ``Q a`` (None:
+        :data:`BAND_FMAX` ``Q a``).
     fmax : float, default 1e-6
         The refined saddle's convergence, ``Q a``.
     steps : int, default 200
         Steps of the refinement.
     band_steps : int, default 2000
         Steps of each of the band's two relaxations.
-    spring : float or None, default None
-        The band's springs, force per length (None: the scene's ``Q``).
     interpolation : {'linear', 'idpp'}, default 'linear'
         The band's first images.
     seed : int, default 0
@@ -202,28 +199,25 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
     check_same_scene(first, second)
     potential = first.calc.potential
     band_fmax = BAND_FMAX * potential.force_unit if band_fmax is None else band_fmax
-    spring = potential.Q if spring is None else spring
-    for name, value in (('band_fmax', band_fmax), ('spring', spring)):
-        if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
-            raise ValueError(f'{name} must be a finite number > 0, got {value!r}')
+    if not (isinstance(band_fmax, (int, float)) and np.isfinite(band_fmax) and band_fmax > 0):
+        raise ValueError(f'band_fmax must be a finite number > 0, got {band_fmax!r}')
     if not (isinstance(band_steps, int) and band_steps >= 1):
         raise ValueError(f'band_steps must be a whole number >= 1, got {band_steps!r}')
     if interpolation not in ('linear', 'idpp'):
         raise ValueError(f"interpolation must be 'linear' or 'idpp', got {interpolation!r}")
     cpu = cpu_seconds()
     band = [fresh_copy(first), *(fresh_copy(first) for _ in range(images)), fresh_copy(second)]
-    neb = NEB(band, k=spring, method='improvedtangent')
-    neb.interpolate(method=interpolation)
+    NEB(band, method='improvedtangent').interpolate(method=interpolation)
     _jitter(band[1:-1], JITTER * potential.a, seed)
     found = Transition(None, band)
+    string = PreconditionedString(band)
     with ExitStack() as stack:
         recorders = [stack.enter_context(CallRecorder(image.calc)) for image in band]
-        neb.climb = False   # a climbing image climbs only once the band is near its path
-        found.outcome = _relax_band(neb, band_fmax, band_steps, found)
-        neb.climb = True
+        # an image climbs only once the band is near its path
+        found.outcome = _relax_band(string, band_fmax, band_steps, False)
         target = band_fmax
         for _ in range(RETRIES + 1 if not found.outcome else 0):
-            found.outcome = _relax_band(neb, target, band_steps, found)
+            found.outcome = _relax_band(string, target, band_steps, True)
             if found.outcome:
                 break
             saddle, found.outcome = _refine(band, fmax, steps, found)
@@ -239,6 +233,7 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
                 break
             target *= 0.1
         found.band_calls = sum(len(r.samples) for r in recorders)
+        found.band_steps = string.steps
     found.climbing = max(image.get_potential_energy() for image in band[1:-1]) - (
         first.get_potential_energy())
     found.cpu_s = cpu_seconds() - cpu
@@ -355,18 +350,18 @@ def check_same_scene(first: Atoms, second: Atoms) -> None:
                          f'(near point {point})')
 
 
-def _relax_band(neb: NEB, target: float, steps: int, found: Transition) -> str:
-    """Relax ``neb`` with Maud until its largest force is below ``target``
-    (at most ``steps`` steps, added to ``found``); '' if it got there, else
-    why not."""
-    opt = Maud(neb, logfile=None, gamma_max=BAND_GAMMA_MAX)
+def _relax_band(string: PreconditionedString, target: float, steps: int, climb: bool) -> str:
+    """Relax ``string`` until its largest residual force is below ``target``
+    (at most ``steps`` steps; with a climbing image if ``climb``); '' if it
+    got there, else why not."""
     try:
-        done = opt.run(fmax=target, steps=steps)
-        why = '' if done else f'the band did not relax to fmax {target:.3g} in {steps} steps'
+        if string.relax(target, steps, climb):
+            return ''
+        return (f'the band did not relax to fmax {target:.3g} in {steps} steps '
+                f'(its largest residual force {string.residual:.3g})')
     except MaudError as error:
-        why = f'the band stopped: {type(error).__name__}: {str(error).splitlines()[0]}'
-    found.band_steps += opt.nsteps
-    return why
+        return f'the band stopped: {type(error).__name__}: {str(error).splitlines()[0]}'
+
 
 
 def _apart(band: list[Atoms], saddle: Atoms, first: Atoms) -> str:

@@ -1,0 +1,112 @@
+"""A band of images relaxed as a string preconditioned by each image's stiffness model.
+
+The simplified string method (E, Ren and Vanden-Eijnden, J. Chem. Phys. 126, 164103,
+2007) with a climbing image (Ren and Vanden-Eijnden, J. Chem. Phys. 138, 134105, 2013),
+preconditioned as in Makri, Ortner and Kermode (J. Chem. Phys. 150, 094109, 2019). Each
+moving image ``i`` steps by
+
+    d_i = P_i^-1 f_i - m c_i t_i,    c_i = <P_i^-1 f_i, P_i t_i> / <t_i, P_i t_i>,
+
+``f_i`` its forces, ``t_i`` the band's tangent there, ``P_i`` the image's global stiffness
+model (:class:`~ase_maud.optimize.precon.MaudPrecon`: springs and the repulsion's nodal
+blocks, force per length), ``m`` 1 (the step across the path: the model's Newton step with
+the move along the path taken out in ``P_i``'s metric) or 2 for the climbing image (the
+highest, which then climbs along the path and descends across it). No point moves by more
+than :data:`MAX_MOVE` ``a`` in a step (the image's step is scaled down). After each step
+the images are spaced evenly by arc length along the cubic spline through the band
+(SciPy's ``CubicSpline``; the climbing image stays where it is, each side spaced on its
+own), so a string needs no springs between its images.
+
+A band is relaxed when every moving image's residual, ``|f_i - m c_i P_i t_i|`` (largest
+component, force units), is below a target: zero exactly where ``d_i`` is, the force across
+the path in ``P_i``'s metric (Makri et al., eq. 11). The metric shapes the path but not its
+stationary points: a climbing image at rest is at a saddle.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from ase import Atoms
+from scipy.interpolate import CubicSpline
+
+from ase_maud.optimize.precon import MaudPrecon
+
+#: The largest move of a point in one step of an image, in units of the scene's ``a``.
+MAX_MOVE = 0.5
+
+
+class PreconditionedString:
+    """The string through ``band`` (Atoms with MaudCalculators, the two ends fixed),
+    moved in place by :meth:`relax` (module docstring). ``steps``: the steps taken so
+    far; ``residual``: the largest residual of the last step (force units)."""
+
+    def __init__(self, band: list[Atoms]):
+        if len(band) < 3:
+            raise ValueError(f'a string needs at least one moving image between its ends, '
+                             f'got a band of {len(band)}')
+        self.band = band
+        self.precons = [MaudPrecon() for _ in band[1:-1]]
+        self.max_move = MAX_MOVE * band[0].calc.potential.a
+        self.steps = 0
+        self.residual = float('inf')
+
+    def relax(self, target: float, steps: int, climb: bool) -> bool:
+        """Step until every residual is below ``target`` (force units) or ``steps`` steps
+        were taken, with a climbing image if ``climb``; whether it got there. The images
+        are left at the last positions evaluated."""
+        positions = np.array([image.positions for image in self.band])
+        for taken in range(steps + 1):
+            energies = [image.get_potential_energy() for image in self.band[1:-1]]
+            top = 1 + int(np.argmax(energies)) if climb else None
+            tangents = _tangents(positions)
+            moves, self.residual = [], 0.0
+            for i, (image, precon) in enumerate(zip(self.band[1:-1], self.precons), 1):
+                forces = image.get_forces().ravel()
+                tangent = tangents[i].ravel()
+                precon.make_precon(image)
+                step = precon.solve(forces)
+                towards = precon.Pdot(tangent)
+                along = (2 if i == top else 1) * (step @ towards) / (tangent @ towards)
+                self.residual = max(self.residual,
+                                    float(np.abs(forces - along * towards).max()))
+                moves.append((step - along * tangent).reshape(-1, 3))
+            if self.residual < target:
+                return True
+            if taken == steps:
+                return False
+            for i, move in enumerate(moves, 1):
+                longest = float(np.linalg.norm(move, axis=1).max())
+                positions[i] += (min(1.0, self.max_move / longest) if longest > 0 else 0.0) * move
+            positions = _spaced(positions, top)
+            for image, moved in zip(self.band[1:-1], positions[1:-1]):
+                image.positions = moved
+            self.steps += 1
+        return False
+
+
+def _spline(positions: np.ndarray) -> tuple[np.ndarray, CubicSpline]:
+    """The cumulative arc length at each image (the polyline's, length units) and the
+    cubic spline through the images by it."""
+    flat = positions.reshape(len(positions), -1)
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(flat, axis=0), axis=1))])
+    return arc, CubicSpline(arc, positions, axis=0)
+
+
+def _tangents(positions: np.ndarray) -> np.ndarray:
+    """The band's unit tangent at each image (the spline's derivative), images x points x 3."""
+    arc, spline = _spline(positions)
+    tangents = spline(arc, 1)
+    norms = np.linalg.norm(tangents.reshape(len(positions), -1), axis=1)
+    return tangents / norms[:, None, None]
+
+
+def _spaced(positions: np.ndarray, keep: int | None) -> np.ndarray:
+    """The images moved along the spline through them to even arc length, the ends and
+    image ``keep`` (if given) kept, each side of it spaced on its own."""
+    arc, spline = _spline(positions)
+    last = len(positions) - 1
+    marks = [0, last] if keep is None else [0, keep, last]
+    spaced = positions.copy()
+    for start, stop in zip(marks, marks[1:]):
+        spaced[start + 1:stop] = spline(np.linspace(arc[start], arc[stop], stop - start + 1)[1:-1])
+    return spaced

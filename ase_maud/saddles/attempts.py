@@ -190,9 +190,10 @@ def climb_region(minimum: Atoms, centre: int, known: list[np.ndarray], fmax: flo
 
 def path_to_partner(minimum: Atoms, partner: Atoms, fmax: float, relax: int | None = None,
           distance_atol: float = 0.0) -> tuple[Atoms | None, Attempt]:
-    """The saddle between ``minimum`` and ``partner`` by a band of images (or,
-    if none, the first verified saddle a refinement from the band reached
-    elsewhere: :attr:`~ase_maud.saddles.between_minima.Transition.elsewhere`);
+    """The first verified saddle a band of images between ``minimum`` and
+    ``partner`` reaches: the band's, or one a refinement from it reached
+    elsewhere (:attr:`~ase_maud.saddles.between_minima.Transition.elsewhere`,
+    ``saddle_between(..., any_saddle=True)``);
     ``partner`` first relaxed in at most ``relax`` steps if given (a mirror
     image: its calls and CPU seconds counted in the attempt), no path if no
     point then lies further than ``distance_atol`` from its place in
@@ -210,7 +211,7 @@ def path_to_partner(minimum: Atoms, partner: Atoms, fmax: float, relax: int | No
         if np.abs(partner.positions - minimum.positions).max() <= distance_atol:
             attempt.outcome = 'the mirror image relaxed back to the minimum'
             return None, attempt
-    found = saddle_between(minimum, partner, fmax=fmax)
+    found = saddle_between(minimum, partner, fmax=fmax, any_saddle=True)
     saddle = found.saddle if found.saddle is not None else next(iter(found.elsewhere), None)
     attempt.outcome = 'saddle' if saddle is not None else found.outcome
     attempt.calls += found.calls

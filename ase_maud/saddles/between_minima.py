@@ -147,7 +147,8 @@ class Transition:
 def saddle_between(first: Atoms, second: Atoms, images: int = 7,
                    band_fmax: float | None = None,
                    fmax: float = 1e-6, steps: int = 200, band_steps: int = 2000,
-                   interpolation: str = 'linear', seed: int = 0) -> Transition:
+                   interpolation: str = 'linear', seed: int = 0,
+                   any_saddle: bool = False) -> Transition:
     """The :class:`Transition` between the minima ``first`` and ``second``
     (module docstring): a band of ``images`` moving images interpolated by
     ``interpolation`` ('linear' or ASE's 'idpp'), their free coordinates
@@ -155,8 +156,11 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
     string without and then with a climbing image until its largest
     residual force is below ``band_fmax`` (force units; None:
     :data:`BAND_FMAX` ``Q a``; at most ``band_steps`` steps each time), then
-    its highest image refined to ``fmax`` in at most ``steps`` steps.
-    Neither minimum is changed. A ValueError names a bad argument, or what
+    its highest image refined to ``fmax`` in at most ``steps`` steps. With
+    ``any_saddle`` the first verified saddle a refinement reaches ends the
+    search even if it is not the band's (it is then in ``elsewhere``): what
+    a saddle search wants, where the band would be relaxed on only to reach
+    this path's own saddle. Neither minimum is changed. A ValueError names a bad argument, or what
     the two scenes do not share.
 
     Parameters
@@ -179,6 +183,9 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
         The band's first images.
     seed : int, default 0
         The seed of the images' jitter (up to :data:`JITTER` ``a``).
+    any_saddle : bool, default False
+        Stop at the first verified index-1 saddle a refinement reaches,
+        the band's or another.
 
     Returns
     -------
@@ -225,6 +232,8 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
                 found.outcome = _apart(band, saddle, first)
                 if found.outcome:
                     found.elsewhere.append(saddle)
+                    if any_saddle:
+                        break
             if saddle is not None and not found.outcome:
                 found.saddle = saddle
                 energy = saddle.get_potential_energy()

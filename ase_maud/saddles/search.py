@@ -48,9 +48,9 @@ that the next will not.
    :func:`ase_maud.saddles.between_minima.reflection`, relaxed, its calls counted): a
    band of images between the two, its highest image refined to a verified
    index-1 saddle (:func:`ase_maud.saddles.between_minima.saddle_between`): a dome's
-   snap-through, a whole-scene path no local push reaches. Where the
-   refinement reached a verified saddle that is not the band's (another
-   barrier), that saddle is the attempt's.
+   snap-through, a whole-scene path no local push reaches. Where a
+   refinement reaches a verified saddle that is not the band's (another
+   barrier), the path stops there and that saddle is the attempt's.
 4. **A path to a neighbouring minimum**, if still none
    (:func:`ase_maud.saddles.attempts.path_to_neighbour`): the points where the
    attempts stopped (a failed path: its band's highest image), the highest

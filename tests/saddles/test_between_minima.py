@@ -238,3 +238,26 @@ def test_the_landscape_takes_the_path_where_its_climbs_found_nothing():
     assert classify(fresh_copy(graph.saddles[0])).index == 1
     forward, back = graph.barriers()[0]
     assert forward > 0 and back > 0
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_any_saddle_stops_at_the_first_saddle_reached_elsewhere(seed, monkeypatch):
+    """A refinement that reaches a verified saddle far from the band's highest image
+    (a stand-in: the second minimum, its barrier apart): by default the band is relaxed
+    on and refined again (RETRIES more times), with ``any_saddle`` the search ends there,
+    the saddle in ``elsewhere``."""
+    import ase_maud.saddles.between_minima as between
+    first, second = dome(4, seed)
+    refined = []
+
+    def stand_in(band, fmax, steps, found):
+        refined.append(len(band))
+        return fresh_copy(second), ''
+
+    monkeypatch.setattr(between, '_refine', stand_in)
+    monkeypatch.setattr(between, '_apart', lambda band, saddle, first: 'apart')
+    for any_saddle, refinements in ((False, between.RETRIES + 1), (True, 1)):
+        refined.clear()
+        found = saddle_between(first, second, any_saddle=any_saddle)
+        assert len(refined) == refinements
+        assert found.saddle is None and len(found.elsewhere) == refinements

@@ -46,11 +46,12 @@ from ase_maud.optimize.maud import Maud
 from ase_maud.physics.dofs import free_dofs
 from ase_maud.saddles.string_method import PreconditionedString
 
-#: The largest force of a relaxed band (``band_fmax``), in units of ``Q a``.
+#: The largest residual force of a relaxed band (``band_fmax``), in units of ``Q a``.
 BAND_FMAX = 0.1
 #: A refined saddle's barrier within this fraction of the band's highest
-#: image's is the band's saddle (measured: within 0.9 % on 400-point domes,
-#: 4.2 % on 8x8; a refinement that led elsewhere 26-49 % apart:
+#: image's is the band's saddle (measured with the NEB the string replaced:
+#: within 0.9 % on 400-point domes, 4.2 % on 8x8, a refinement that led
+#: elsewhere 26-49 % apart; with the string within 3 % on the 400-point domes:
 #: docs/dev/bench/saddles.md).
 AGREE = 0.05
 #: The interpolated images' free coordinates are moved by up to this many
@@ -160,8 +161,8 @@ def saddle_between(first: Atoms, second: Atoms, images: int = 7,
     ``any_saddle`` the first verified saddle a refinement reaches ends the
     search even if it is not the band's (it is then in ``elsewhere``): what
     a saddle search wants, where the band would be relaxed on only to reach
-    this path's own saddle. Neither minimum is changed. A ValueError names a bad argument, or what
-    the two scenes do not share.
+    this path's own saddle. Neither minimum is changed. A ValueError names a
+    bad argument, or what the two scenes do not share.
 
     Parameters
     ----------
@@ -370,7 +371,6 @@ def _relax_band(string: PreconditionedString, target: float, steps: int, climb: 
                 f'(its largest residual force {string.residual:.3g})')
     except MaudError as error:
         return f'the band stopped: {type(error).__name__}: {str(error).splitlines()[0]}'
-
 
 
 def _apart(band: list[Atoms], saddle: Atoms, first: Atoms) -> str:

@@ -20,10 +20,12 @@ own), so a string needs no springs between its images.
 A band is relaxed when every moving image's residual, ``|f_i - m c_i P_i t_i|`` (largest
 component, force units), is below a target: zero exactly where ``d_i`` is, the force across
 the path in ``P_i``'s metric (Makri et al., eq. 11). The metric shapes the path but not its
-stationary points: a climbing image at rest is at a saddle.
+stationary points: a climbing image at rest has zero forces.
 """
 
 from __future__ import annotations
+
+import itertools
 
 import numpy as np
 from ase import Atoms
@@ -60,7 +62,7 @@ class PreconditionedString:
             top = 1 + int(np.argmax(energies)) if climb else None
             tangents = _tangents(positions)
             moves, self.residual = [], 0.0
-            for i, (image, precon) in enumerate(zip(self.band[1:-1], self.precons), 1):
+            for i, (image, precon) in enumerate(zip(self.band[1:-1], self.precons, strict=True), 1):
                 forces = image.get_forces().ravel()
                 tangent = tangents[i].ravel()
                 precon.make_precon(image)
@@ -78,7 +80,7 @@ class PreconditionedString:
                 longest = float(np.linalg.norm(move, axis=1).max())
                 positions[i] += (min(1.0, self.max_move / longest) if longest > 0 else 0.0) * move
             positions = _spaced(positions, top)
-            for image, moved in zip(self.band[1:-1], positions[1:-1]):
+            for image, moved in zip(self.band[1:-1], positions[1:-1], strict=True):
                 image.positions = moved
             self.steps += 1
         return False
@@ -107,6 +109,6 @@ def _spaced(positions: np.ndarray, keep: int | None) -> np.ndarray:
     last = len(positions) - 1
     marks = [0, last] if keep is None else [0, keep, last]
     spaced = positions.copy()
-    for start, stop in zip(marks, marks[1:]):
+    for start, stop in itertools.pairwise(marks):
         spaced[start + 1:stop] = spline(np.linspace(arc[start], arc[stop], stop - start + 1)[1:-1])
     return spaced

@@ -69,7 +69,7 @@ def test_no_point_moves_more_than_the_cap_in_a_step(seed, monkeypatch):
     assert Maud(first, logfile=None).run(fmax=1e-6, steps=2000)
     second = mirrored(first, fmax=1e-6)
     band = [fresh_copy(first) for _ in range(4)] + [second]
-    for t, image in zip(np.linspace(0, 1, 5), band):
+    for t, image in zip(np.linspace(0, 1, 5), band, strict=True):
         image.positions = (1 - t) * first.positions + t * second.positions
     monkeypatch.setattr(string_method, '_spaced', lambda positions, keep: positions)
     before = np.array([image.positions for image in band])

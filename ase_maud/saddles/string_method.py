@@ -8,9 +8,12 @@ moving image ``i`` steps by
     d_i = P_i^-1 f_i - m c_i t_i,    c_i = <P_i^-1 f_i, P_i t_i> / <t_i, P_i t_i>,
 
 ``f_i`` its forces, ``t_i`` the band's tangent there, ``P_i`` the image's global stiffness
-model (:class:`~ase_maud.optimize.precon.MaudPrecon`: springs and the repulsion's nodal
-blocks, force per length), ``m`` 1 (the step across the path: the model's Newton step with
-the move along the path taken out in ``P_i``'s metric) or 2 for the climbing image (the
+model (:class:`~ase_maud.optimize.models.global_model.GlobalModel`, the model of
+:class:`~ase_maud.optimize.precon.MaudPrecon`: springs and the repulsion's nodal blocks,
+force per length; rebuilt where the image has moved by half its neighbour distance, its
+nodal blocks asked for in the same calculator call as the energy and forces), ``m`` 1
+(the step across the path: the model's Newton step with the move along the path taken
+out in ``P_i``'s metric) or 2 for the climbing image (the
 highest, which then climbs along the path and descends across it). No point moves by more
 than :data:`MAX_MOVE` ``a`` in a step (the image's step is scaled down). After each step
 the images are spaced evenly by arc length along the cubic spline through the band
@@ -31,7 +34,7 @@ import numpy as np
 from ase import Atoms
 from scipy.interpolate import CubicSpline
 
-from ase_maud.optimize.precon import MaudPrecon
+from ase_maud.optimize.models.global_model import GlobalModel
 
 #: The largest move of a point in one step of an image, in units of the scene's ``a``.
 MAX_MOVE = 0.5
@@ -47,7 +50,7 @@ class PreconditionedString:
             raise ValueError(f'a string needs at least one moving image between its ends, '
                              f'got a band of {len(band)}')
         self.band = band
-        self.precons = [MaudPrecon() for _ in band[1:-1]]
+        self.models = [GlobalModel() for _ in band[1:-1]]
         self.max_move = MAX_MOVE * band[0].calc.potential.a
         self.steps = 0
         self.residual = float('inf')
@@ -57,21 +60,22 @@ class PreconditionedString:
         were taken, with a climbing image if ``climb``; whether it got there. The images
         are left at the last positions evaluated."""
         positions = np.array([image.positions for image in self.band])
+        moving = list(zip(self.band[1:-1], self.models, strict=True))
         for taken in range(steps + 1):
-            energies = [image.get_potential_energy() for image in self.band[1:-1]]
+            energies = [_energy(image, model) for image, model in moving]
             top = 1 + int(np.argmax(energies)) if climb else None
             tangents = _tangents(positions)
             moves, self.residual = [], 0.0
-            for i, (image, precon) in enumerate(zip(self.band[1:-1], self.precons, strict=True), 1):
-                forces = image.get_forces().ravel()
-                tangent = tangents[i].ravel()
-                precon.make_precon(image)
-                step = precon.solve(forces)
-                towards = precon.Pdot(tangent)
-                along = (2 if i == top else 1) * (step @ towards) / (tangent @ towards)
+            for i, (image, model) in enumerate(moving, 1):
+                forces = image.get_forces()
+                tangent = tangents[i]
+                solver = model.at(image)
+                step = solver.solve(forces)
+                towards = solver.dot(tangent)
+                along = (2 if i == top else 1) * np.vdot(step, towards) / np.vdot(tangent, towards)
                 self.residual = max(self.residual,
                                     float(np.abs(forces - along * towards).max()))
-                moves.append((step - along * tangent).reshape(-1, 3))
+                moves.append(step - along * tangent)
             if self.residual < target:
                 return True
             if taken == steps:
@@ -84,6 +88,15 @@ class PreconditionedString:
                 image.positions = moved
             self.steps += 1
         return False
+
+
+def _energy(image: Atoms, model: GlobalModel) -> float:
+    """The energy of ``image``, its forces and, where ``model`` will rebuild there, its
+    nodal blocks computed in the same calculator call."""
+    needed = model.needs(image)
+    if needed is not None:
+        image.calc.get_property(needed, image)
+    return image.get_potential_energy()
 
 
 def _spline(positions: np.ndarray) -> tuple[np.ndarray, CubicSpline]:

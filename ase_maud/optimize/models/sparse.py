@@ -29,6 +29,10 @@ class SparseSolver(DofSolver):
         super().__init__(free)
         self.matrix = matrix
 
+    def dot(self, move: np.ndarray) -> np.ndarray:
+        """``P move`` (N, 3), force per length, zero on held coordinates."""
+        return self._scatter(self.matrix @ self._gather(move))
+
 
 class FactorSolver(SparseSolver):
     """The free part of ``P`` inverted by :func:`spd_inverse`."""

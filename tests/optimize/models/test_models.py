@@ -106,6 +106,23 @@ def test_global_model_spring_part_is_the_hessians(seed, dim, weighted):
                        rtol=0, atol=1e-10 * np.abs(spring_part).max())
 
 
+@pytest.mark.parametrize('seed', range(3))
+@pytest.mark.parametrize('dim', [2, 3])
+def test_global_model_product_is_its_matrix_and_solve_undoes_it(seed, dim):
+    # The solver's P v (what the string's tangent is measured with) is the
+    # assembled P on the free coordinates, zero where held, and solve undoes it.
+    atoms = random_scene(seed, dim)
+    solver = GlobalModel().at(atoms)
+    matrix, free, _ = GlobalModel().assemble(atoms)
+    move = np.random.default_rng(seed).normal(size=(len(atoms), 3))
+    product = solver.dot(move)
+    assert not product[:, dim:].any() and not product[:, :dim][~free].any()
+    assert np.allclose(product[:, :dim][free], matrix @ move[:, :dim][free],
+                       rtol=1e-12, atol=0)
+    back = solver.solve(product)
+    assert np.allclose(back[:, :dim][free], move[:, :dim][free], rtol=0, atol=1e-8)
+
+
 def test_dense_spring_graph_is_solved_matrix_free():
     # Every pair sprung: L is dense; the CG path must solve P d = f.
     atoms = build('all_pairs', 120, seed=1)

@@ -42,15 +42,20 @@ finding new saddles. The saddles missed lie along higher modes or where
 only a local activation reaches, so a round that finds nothing is no sign
 that the next will not.
 
-3. **A path**, if none of these found a saddle and a second minimum of the
-   scene is given (``partner``), or the minimum's mirror image is another
-   configuration (``mirror``, by default: through the plane of its fixed points,
+3. **A path**, where a second minimum of the scene is given (``partner``),
+   or the minimum's mirror image is another configuration (``mirror``, by
+   default: through the plane of its fixed points,
    :func:`ase_maud.saddles.between_minima.reflection`, relaxed, its calls counted): a
    band of images between the two, its highest image refined to a verified
    index-1 saddle (:func:`ase_maud.saddles.between_minima.saddle_between`): a dome's
    snap-through, a whole-scene path no local push reaches. Where a
    refinement reaches a verified saddle that is not the band's (another
-   barrier), the path stops there and that saddle is the attempt's.
+   barrier), the path stops there and that saddle is the attempt's. A search
+   for the first ``wanted`` saddles takes the path **before** 1 and 2: on
+   nets and domes held in a plane it is the attempt that finds a saddle, and
+   the climbs and activations before it cost a third of such a search's CPU
+   for nothing (docs/performance.md). Otherwise (every attempt, a window's
+   rounds) it comes after them, if they found no saddle.
 4. **A path to a neighbouring minimum**, if still none
    (:func:`ase_maud.saddles.attempts.path_to_neighbour`): the points where the
    attempts stopped (a failed path: its band's highest image), the highest
@@ -245,14 +250,16 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
         counted in :attr:`SaddleSearch.work`).
     partner : Atoms or None, default None
         A second minimum of the same scene (a dome's mirror image,
-        :func:`~ase_maud.saddles.between_minima.mirrored`, say): if the
-        attempts found no saddle, a last one joins the two by a band of
-        images (:func:`~ase_maud.saddles.between_minima.saddle_between`);
-        if that finds none either, a minimum next to this one is looked for
-        where the attempts stopped, and joined (module docstring, 4).
+        :func:`~ase_maud.saddles.between_minima.mirrored`, say): an attempt
+        joins the two by a band of images
+        (:func:`~ase_maud.saddles.between_minima.saddle_between`), the first
+        one where ``wanted`` is given, else the last one if the others found
+        no saddle; if no attempt finds one, a minimum next to this one is
+        looked for where the attempts stopped, and joined (module docstring,
+        3 and 4).
     mirror : bool or None, default None
         Take as partner the mirror image of ``minimum`` through the plane of
-        its fixed points (relaxed only if the attempts found nothing); None:
+        its fixed points (relaxed only when its path is taken); None:
         wherever no ``partner`` is given, the fixed points span a plane and
         the image is another configuration (a net sagging out of the plane
         of its supports); False: never.
@@ -297,7 +304,7 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
         raise ValueError('give a partner or mirror=True, not both')
     if mirror or (mirror is None and partner is None):
         partner = _mirror_image(minimum, distance_atol, required=bool(mirror))
-        mirror = partner is not None   # relaxed only if the attempts find nothing
+        mirror = partner is not None   # relaxed only when its path is taken
     found = SaddleSearch(force_call_cpu_s=force_call_cpu(minimum))
     if point is None:
         point = classify(minimum, ftol=np.inf, work=found.work)
@@ -329,8 +336,16 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
                                and (connected is None or connected(saddle))))
         return sum(judged)
 
+    def path() -> None:
+        merge([path_to_partner(minimum, partner, fmax, steps if mirror else None, distance_atol)])
+
+    path_first = partner is not None and wanted is not None   # module docstring, 3
+    if path_first:
+        path()
     empty = 0   # rounds in a row that found no new saddle that counts
     for turn in itertools.count():   # rounds: modes [turn modes, (turn + 1) modes), ...
+        if enough():   # the path found them
+            break
         before = 0 if window is None else below()
         share = None if budget is None else max(1, round(CLIMB_SHARE * budget))
         climbs = [(minimum, sign * point.modes[k], Attempt('mode', k, sign), fmax, steps,
@@ -354,8 +369,8 @@ def search_saddles(minimum: Atoms, modes: int = 1, local: int = 8, wanted: int |
         empty = 0 if window is None or below() > before else empty + 1
         if window is None or enough() or used_up or empty >= empty_rounds:
             break
-    if partner is not None and not found.saddles:
-        merge([path_to_partner(minimum, partner, fmax, steps if mirror else None, distance_atol)])
+    if partner is not None and not path_first and not found.saddles:
+        path()
     ends = sorted((a for a in found.attempts if a.end is not None), key=lambda a: -a.energy)
     if ends and not found.saddles:   # the highest first: the likeliest past a ridge
         tried = () if partner is None else (partner.get_potential_energy(),)

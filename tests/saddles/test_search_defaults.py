@@ -36,6 +36,26 @@ def test_the_default_call_finds_a_corner_net_s_saddle_by_its_mirror(seed):
     assert not none.saddles and not none.attempts   # what the default adds
 
 
+@pytest.mark.parametrize('seed', [14, 15])
+def test_a_search_for_a_first_saddle_takes_the_mirror_path_first(seed):
+    """With ``wanted``, the path to the mirror image is the first attempt and,
+    finding a verified saddle, the only one; asked for every attempt, the
+    climbs and activations come first and the path only if they found none."""
+    net = corner_net(6, seed)
+    assert Maud(net, logfile=None).run(fmax=1e-8, steps=5000)
+    first = search_saddles(net, modes=1, local=1, wanted=1, seed=seed)
+    assert [a.kind for a in first.attempts] == ['path'] and first.rounds == 0
+    point = classify(fresh_copy(first.saddles[0]), ftol=1e-6)
+    assert point.verdict == 'saddle' and point.index == 1
+    every = search_saddles(net, modes=1, local=1, seed=seed)
+    kinds = [a.kind for a in every.attempts]
+    assert kinds[:3] == ['mode', 'mode', 'local']
+    if 'path' in kinds:
+        assert not any(a.outcome == 'saddle' for a in every.attempts[:kinds.index('path')])
+    else:
+        assert every.saddles
+
+
 def test_a_flat_scene_gets_no_mirror_attempt_by_default():
     """A 2D scene (every point on one plane with its held points) is its own
     mirror image: the default makes no path attempt."""

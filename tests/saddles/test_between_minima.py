@@ -7,6 +7,8 @@ import warnings
 
 import numpy as np
 import pytest
+from ase import Atoms
+from ase.calculators.singlepoint import SinglePointCalculator
 from ase.mep import NEB
 from ase.optimize import FIRE
 
@@ -14,7 +16,7 @@ from ase_maud import Maud
 from ase_maud.analysis.stationary import classify, same_point
 from ase_maud.counting import fresh_copy
 from ase_maud.errors import MaudError
-from ase_maud.saddles.between_minima import mirrored, saddle_between
+from ase_maud.saddles.between_minima import _candidates, mirrored, saddle_between
 from ase_maud.saddles.landscape import landscape
 from ase_maud.saddles.search import search_saddles
 from ase_maud.scenes.catalogue import build
@@ -216,7 +218,7 @@ def test_a_refined_saddle_that_is_not_the_bands_is_kept_apart_and_taken_by_a_sea
     first, second = dome(6, 5)
     found = saddle_between(first, second)
     assert found.saddle is None and found.outcome
-    assert 1 <= len(found.elsewhere) <= transition.RETRIES + 1
+    assert 1 <= len(found.elsewhere) <= 2 * (transition.RETRIES + 1)   # two candidates a try
     for saddle in found.elsewhere:
         assert classify(fresh_copy(saddle)).index == 1
     search = search_saddles(first, modes=0, local=0, partner=second)
@@ -250,14 +252,58 @@ def test_any_saddle_stops_at_the_first_saddle_reached_elsewhere(seed, monkeypatc
     first, second = dome(4, seed)
     refined = []
 
-    def stand_in(band, fmax, steps, found):
-        refined.append(len(band))
+    def stand_in(band, image, fmax, steps, found):
+        refined.append((image, tuple(between._candidates(band))))
         return fresh_copy(second), ''
 
     monkeypatch.setattr(between, '_refine', stand_in)
     monkeypatch.setattr(between, '_apart', lambda band, saddle, first: 'apart')
-    for any_saddle, refinements in ((False, between.RETRIES + 1), (True, 1)):
+    for any_saddle, retries in ((False, between.RETRIES + 1), (True, 1)):
         refined.clear()
         found = saddle_between(first, second, any_saddle=any_saddle)
-        assert len(refined) == refinements
-        assert found.saddle is None and len(found.elsewhere) == refinements
+        images = [image for image, _ in refined]
+        expected, at = [], 0   # each retry refines the candidates of its band in turn
+        for _ in range(retries):
+            candidates = list(refined[at][1])
+            expected += candidates[:1] if any_saddle else candidates
+            at = len(expected)
+        assert images == expected
+        assert found.saddle is None and len(found.elsewhere) == len(images)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_failed_refinement_is_followed_by_one_from_the_higher_neighbour(seed, monkeypatch):
+    """The refinement from the highest image fails (a stand-in), the one from its
+    higher neighbour reaches the band's saddle (the stand-in's answer, agreeing):
+    the transition's saddle, after those two refinements and no more relaxation."""
+    import ase_maud.saddles.between_minima as between
+    first, second = dome(4, seed)
+    refined = []
+
+    def stand_in(band, image, fmax, steps, found):
+        refined.append(image)
+        energies = [im.get_potential_energy() for im in band]
+        assert energies[image] == (max(energies[1:-1]) if len(refined) == 1 else
+                                   max(energies[refined[0] - 1], energies[refined[0] + 1]))
+        return (None, 'did not converge') if len(refined) == 1 else (fresh_copy(band[image]), '')
+
+    monkeypatch.setattr(between, '_refine', stand_in)
+    monkeypatch.setattr(between, '_apart', lambda band, saddle, first: '')
+    found = saddle_between(first, second)
+    assert len(refined) == 2 and abs(refined[1] - refined[0]) == 1
+    assert found.saddle is not None and not found.outcome
+
+
+def test_the_candidates_are_the_highest_image_then_its_higher_moving_neighbour():
+    def band(energies):
+        images = []
+        for energy in energies:
+            image = Atoms('H', positions=[[0.0, 0.0, 0.0]])
+            image.calc = SinglePointCalculator(image, energy=energy)
+            images.append(image)
+        return images
+
+    assert _candidates(band([0, 1, 5, 3, 4, 2])) == [2, 3]
+    assert _candidates(band([0, 5, 1, 0])) == [1, 2]
+    assert _candidates(band([9, 5, 1, 0])) == [1]   # the higher side is an end
+    assert _candidates(band([0, 2, 7, 9])) == [2]

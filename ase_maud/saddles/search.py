@@ -53,9 +53,9 @@ that the next will not.
    barrier), the path stops there and that saddle is the attempt's. A search
    for the first ``wanted`` saddles takes the path **before** 1 and 2: on
    nets and domes held in a plane it is the attempt that finds a saddle, and
-   the climbs and activations before it cost a third of such a search's CPU
-   for nothing (docs/performance.md). Otherwise (every attempt, a window's
-   rounds) it comes after them, if they found no saddle.
+   climbs and activations before it would spend their CPU for nothing (the
+   saddle families of docs/performance.md). Otherwise (every attempt, a
+   window's rounds) it comes after them, if they found no saddle.
 4. **A path to a neighbouring minimum**, if still none
    (:func:`ase_maud.saddles.attempts.path_to_neighbour`): the points where the
    attempts stopped (a failed path: its band's highest image), the highest

@@ -395,8 +395,7 @@ def _apart(band: list[Atoms], saddle: Atoms, first: Atoms) -> str:
 def _candidates(band: list[Atoms]) -> list[int]:
     """The moving images a refinement starts from, in turn: the highest, then
     the higher of its neighbours if that one moves (the band's barrier lies
-    between the two; on a 432-point net the refinement from the highest image
-    failed and the one from its neighbour reached a saddle in 66 steps)."""
+    between the two)."""
     energies = [image.get_potential_energy() for image in band]
     top = 1 + int(np.argmax(energies[1:-1]))
     side = max((top - 1, top + 1), key=lambda k: energies[k])

@@ -5,7 +5,8 @@ subprocess (so that the peak resident memory is that measurement's own):
 
 - seconds per call of every backend (``numba`` direct sum, ``fmm`` at the
   precision ``tol`` asks for, and ``auto``), energy + forces (E+F) and with
-  the nodal blocks (E+F+K), wall and process CPU, and peak memory;
+  the nodal blocks (E+F+K), wall and process CPU, and peak memory (of the
+  process and its FMM workers: :class:`TreeMemory`);
 - calls, wall and CPU seconds and peak memory to relax the net to ``--fmax``
   (in ``Q a``; ``--coarse-fmax`` from ``--coarse-from`` points on) with Maud
   (default model, ``backend='auto'``) for nets up to ``--relax-up-to``
@@ -32,6 +33,7 @@ import os
 import resource
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -40,9 +42,45 @@ RELAX_FIELDS = ('N', 'optimiser', 'converged', 'calls', 'wall_s', 'cpu_s',
                 'peak_mb', 'energy', 'fmax', 'fmax_asked')
 
 
-def _peak_mb() -> float:
-    """Peak resident memory of this process so far (MB)."""
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+class TreeMemory:
+    """The peak memory of this process and its children (the FMM's worker
+    processes) while it runs, in MB: their summed proportional set size
+    (``Pss`` of ``/proc/<pid>/smaps_rollup``: pages a forked worker still
+    shares with this process count once), sampled every ``interval`` seconds
+    by a thread; at least this process's own peak resident memory (where
+    ``/proc`` has no such file, that alone)."""
+
+    def __init__(self, interval: float = 0.25):
+        self.interval, self.peak_kb = interval, 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._sample, daemon=True)
+        self._thread.start()
+
+    @staticmethod
+    def _pss_kb(pid: int) -> int:
+        try:
+            with open(f'/proc/{pid}/smaps_rollup') as handle:
+                return next((int(line.split()[1]) for line in handle
+                             if line.startswith('Pss:')), 0)
+        except OSError:   # no such process (any more), or no /proc
+            return 0
+
+    def _sample(self) -> None:
+        me = os.getpid()
+        while not self._stop.wait(self.interval):
+            try:
+                with open(f'/proc/{me}/task/{me}/children') as handle:
+                    pids = [me, *map(int, handle.read().split())]
+            except OSError:
+                pids = [me]
+            self.peak_kb = max(self.peak_kb, sum(map(self._pss_kb, pids)))
+
+    def peak_mb(self) -> float:
+        """Stop sampling; the peak (MB)."""
+        self._stop.set()
+        self._thread.join()
+        own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        return max(self.peak_kb, own) / 1024.0
 
 
 def one_call(side: int, backend: str, blocks: bool, tol: float) -> dict:
@@ -62,11 +100,12 @@ def one_call(side: int, backend: str, blocks: bool, tol: float) -> dict:
         warm.calc.get_property('stiffness' if blocks else 'forces', warm)
     atoms = build('hanging_net', side)
     atoms.calc.set(**kwargs)
+    memory = TreeMemory()
     wall, cpu = time.perf_counter(), cpu_seconds()
     atoms.calc.get_property('stiffness' if blocks else 'forces', atoms)
     wall, cpu = time.perf_counter() - wall, cpu_seconds() - cpu
     return {'N': len(atoms), 'backend': backend, 'blocks': blocks,
-            'wall_s': wall, 'cpu_s': cpu, 'peak_mb': _peak_mb(),
+            'wall_s': wall, 'cpu_s': cpu, 'peak_mb': memory.peak_mb(),
             'fmm_eps': kwargs.get('fmm_eps', '')}
 
 
@@ -84,12 +123,14 @@ def one_relax(side: int, optimiser: str, fmax: float, steps: int) -> dict:
         warm = build('hanging_net', warm_side)
         OPTIMIZERS[optimiser](warm).run(fmax=fmax, steps=20)
     atoms = build('hanging_net', side)
+    memory = TreeMemory()
     wall = time.perf_counter()
     calls, cpu, done = calls_and_cpu(atoms, OPTIMIZERS[optimiser](atoms), fmax, steps)
     wall = time.perf_counter() - wall
+    peak = memory.peak_mb()
     fmax_end = float(np.linalg.norm(atoms.get_forces(), axis=1).max())
     return {'N': len(atoms), 'optimiser': optimiser, 'converged': done,
-            'calls': calls, 'wall_s': wall, 'cpu_s': cpu, 'peak_mb': _peak_mb(),
+            'calls': calls, 'wall_s': wall, 'cpu_s': cpu, 'peak_mb': peak,
             'energy': float(atoms.get_potential_energy()), 'fmax': fmax_end,
             'fmax_asked': fmax}
 

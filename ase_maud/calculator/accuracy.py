@@ -6,9 +6,12 @@ exact direct sum for a fine one) is :class:`ToleranceAware`. An optimiser
 asks it, before each evaluation, for the force error it needs then
 (:func:`ask`): :data:`ACCURACY_FRACTION` of the larger of the requested
 ``fmax`` and the current one, at most :data:`MAX_RUN_TOL` of the largest
-repulsive force: coarse, cheap sums far from the answer, fine ones near it,
-and never a stall on evaluation noise. The energies it then compares carry
-the relative error :func:`noise`. Other calculators are left alone.
+repulsive force (that coarsest at a run's first call, before any force is
+known): coarse, cheap sums far from the answer, fine ones near it, and never
+a stall on evaluation noise. Forces below ``fmax`` on sums too coarse to say
+so (:func:`settled`) are computed again, finely, before a run stops. The
+energies it then compares carry the relative error :func:`noise`. Other
+calculators are left alone.
 """
 
 from __future__ import annotations
@@ -56,11 +59,22 @@ def is_aware(calc: Any) -> bool:
 
 def ask(calc: Any, fmax: float, fmax_now: float) -> None:
     """Set a :class:`ToleranceAware` calculator's tolerance for the next
-    evaluation (module docstring); leave any other alone."""
-    if not is_aware(calc) or not calc.last_force_scale:
+    evaluation (module docstring; :data:`MAX_RUN_TOL` while no call has
+    measured its force scale); leave any other alone."""
+    if not is_aware(calc):
         return
-    wanted = ACCURACY_FRACTION * max(fmax, fmax_now) / calc.last_force_scale
+    scale = calc.last_force_scale
+    wanted = ACCURACY_FRACTION * max(fmax, fmax_now) / scale if scale else MAX_RUN_TOL
     calc.set_tolerance(min(wanted, MAX_RUN_TOL))
+
+
+def settled(calc: Any, fmax: float) -> bool:
+    """Whether the forces ``calc`` holds are fine enough to judge against
+    ``fmax``: their promised error at most :data:`ACCURACY_FRACTION` of it
+    (always, for a calculator that is not :class:`ToleranceAware`)."""
+    if not is_aware(calc) or not calc.last_force_scale:
+        return True
+    return (calc.last_tolerance or 0.0) * calc.last_force_scale <= ACCURACY_FRACTION * fmax
 
 
 def noise(calc: Any) -> float:

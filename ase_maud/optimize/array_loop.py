@@ -113,6 +113,11 @@ def relax(atoms: Atoms, model: StiffnessModel, strategy: Strategy, state: MaudSt
     energy, forces = held_results()
     fmax_now = float(lengths(forces).max())
     while True:
+        if fmax_now < fmax and not accuracy.settled(calc, fmax):
+            # below fmax on sums too coarse to say so: the same positions, finely
+            accuracy.ask(calc, fmax, fmax_now)
+            energy, forces = evaluate(True)
+            fmax_now = float(lengths(forces).max())
         yield energy, fmax_now
         x = next_positions(strategy, state, monitor, step(), positions.copy(), energy,
                            forces, accuracy.noise(calc), local_at, no_step)

@@ -217,12 +217,14 @@ class Maud(Optimizer):
         return (self._subset.current() if self._subset is not None
                 else getattr(getattr(self, 'optimizable', None), 'atoms', None))
 
-    def _evaluate(self) -> None:
-        """One call: energy, forces and what the model needs, at the accuracy needed now."""
+    def _evaluate(self, ask: bool = True) -> None:
+        """One call: energy, forces and what the model needs, at the accuracy
+        needed now (``ask=False``: at the calculator's own)."""
         atoms = self._atoms()
         if atoms is None:
             return
-        accuracy.ask(atoms.calc, self.fmax, self.fmax_now)
+        if ask:
+            accuracy.ask(atoms.calc, self.fmax, self.fmax_now)
         if (prop := self.model.needs(atoms)) is not None:
             atoms.calc.get_property(prop, atoms)
             self.work.hessians += prop == 'hessian'
@@ -295,7 +297,9 @@ class Maud(Optimizer):
         MaudError, RestartFileError
             As :meth:`run`, from the step where they arise.
         """
-        steps = self._preflight(fmax, steps)   # bad arguments refused here, not when iterated
+        # bad arguments refused here, not when iterated; the first call at the
+        # calculator's own accuracy (a generator never iterated restores nothing)
+        steps = self._preflight(fmax, steps, ask=False)
         return self._locked(super().irun(self.fmax, steps))
 
     def _locked(self, steps: Iterator[bool]) -> Iterator[bool]:
@@ -341,22 +345,32 @@ class Maud(Optimizer):
         RestartFileError
             The restart file cannot be read or is of another run.
         """
-        steps = self._preflight(fmax, steps)
-        with self._lock, accuracy.kept(getattr(self._atoms(), 'calc', None)):
-            try:
-                converged = (arrays.run(self, steps, self._no_step, self._stop)
-                             if arrays.applies(self)
-                             else super().run(self.fmax, steps))
-            finally:   # the atoms moved outside the optimizable
-                self.optimizable.held = None
-                self._handoff = Handoff.of(self.optimizable.get_x(), self._atoms())
+        with accuracy.kept(getattr(self._atoms(), 'calc', None)):
+            steps = self._preflight(fmax, steps, ask=True)   # the first call: coarse
+            with self._lock:
+                try:
+                    converged = (arrays.run(self, steps, self._no_step, self._stop)
+                                 if arrays.applies(self)
+                                 else super().run(self.fmax, steps))
+                finally:   # the atoms moved outside the optimizable
+                    self.optimizable.held = None
+                    self._handoff = Handoff.of(self.optimizable.get_x(), self._atoms())
         if converged:
             self._verify()
         return converged
 
     def gradient_converged(self, gradient: np.ndarray) -> bool:
-        """ASE's test (``fmax``), and a saddle search's: its index reached."""
-        return super().gradient_converged(gradient) and self.strategy.index_reached(
+        """ASE's test (``fmax``; on forces fine enough to say so, computed
+        again if they are not: :func:`.accuracy.settled`), and a saddle
+        search's: its index reached."""
+        if not super().gradient_converged(gradient):
+            return False
+        calc = getattr(self._atoms(), 'calc', None)
+        if not accuracy.settled(calc, self.fmax):
+            accuracy.ask(calc, self.fmax, 0.0)
+            if not super().gradient_converged(self.optimizable.get_gradient()):
+                return False
+        return self.strategy.index_reached(
             self.state, lambda: self._local_at(self.optimizable.get_x().reshape(-1, 3)))
 
     def _verify(self) -> None:
@@ -370,15 +384,16 @@ class Maud(Optimizer):
             if error is not None:
                 self._stop(error)
 
-    def _preflight(self, fmax: float, steps: int) -> int:
+    def _preflight(self, fmax: float, steps: int, ask: bool) -> int:
         """Before the first step: arguments checked (``steps`` returned), no proof of
-        no equilibrium, held results dropped, a changed scene afresh, an evaluation."""
+        no equilibrium, held results dropped, a changed scene afresh, an evaluation
+        (at the accuracy the run asks if ``ask``, else the calculator's own)."""
         self.fmax, steps = check('fmax', fmax, 'run_fmax'), check('steps', steps)
         self.optimizable.held = None
         self._afresh_if_changed()
         if (error := no_equilibrium(self._atoms(), self.target)) is not None:
             self._stop(error)
-        self._evaluate()
+        self._evaluate(ask)
         return steps
 
     def _stop(self, error: MaudError) -> None:

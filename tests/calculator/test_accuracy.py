@@ -1,6 +1,8 @@
 """Accuracy follows the run: Maud asks a tol-aware calculator for coarse
-sums far from the answer and fine ones near it, and still reaches fmax
-(checked with the exact direct sum)."""
+sums far from the answer (the coarsest at its first call) and fine ones near
+it, and still reaches fmax (checked with the exact direct sum); forces below
+fmax on sums too coarse to say so are computed again before it stops, and
+the calculator's own tol is back after the run."""
 
 import numpy as np
 import pytest
@@ -8,7 +10,8 @@ from ase.calculators.emt import EMT
 from ase.cluster import Icosahedron
 
 from ase_maud import Maud
-from ase_maud.calculator.accuracy import ACCURACY_FRACTION
+from ase_maud.calculator import MaudCalculator
+from ase_maud.calculator.accuracy import ACCURACY_FRACTION, MAX_RUN_TOL
 from ase_maud.physics.dofs import free_dofs
 from ase_maud.scenes.catalogue import build
 
@@ -36,7 +39,8 @@ def test_maud_reaches_fmax_on_the_fmm_path(seed):
     with Maud(atoms, logfile=None) as opt:
         assert opt.run(fmax=1e-6, steps=3000)
     assert {backend for backend, _, _ in seen} == {'fmm'}
-    tolerances = [tol for _, tol, _ in seen[1:]]            # the first is the default
+    tolerances = [tol for _, tol, _ in seen]
+    assert tolerances[0] == MAX_RUN_TOL                  # the first: the coarsest
     assert tolerances[0] > 100 * tolerances[-1]          # coarse early, fine late
     # The answer, checked with the exact direct sum.
     exact = atoms.copy()
@@ -82,3 +86,73 @@ def test_calculators_without_tol_are_left_alone():
     with Maud(atoms, logfile=None) as opt:
         assert opt.run(fmax=1e-3, steps=500)
     assert dict(atoms.calc.parameters) == before
+
+
+class CoarseHidesForces(MaudCalculator):
+    """A MaudCalculator that keeps to the letter of its promise: at a ``tol``
+    of at least ``MAX_RUN_TOL`` it says its forces are that coarse and
+    shrinks each toward zero by up to ``tol`` times the force scale (zero
+    where smaller), an error within the promise."""
+
+    def calculate(self, *args, **kwargs):
+        super().calculate(*args, **kwargs)
+        tol = self.parameters['tol']
+        if tol >= MAX_RUN_TOL:
+            self.last_tolerance = tol
+            forces = self.results['forces']
+            size = np.linalg.norm(forces, axis=1, keepdims=True)
+            hidden = tol * self.last_force_scale
+            forces *= np.clip(size - hidden, 0.0, None) / np.where(size > 0, size, 1.0)
+
+
+def _near_minimum(seed):
+    """A hanging net relaxed to forces below what a coarse call can see, on
+    a :class:`CoarseHidesForces`, and the exact largest force there."""
+    atoms = build('hanging_net', 8, seed=seed)
+    with Maud(atoms, logfile=None) as opt:
+        assert opt.run(fmax=1e-3, steps=500)
+    atoms.calc = CoarseHidesForces(**atoms.calc.parameters)
+    return atoms
+
+
+def _exact_fmax(atoms):
+    """The largest force on a free point, by the exact direct sum."""
+    exact = atoms.copy()
+    exact.calc = MaudCalculator(**{**atoms.calc.parameters, 'backend': 'numba'})
+    return np.linalg.norm(exact.get_forces(), axis=1).max()   # held points' rows are 0
+
+
+@pytest.mark.parametrize('watched', [False, True])
+@pytest.mark.parametrize('seed', [3, 4])
+def test_a_coarse_call_below_fmax_is_computed_again(seed, watched):
+    """Forces a coarse call shows below fmax are not taken as converged: the
+    run computes them again finely, goes on, and ends below fmax by the exact
+    sum (on arrays, and in ASE's loop at a calculator tol as coarse)."""
+    atoms = _near_minimum(seed)
+    own = atoms.calc.parameters['tol']
+    assert 1e-6 < _exact_fmax(atoms) < 1e-3
+    atoms.calc.set(tol=MAX_RUN_TOL)
+    assert np.linalg.norm(atoms.get_forces(), axis=1).max() == 0.0   # all hidden, as promised
+    if not watched:   # (ASE's loop starts at the calculator's own tol: leave it coarse)
+        atoms.calc.set(tol=own)
+    atoms.calc.reset()
+    with Maud(atoms, logfile=None) as opt:
+        if watched:
+            opt.attach(lambda: None)
+        assert opt.run(fmax=1e-6, steps=500)
+        assert opt.nsteps > 0
+    assert _exact_fmax(atoms) < 1e-6
+
+
+@pytest.mark.parametrize('watched', [False, True])
+def test_the_calculators_tol_is_back_after_a_run(watched):
+    """A run asks its calculator for other tols; after it, the calculator's
+    own is back, also when the calculator was called before the run."""
+    atoms = build('hanging_net', 8, seed=5)
+    atoms.get_forces()                 # a force scale known before the run
+    own = atoms.calc.parameters['tol']
+    with Maud(atoms, logfile=None) as opt:
+        if watched:
+            opt.attach(lambda: None)
+        assert opt.run(fmax=1e-4, steps=500)
+    assert atoms.calc.parameters['tol'] == own

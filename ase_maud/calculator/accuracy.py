@@ -9,7 +9,8 @@ asks it, before each evaluation, for the force error it needs then
 repulsive force (that coarsest at a run's first call, before any force is
 known): coarse, cheap sums far from the answer, fine ones near it, and never
 a stall on evaluation noise. Forces below ``fmax`` on sums too coarse to say
-so (:func:`settled`) are computed again, finely, before a run stops. The
+so (:func:`settled`: the largest plus the promised error is not) are
+computed again, at the accuracy ``fmax`` asks, before a run stops. The
 energies it then compares carry the relative error :func:`noise`. Other
 calculators are left alone.
 """
@@ -68,13 +69,13 @@ def ask(calc: Any, fmax: float, fmax_now: float) -> None:
     calc.set_tolerance(min(wanted, MAX_RUN_TOL))
 
 
-def settled(calc: Any, fmax: float) -> bool:
-    """Whether the forces ``calc`` holds are fine enough to judge against
-    ``fmax``: their promised error at most :data:`ACCURACY_FRACTION` of it
-    (always, for a calculator that is not :class:`ToleranceAware`)."""
+def settled(calc: Any, fmax: float, fmax_now: float) -> bool:
+    """Whether the forces ``calc`` holds, whose largest is ``fmax_now``, prove
+    the largest force below ``fmax``: ``fmax_now`` plus their promised error
+    is (always, for a calculator that is not :class:`ToleranceAware`)."""
     if not is_aware(calc) or not calc.last_force_scale:
-        return True
-    return (calc.last_tolerance or 0.0) * calc.last_force_scale <= ACCURACY_FRACTION * fmax
+        return fmax_now < fmax
+    return fmax_now + (calc.last_tolerance or 0.0) * calc.last_force_scale < fmax
 
 
 def noise(calc: Any) -> float:

@@ -113,7 +113,7 @@ def relax(atoms: Atoms, model: StiffnessModel, strategy: Strategy, state: MaudSt
     energy, forces = held_results()
     fmax_now = float(lengths(forces).max())
     while True:
-        if fmax_now < fmax and not accuracy.settled(calc, fmax):
+        if fmax_now < fmax and not accuracy.settled(calc, fmax, fmax_now):
             # below fmax on sums too coarse to say so: the same positions, finely
             accuracy.ask(calc, fmax, fmax_now)
             energy, forces = evaluate(True)

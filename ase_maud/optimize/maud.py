@@ -366,7 +366,8 @@ class Maud(Optimizer):
         if not super().gradient_converged(gradient):
             return False
         calc = getattr(self._atoms(), 'calc', None)
-        if not accuracy.settled(calc, self.fmax):
+        if not accuracy.settled(calc, self.fmax, float(np.linalg.norm(
+                gradient.reshape(-1, 3), axis=1).max())):
             accuracy.ask(calc, self.fmax, 0.0)
             if not super().gradient_converged(self.optimizable.get_gradient()):
                 return False

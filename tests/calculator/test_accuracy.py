@@ -11,7 +11,7 @@ from ase.cluster import Icosahedron
 
 from ase_maud import Maud
 from ase_maud.calculator import MaudCalculator
-from ase_maud.calculator.accuracy import ACCURACY_FRACTION, MAX_RUN_TOL
+from ase_maud.calculator.accuracy import ACCURACY_FRACTION, MAX_RUN_TOL, settled
 from ase_maud.physics.dofs import free_dofs
 from ase_maud.scenes.catalogue import build
 
@@ -156,3 +156,20 @@ def test_the_calculators_tol_is_back_after_a_run(watched):
             opt.attach(lambda: None)
         assert opt.run(fmax=1e-4, steps=500)
     assert atoms.calc.parameters['tol'] == own
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_settled_is_the_largest_force_plus_the_promised_error(seed):
+    """Forces prove fmax when the largest shown plus the promised error (the
+    last tol times the force scale) is below it; a calculator without a tol
+    is taken at its word."""
+    rng = np.random.default_rng(seed)
+    calc = MaudCalculator(springs=[[0, 1]])
+    fmax, scale = rng.uniform(1e-4, 1.0), rng.uniform(1.0, 100.0)
+    calc.last_force_scale, shown = scale, rng.uniform(0.1, 0.9) * fmax
+    for error, proved in ((0.99, True), (1.01, False)):
+        calc.last_tolerance = error * (fmax - shown) / scale
+        assert settled(calc, fmax, shown) is proved
+    calc.last_tolerance = 0.0
+    assert settled(calc, fmax, shown) and not settled(calc, fmax, 1.01 * fmax)
+    assert settled(EMT(), fmax, shown) and not settled(EMT(), fmax, 1.01 * fmax)

@@ -6,9 +6,9 @@ exact direct sum for a fine one) is :class:`ToleranceAware`. An optimiser
 asks it, before each evaluation, for the force error it needs then
 (:func:`ask`): :data:`ACCURACY_FRACTION` of the larger of the requested
 ``fmax`` and the current one, at most :data:`MAX_RUN_TOL` of the largest
-repulsive force (that coarsest at a run's first call, before any force is
-known): coarse, cheap sums far from the answer, fine ones near it, and never
-a stall on evaluation noise. Forces below ``fmax`` on sums too coarse to say
+repulsive force (a run's first call, before any force is known, at the
+calculator's own ``tol``): coarse, cheap sums far from the answer, fine ones
+near it, and never a stall on evaluation noise. Forces below ``fmax`` on sums too coarse to say
 so (:func:`settled`: the largest plus the promised error is not) are
 computed again, at the accuracy ``fmax`` asks, before a run stops. The
 energies it then compares carry the relative error :func:`noise`. Other
@@ -60,12 +60,11 @@ def is_aware(calc: Any) -> bool:
 
 def ask(calc: Any, fmax: float, fmax_now: float) -> None:
     """Set a :class:`ToleranceAware` calculator's tolerance for the next
-    evaluation (module docstring; :data:`MAX_RUN_TOL` while no call has
-    measured its force scale); leave any other alone."""
-    if not is_aware(calc):
+    evaluation (module docstring); leave any other alone, and this one too
+    while no call has measured its force scale (its own ``tol`` then)."""
+    if not is_aware(calc) or not calc.last_force_scale:
         return
-    scale = calc.last_force_scale
-    wanted = ACCURACY_FRACTION * max(fmax, fmax_now) / scale if scale else MAX_RUN_TOL
+    wanted = ACCURACY_FRACTION * max(fmax, fmax_now) / calc.last_force_scale
     calc.set_tolerance(min(wanted, MAX_RUN_TOL))
 
 

@@ -298,7 +298,8 @@ class Maud(Optimizer):
             As :meth:`run`, from the step where they arise.
         """
         # bad arguments refused here, not when iterated; the first call at the
-        # calculator's own accuracy (a generator never iterated restores nothing)
+        # calculator's own accuracy (a generator never iterated would not put back
+        # a tol asked here)
         steps = self._preflight(fmax, steps, ask=False)
         return self._locked(super().irun(self.fmax, steps))
 
@@ -346,7 +347,7 @@ class Maud(Optimizer):
             The restart file cannot be read or is of another run.
         """
         with accuracy.kept(getattr(self._atoms(), 'calc', None)):
-            steps = self._preflight(fmax, steps, ask=True)   # the first call: coarse
+            steps = self._preflight(fmax, steps, ask=True)
             with self._lock:
                 try:
                     converged = (arrays.run(self, steps, self._no_step, self._stop)

@@ -1,8 +1,8 @@
 """Accuracy follows the run: Maud asks a tol-aware calculator for coarse
-sums far from the answer (the coarsest at its first call) and fine ones near
-it, and still reaches fmax (checked with the exact direct sum); forces below
-fmax on sums too coarse to say so are computed again before it stops, and
-the calculator's own tol is back after the run."""
+sums far from the answer and fine ones near it, and still reaches fmax
+(checked with the exact direct sum); forces below fmax on sums too coarse to
+say so are computed again before it stops, and the calculator's own tol is
+back after the run."""
 
 import numpy as np
 import pytest
@@ -39,8 +39,7 @@ def test_maud_reaches_fmax_on_the_fmm_path(seed):
     with Maud(atoms, logfile=None) as opt:
         assert opt.run(fmax=1e-6, steps=3000)
     assert {backend for backend, _, _ in seen} == {'fmm'}
-    tolerances = [tol for _, tol, _ in seen]
-    assert tolerances[0] == MAX_RUN_TOL                  # the first: the coarsest
+    tolerances = [tol for _, tol, _ in seen[1:]]            # the first is the default
     assert tolerances[0] > 100 * tolerances[-1]          # coarse early, fine late
     # The answer, checked with the exact direct sum.
     exact = atoms.copy()
@@ -127,14 +126,11 @@ def _exact_fmax(atoms):
 def test_a_coarse_call_below_fmax_is_computed_again(seed, watched):
     """Forces a coarse call shows below fmax are not taken as converged: the
     run computes them again finely, goes on, and ends below fmax by the exact
-    sum (on arrays, and in ASE's loop at a calculator tol as coarse)."""
+    sum (on arrays and in ASE's loop; the calculator's own tol is coarse)."""
     atoms = _near_minimum(seed)
-    own = atoms.calc.parameters['tol']
     assert 1e-6 < _exact_fmax(atoms) < 1e-3
-    atoms.calc.set(tol=MAX_RUN_TOL)
+    atoms.calc.set(tol=MAX_RUN_TOL)   # a run's first call is at the calculator's own tol
     assert np.linalg.norm(atoms.get_forces(), axis=1).max() == 0.0   # all hidden, as promised
-    if not watched:   # (ASE's loop starts at the calculator's own tol: leave it coarse)
-        atoms.calc.set(tol=own)
     atoms.calc.reset()
     with Maud(atoms, logfile=None) as opt:
         if watched:

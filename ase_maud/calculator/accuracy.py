@@ -8,10 +8,10 @@ asks it, before each evaluation, for the force error it needs then
 ``fmax`` and the current one, at most :data:`MAX_RUN_TOL` of the largest
 repulsive force (a run's first call, before any force is known, at the
 calculator's own ``tol``): coarse, cheap sums far from the answer, fine ones
-near it, and never a stall on evaluation noise. Forces below ``fmax`` on sums too coarse to say
-so (:func:`settled`: the largest plus the promised error is not) are
-computed again, at the accuracy ``fmax`` asks, before a run stops. The
-energies it then compares carry the relative error :func:`noise`. Other
+near it, and never a stall on evaluation noise. Forces below ``fmax`` on sums
+too coarse to say so (:func:`settled`: the largest plus the promised error is
+not) are computed again, at the accuracy ``fmax`` asks, before a run stops.
+The energies it then compares carry the relative error :func:`noise`. Other
 calculators are left alone.
 """
 

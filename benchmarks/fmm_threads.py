@@ -16,6 +16,13 @@ eps whose worst error over every geometry, N, seed and property, times
 ``--safety``, is within the tolerance (FMM3D's time is not monotone in eps on
 sheets, so the choice is by time among those that qualify).
 
+Memory (``split_memory.csv``, ``--split-memory``): the ``fmm`` backend's
+call (E+F) with ``ASE_MAUD_FMM_WORKERS`` 1 and 2, each in a fresh process,
+its wall seconds and the peak memory of that process and its workers (their
+summed proportional set size, sampled every 0.1 s from this process, so a
+call that holds the GIL is sampled too): where splitting a call still pays
+(``fmm.POOL_MAX_POINTS``).
+
 Split (``split.csv``, ``--split-eps``): one process (``lfmm3d`` with all
 points) against two worker processes (fork), each with all sources and the
 targets of one half of space (split at the median of the longest axis),
@@ -34,6 +41,7 @@ import argparse
 import csv
 import multiprocessing
 import os
+import subprocess
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -224,6 +232,56 @@ def split(sizes, eps_list, repeats, geometries, writer):
                     print(row, flush=True)
 
 
+def _one_call(geometry, n, eps):
+    """In a fresh process: the backend's E+F call at ``fmm_eps = eps`` on
+    ``n`` points of ``geometry`` (workers started by a call of 3x10^4 points
+    first); prints its wall seconds."""
+    p = scene(geometry, n, 0)
+    fmm.evaluate(p[:30000], False, eps)
+    _, wall, _ = timed(fmm.evaluate, p, False, eps)
+    print(wall)
+
+
+def _tree_pss_mb(pid):
+    """The summed proportional set size of ``pid`` and its children, MB."""
+    try:
+        with open(f'/proc/{pid}/task/{pid}/children') as handle:
+            pids = [pid, *map(int, handle.read().split())]
+    except OSError:
+        return 0.0
+    total = 0
+    for each in pids:
+        try:
+            with open(f'/proc/{each}/smaps_rollup') as handle:
+                total += next((int(line.split()[1]) for line in handle
+                               if line.startswith('Pss:')), 0)
+        except OSError:
+            pass
+    return total / 1024
+
+
+def split_memory(sizes, eps_list, geometries, writer):
+    """Rows: wall seconds and peak memory of one call with one worker
+    process and with two, each call in a fresh process."""
+    for n in sizes:
+        for geometry in geometries:
+            for eps in eps_list:
+                for count in (2, 1):
+                    child = subprocess.Popen(
+                        [sys.executable, __file__, '--one-call', geometry, str(n), str(eps)],
+                        stdout=subprocess.PIPE, text=True,
+                        env={**os.environ, fmm.WORKERS_VARIABLE: str(count)})
+                    peak = 0.0
+                    while child.poll() is None:
+                        peak = max(peak, _tree_pss_mb(child.pid))
+                        time.sleep(0.1)
+                    row = {'geometry': geometry, 'n': n, 'fmm_eps': eps, 'workers': count,
+                           'wall_s': float(child.stdout.read()), 'peak_mb': round(peak),
+                           'load': ' '.join(open('/proc/loadavg').read().split()[:3])}
+                    writer.writerow(row)
+                    print(row, flush=True)
+
+
 def goal(geometry, n, tol, repeats):
     """Wall s of ``auto`` at ``tol``, of the numba direct sum and of the
     ``fmm`` backend at ``fmm_eps = tol`` (E+F) on ``n`` points of
@@ -257,7 +315,14 @@ def main():
                         help='N for auto at tol 1e-4 against the direct sum (0: skip)')
     parser.add_argument('--combine', type=Path, nargs='+',
                         help="earlier runs' errors.csv: their table only")
+    parser.add_argument('--split-memory', type=float, nargs='*', default=(),
+                        help='fmm_eps of the one-against-two memory rows')
+    parser.add_argument('--one-call', nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.one_call:
+        geometry, n, eps = args.one_call
+        _one_call(geometry, int(n), float(eps))
+        return
     if args.combine:
         rows = [{**row, **{k: float(row[k] or 0.0) for k in (
             'lib_eps', 'force_error', 'energy_error', 'block_error', 'cpu_s')}}
@@ -293,6 +358,14 @@ def main():
             writer.writeheader()
             split(args.sizes, args.split_eps, args.repeats, args.geometries, writer)
         lines.append('Split: see split.csv (wall and CPU seconds, one process '
+                     'against two).\n')
+    if args.split_memory:
+        with open(args.out / 'split_memory.csv', 'w', newline='') as file:
+            writer = csv.DictWriter(file, ['geometry', 'n', 'fmm_eps', 'workers', 'wall_s',
+                                           'peak_mb', 'load'])
+            writer.writeheader()
+            split_memory(args.sizes, args.split_memory, args.geometries, writer)
+        lines.append('Memory: see split_memory.csv (one call, one worker process '
                      'against two).\n')
     for geometry in args.geometries if args.goal else ():
         best, took = goal(geometry, args.goal, 1e-4, args.repeats)

@@ -41,12 +41,15 @@ Cost is O(N), with a fixed cost per call. The fmm3dpy wheel from PyPI is
 built without OpenMP and runs on one thread (a source build with OpenMP
 follows ``OMP_NUM_THREADS``; declare its threads in
 ``ASE_MAUD_FMM_THREADS``, :func:`library_threads`), and it holds Python's
-GIL. So a call of at least :data:`POOL_MIN_POINTS` points is split across
-:func:`workers` processes (default: the cores available, at most
-:data:`MAX_WORKERS`; ``ASE_MAUD_FMM_WORKERS`` sets it, 1 for none; one for a
-declared OpenMP build; Linux only, where they are forked): each gets every
-point as a source and the points of one slab along the longest axis as
-targets, and the sums are one call's to round-off. The workers start at the
+GIL. So a call of :data:`POOL_MIN_POINTS` to :data:`POOL_MAX_POINTS` points
+is split across :func:`workers` processes (default: the cores available, at
+most :data:`MAX_WORKERS`; ``ASE_MAUD_FMM_WORKERS`` sets it, 1 for none, and
+then splits larger calls too; one for a declared OpenMP build; Linux only,
+where they are forked; :func:`call_workers`): each gets every point as a
+source and the points of one slab along the longest axis as targets, and the
+sums are one call's to round-off. Each worker builds FMM3D's whole tree, so
+the split doubles the memory, and above :data:`POOL_MAX_POINTS` it buys
+little time, if any. The workers start at the
 first such call and stay (:func:`shutdown` stops them, as does the exit).
 :func:`threads`, a call's threads times the workers, is what the ``auto``
 backend's crossovers count; they are in docs/calculator.md. Below a few
@@ -111,6 +114,12 @@ MAX_WORKERS = 2
 #: Points from which a call is split across the workers (measured from
 #: 2x10^4: 1.3-1.6x on free cores by the workers' CPU).
 POOL_MIN_POINTS = 20000
+#: Most points a call is split across the workers by default: two processes
+#: took 0.69-0.91x one's wall at 3x10^5 points but 0.83-1.21x at 10^6 (a
+#: grid and a sagging sheet, eps 1e-4 and 1e-7), and every split call held
+#: twice the memory (10^6: 14.0 GB against 7.0); measured by
+#: ``benchmarks/fmm_threads.py --split-memory`` (docs/calculator.md).
+POOL_MAX_POINTS = 500_000
 
 
 def _positive(variable: str, default: str, meaning: str) -> int:
@@ -145,6 +154,17 @@ def workers() -> int:
     if library_threads() > 1 or not _can_fork():
         return 1
     return max(1, min(MAX_WORKERS, len(os.sched_getaffinity(0))))
+
+
+def call_workers(natoms: int) -> int:
+    """The processes a call of ``natoms`` points is split across:
+    :func:`workers` from :data:`POOL_MIN_POINTS` points up to
+    :data:`POOL_MAX_POINTS` (beyond it too where :data:`WORKERS_VARIABLE` is
+    set), else 1 (this process)."""
+    if natoms < POOL_MIN_POINTS or (natoms > POOL_MAX_POINTS
+                                    and WORKERS_VARIABLE not in os.environ):
+        return 1
+    return workers()
 
 
 def threads() -> int:
@@ -278,7 +298,7 @@ def evaluate(positions: np.ndarray, want_blocks: bool = False,
     near = _near_points(p, fmm_eps)
     eps = library_eps(fmm_eps)
     order = 3 if want_blocks else 2
-    count = workers() if n >= POOL_MIN_POINTS and near.size == 0 else 1
+    count = call_workers(n) if near.size == 0 else 1
     pooled = _pooled(p, eps, order, count) if count > 1 else None
     if pooled is not None:
         return _unscale(0.5 * pooled[0], *pooled[1:])

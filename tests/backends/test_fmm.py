@@ -227,6 +227,41 @@ def test_split_across_processes_is_one_call_to_round_off(monkeypatch, kind, seed
     fmm.shutdown()
 
 
+def test_calls_are_split_between_the_pool_bounds(monkeypatch):
+    monkeypatch.delenv(fmm.WORKERS_VARIABLE, raising=False)
+    monkeypatch.delenv(fmm.THREADS_VARIABLE, raising=False)
+    monkeypatch.setattr(fmm, '_can_fork', lambda: True)
+    monkeypatch.setattr(fmm.os, 'sched_getaffinity', lambda pid: {0, 1})
+    low, high = fmm.POOL_MIN_POINTS, fmm.POOL_MAX_POINTS
+    counts = [fmm.call_workers(n) for n in (low - 1, low, high, high + 1)]
+    assert counts == [1, 2, 2, 1]
+    monkeypatch.setenv(fmm.WORKERS_VARIABLE, '2')   # set: larger calls too
+    assert fmm.call_workers(high + 1) == 2 and fmm.call_workers(low - 1) == 1
+    monkeypatch.setenv(fmm.WORKERS_VARIABLE, '1')
+    assert fmm.call_workers(high) == 1
+
+
+@pytest.mark.parametrize('seed', [33, 34])
+def test_a_call_above_the_pool_stays_in_this_process(monkeypatch, seed):
+    points = promise_scene('net', 3000, seed)
+    monkeypatch.delenv(fmm.WORKERS_VARIABLE, raising=False)
+    monkeypatch.delenv(fmm.THREADS_VARIABLE, raising=False)
+    monkeypatch.setattr(fmm, '_can_fork', lambda: True)
+    monkeypatch.setattr(fmm.os, 'sched_getaffinity', lambda pid: {0, 1})
+    monkeypatch.setattr(fmm, 'POOL_MIN_POINTS', 1000)
+    fmm.shutdown()
+    monkeypatch.setattr(fmm, 'POOL_MAX_POINTS', 2000)
+    before = counting.worker_cpu_seconds()
+    alone = fmm.evaluate(points, False, fmm_eps=1e-6)
+    assert not fmm._POOL and counting.worker_cpu_seconds() == before
+    monkeypatch.setattr(fmm, 'POOL_MAX_POINTS', 4000)
+    split = fmm.evaluate(points, False, fmm_eps=1e-6)
+    assert fmm._POOL['count'] == 2 and counting.worker_cpu_seconds() > before
+    assert split[0] == pytest.approx(alone[0], rel=1e-13)
+    assert rel_err(split[1], alone[1]) < 1e-13
+    fmm.shutdown()
+
+
 def _daemon_evaluate(points):
     """In a daemonic process (a multiprocessing.Pool worker): the workers
     it would use, and the energy."""

@@ -56,10 +56,11 @@ class PairRows:
     is copied in once, when it joins the memory, into a row a dropped pair
     left, where stacking the memory at every step would copy it all
     (docs/performance.md). ``rows(pairs)`` gives the
-    rows of ``pairs`` (oldest first), for the pairs as they are now; the
-    pairs themselves stay the run's state (a restart file holds them). A
-    row knows its pair by the pair's ``s`` itself (held, so never mistaken
-    for a new array at a freed address)."""
+    rows of ``pairs`` (oldest first), for the pairs as they are now;
+    ``store(pairs, capacity)`` gives the pairs as views of their rows, the
+    memory's only copy (a run's state, which a restart file holds, keeps
+    those views). A row knows its pair by the pair's ``s`` itself (held, so
+    never mistaken for a new array at a freed address)."""
 
     def __init__(self) -> None:
         self.s = self.y = np.empty((0, 0))
@@ -80,6 +81,23 @@ class PairRows:
                 self.s[kept[p]], self.y[kept[p]] = np.ravel(s), np.ravel(y)
                 self.held[kept[p]] = s
         return np.array(kept)
+
+    def store(self, pairs: Sequence[Pair], capacity: int) -> list[Pair]:
+        """``pairs`` (oldest first, at most ``capacity``) as views of their
+        rows, a pair that is not yet one copied in (the arrays given are then
+        free to go): rows for ``capacity`` pairs are made at once, so that a
+        view is never left on rows given up for larger ones."""
+        size = np.asarray(pairs[0][0]).size
+        if self.s.shape != (capacity, size):
+            self.s, self.y = np.empty((capacity, size)), np.empty((capacity, size))
+            self.held = [None] * capacity
+        stored = []
+        for row, (s, y) in zip(self.rows(pairs), pairs, strict=True):
+            if getattr(s, 'base', None) is not self.s:   # not yet a view of its row
+                s, y = self.s[row].reshape(np.shape(s)), self.y[row].reshape(np.shape(y))
+                self.held[row] = s
+            stored.append((s, y))
+        return stored
 
 
 def lbfgs(solve: Callable[[np.ndarray], np.ndarray], forces: np.ndarray,

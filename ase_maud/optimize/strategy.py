@@ -143,9 +143,11 @@ class Strategy:
 
     def remember(self, state: MaudState, s: np.ndarray, y: np.ndarray) -> None:
         """Keep the secant pair ``(s, y)`` in the L-BFGS memory (if the rule
-        has one and :func:`keeps_pair`), the oldest dropped beyond its size."""
+        has one and :func:`keeps_pair`), the oldest dropped beyond its size;
+        the pairs are views of ``state.rows``, one copy of each."""
         if self.rule.memory and keeps_pair(s, y):
-            state.pairs = [*state.pairs, (s, y)][-self.rule.memory:]
+            state.pairs = state.rows.store([*state.pairs, (s, y)][-self.rule.memory:],
+                                           self.rule.memory)
 
 
 @dataclass(frozen=True)

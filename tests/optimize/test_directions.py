@@ -1,6 +1,7 @@
 """The L-BFGS memory as rows kept from step to step
 (ase_maud.optimize.directions.PairRows): the same direction, to the last bit,
-as a memory stacked afresh, through a run's appends, drops and resets."""
+as a memory stacked afresh, through a run's appends, drops and resets; the
+pairs stored as views of their rows, one copy of each."""
 
 import numpy as np
 import pytest
@@ -41,3 +42,26 @@ def test_a_new_array_is_never_taken_for_a_dropped_pair():
         r = rows.rows([(s, y)])
         assert rows.s[r[0]][0] == step and rows.y[r[0]][0] == 2.0 * step + 1.0
         del s, y   # freed: the next step's arrays may take their addresses
+
+
+@pytest.mark.parametrize('seed', [3, 4, 5])
+def test_stored_pairs_are_their_rows_and_keep_their_values(seed):
+    rng = np.random.default_rng(seed)
+    n, memory = int(rng.integers(2, 40)), int(rng.integers(1, 8))
+    rows, pairs, values = PairRows(), [], []
+    for step in range(60):
+        if rng.random() < 0.1:
+            pairs, values = [], []   # a reset
+        s, y = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+        values = [*values, (s.copy(), y.copy())][-memory:]
+        pairs = rows.store([*pairs, (s, y)][-memory:], memory)
+        before = [id(p) for p, _ in pairs]
+        again = rows.store(pairs, memory)
+        assert [id(p) for p, _ in again] == before   # a stored pair stays itself
+        assert rows.s.shape == (memory, 3 * n)      # the only copy: rows for memory pairs
+        for (ps, py), (vs, vy) in zip(pairs, values, strict=True):
+            assert ps.base is rows.s and py.base is rows.y and ps.shape == (n, 3)
+            assert np.array_equal(ps, vs) and np.array_equal(py, vy)   # none overwritten
+        forces = rng.normal(size=(n, 3))
+        assert np.array_equal(lbfgs(lambda f: f, forces, pairs, rows),
+                              lbfgs(lambda f: f, forces, values)), step

@@ -170,7 +170,9 @@ def call_workers(natoms: int) -> int:
 def threads() -> int:
     """The threads the FMM runs on: an FMM3D call's
     (:func:`library_threads`) times the processes a large call is split
-    across (:func:`workers`); what the ``auto`` backend's crossovers count."""
+    across (:func:`workers`; a call of more than :data:`POOL_MAX_POINTS`
+    points runs in one by default); what the ``auto`` backend's crossovers
+    count."""
     return library_threads() * workers()
 
 

@@ -93,7 +93,7 @@ class PairRows:
             self.held = [None] * capacity
         stored = []
         for row, (s, y) in zip(self.rows(pairs), pairs, strict=True):
-            if getattr(s, 'base', None) is not self.s:   # not yet a view of its row
+            if s.base is not self.s:   # not yet a view of its row
                 s, y = self.s[row].reshape(np.shape(s)), self.y[row].reshape(np.shape(y))
                 self.held[row] = s
             stored.append((s, y))

@@ -52,6 +52,7 @@ import numpy as np
 from fmm3dpy import lfmm3d  # the benchmark is of fmm3dpy itself
 
 from ase_maud.backends import auto, direct, fmm
+from ase_maud.bench.memory import tree_pss_kb
 from ase_maud.counting import cpu_seconds
 from ase_maud.scenes.catalogue import build
 
@@ -242,24 +243,6 @@ def _one_call(geometry, n, eps):
     print(wall)
 
 
-def _tree_pss_mb(pid):
-    """The summed proportional set size of ``pid`` and its children, MB."""
-    try:
-        with open(f'/proc/{pid}/task/{pid}/children') as handle:
-            pids = [pid, *map(int, handle.read().split())]
-    except OSError:
-        return 0.0
-    total = 0
-    for each in pids:
-        try:
-            with open(f'/proc/{each}/smaps_rollup') as handle:
-                total += next((int(line.split()[1]) for line in handle
-                               if line.startswith('Pss:')), 0)
-        except OSError:
-            pass
-    return total / 1024
-
-
 def split_memory(sizes, eps_list, geometries, writer):
     """Rows: wall seconds and peak memory of one call with one worker
     process and with two, each call in a fresh process."""
@@ -273,7 +256,7 @@ def split_memory(sizes, eps_list, geometries, writer):
                         env={**os.environ, fmm.WORKERS_VARIABLE: str(count)})
                     peak = 0.0
                     while child.poll() is None:
-                        peak = max(peak, _tree_pss_mb(child.pid))
+                        peak = max(peak, tree_pss_kb(child.pid) / 1024)
                         time.sleep(0.1)
                     row = {'geometry': geometry, 'n': n, 'fmm_eps': eps, 'workers': count,
                            'wall_s': float(child.stdout.read()), 'peak_mb': round(peak),

@@ -51,29 +51,17 @@ class TreeMemory:
     ``/proc`` has no such file, that alone)."""
 
     def __init__(self, interval: float = 0.25):
-        self.interval, self.peak_kb = interval, 0
+        from ase_maud.bench.memory import tree_pss_kb  # after the job set its threads
+
+        self.interval, self.peak_kb, self._tree_pss_kb = interval, 0, tree_pss_kb
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._sample, daemon=True)
         self._thread.start()
 
-    @staticmethod
-    def _pss_kb(pid: int) -> int:
-        try:
-            with open(f'/proc/{pid}/smaps_rollup') as handle:
-                return next((int(line.split()[1]) for line in handle
-                             if line.startswith('Pss:')), 0)
-        except OSError:   # no such process (any more), or no /proc
-            return 0
-
     def _sample(self) -> None:
         me = os.getpid()
         while not self._stop.wait(self.interval):
-            try:
-                with open(f'/proc/{me}/task/{me}/children') as handle:
-                    pids = [me, *map(int, handle.read().split())]
-            except OSError:
-                pids = [me]
-            self.peak_kb = max(self.peak_kb, sum(map(self._pss_kb, pids)))
+            self.peak_kb = max(self.peak_kb, self._tree_pss_kb(me))
 
     def peak_mb(self) -> float:
         """Stop sampling; the peak (MB)."""

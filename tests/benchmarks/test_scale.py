@@ -9,6 +9,8 @@ import sys
 import numpy as np
 import pytest
 
+from ase_maud.bench.memory import pss_kb
+
 from helpers import ROOT
 
 TOOL = runpy.run_path(str(ROOT / 'benchmarks' / 'scale.py'))
@@ -30,7 +32,7 @@ def test_the_peak_counts_a_child_process(megabytes):
     context = multiprocessing.get_context('fork')
     ready, release = context.Event(), context.Event()
     memory = TOOL['TreeMemory'](interval=0.05)
-    own = TOOL['TreeMemory']._pss_kb(os.getpid()) / 1024
+    own = pss_kb(os.getpid()) / 1024
     child = context.Process(target=_hold, args=(megabytes, ready, release))
     child.start()
     try:

@@ -74,6 +74,9 @@ OLD_PACKAGES = {'formats'}
 #: Names carried out of a 0.1 module to another home (``module:new_name`` where
 #: renamed).
 CARRIED = {
+    'accuracy': {
+        'noise': 'calculator.accuracy:force_noise',
+    },
     'activation': {
         'Attempt': 'saddles.attempts',
         'GROWTH': 'saddles.attempts',

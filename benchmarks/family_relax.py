@@ -1,11 +1,13 @@
 """Relaxations of scenes nobody tuned for: Maud, and SciPy's L-BFGS-B for reference, on
 seeded draws of the families of :mod:`ase_maud.scenes.families` (``--families``, each seed
 ``--seeds`` within ``--sizes`` points) and on scenes of the catalogue (``--scenes NAME:SIZE``),
-to ``--fmax``.
+to ``--fmax``; with ``--crossover N`` each calculator takes the FMM from N points (its
+energies and forces then carry the FMM's declared errors, as on scenes of 10^5 points).
 
 Per run: the calculator calls (the start's included, as ``ase-maud bench`` counts them),
-whether it converged, the end energy, and the CPU seconds of the run
-(``counting.cpu_seconds``: run with one thread). Printed a row a run, written to ``--out``
+whether it converged, the end energy, the CPU seconds of the run
+(``counting.cpu_seconds``, the FMM's worker processes included: run with one thread) and
+its wall seconds. Printed a row a run, written to ``--out``
 (a CSV; an existing file is never replaced)::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
@@ -18,6 +20,7 @@ from __future__ import annotations
 import argparse
 import csv
 import sys
+import time
 from pathlib import Path
 
 from ase_maud import Maud
@@ -27,18 +30,21 @@ from ase_maud.scenes.catalogue import build
 from ase_maud.scenes.families import FAMILIES
 
 OPTIMIZERS = ('Maud', 'L-BFGS-B')
-FIELDS = ['scene', 'seed', 'natoms', 'optimizer', 'calls', 'converged', 'energy', 'cpu_s']
+FIELDS = ['scene', 'seed', 'natoms', 'optimizer', 'calls', 'converged', 'energy', 'cpu_s',
+          'wall_s']
 
 
-def relax(atoms, optimizer: str, fmax: float, steps: int) -> tuple[int, bool, float]:
-    """Calculator calls (the start's included), convergence and CPU seconds of one run."""
-    cpu = cpu_seconds()
+def relax(atoms, optimizer: str, fmax: float,
+          steps: int) -> tuple[int, bool, float, float]:
+    """Calculator calls (the start's included), convergence, CPU and wall seconds of one run."""
+    cpu, wall = cpu_seconds(), time.perf_counter()
     with CallRecorder(atoms.calc) as calls:
         if optimizer == 'Maud':
             converged = Maud(atoms, logfile=None).run(fmax=fmax, steps=steps)
         else:
             converged = ScipyLBFGSB(atoms).run(fmax=fmax, steps=steps)
-    return len(calls.samples), bool(converged), cpu_seconds() - cpu
+    return (len(calls.samples), bool(converged), cpu_seconds() - cpu,
+            time.perf_counter() - wall)
 
 
 def scenes(args) -> list[tuple[str, int | str, object]]:
@@ -63,6 +69,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--scenes', nargs='*', default=[],
                         help='catalogue scenes as NAME:SIZE (hub_net:48)')
     parser.add_argument('--optimizers', nargs='+', default=['Maud'], choices=OPTIMIZERS)
+    parser.add_argument('--crossover', type=int, default=None,
+                        help="the calculators' crossover: the FMM from this many points")
     parser.add_argument('--fmax', type=float, default=1e-4)
     parser.add_argument('--steps', type=int, default=5000)
     parser.add_argument('--out', type=Path, required=True)
@@ -73,10 +81,13 @@ def main(argv: list[str] | None = None) -> None:
     for name, seed, make in scenes(args):
         for optimizer in args.optimizers:
             atoms = make()
-            calls, converged, cpu = relax(atoms, optimizer, args.fmax, args.steps)
+            if args.crossover is not None:
+                atoms.calc.set(crossover=args.crossover)
+            calls, converged, cpu, wall = relax(atoms, optimizer, args.fmax, args.steps)
             row = {'scene': name, 'seed': seed, 'natoms': len(atoms), 'optimizer': optimizer,
                    'calls': calls, 'converged': converged,
-                   'energy': f'{atoms.get_potential_energy():.6f}', 'cpu_s': f'{cpu:.2f}'}
+                   'energy': f'{atoms.get_potential_energy():.6f}', 'cpu_s': f'{cpu:.2f}',
+                   'wall_s': f'{wall:.2f}'}
             print(' '.join(f'{row[key]}' for key in FIELDS), flush=True)
             rows.append(row)
     with args.out.open('x', newline='') as handle:

@@ -48,10 +48,16 @@ _REGISTRY: dict[str, Backend] = {}
 
 
 def register(backend: Backend) -> None:
-    """Add ``backend``; a second backend of the same name is a ValueError."""
+    """Add ``backend``; a second backend of the same name, or an approximate
+    one that neither delegates nor says its errors (``force_tolerance`` and
+    ``energy_tolerance``), is a ValueError."""
     if backend.name in _REGISTRY:
         raise ValueError(f'a backend named {backend.name!r} is already '
                          'registered')
+    if not backend.exact and backend.choose is None and None in (
+            backend.force_tolerance, backend.energy_tolerance):
+        raise ValueError(f'the approximate backend {backend.name!r} must say the errors '
+                         'it promises: force_tolerance and energy_tolerance')
     _REGISTRY[backend.name] = backend
     _EXACT.clear()   # an earlier pick may have another first backend now
 

@@ -96,8 +96,8 @@ def choose(natoms: int, dim: int, want_blocks: bool,
              else crossover)
     if natoms < max(start, 2) or eps < MIN_EPS:
         return [exact]
-    return [Choice(fmm.BACKEND, {'fmm_eps': eps}, fmm.force_tolerance(eps)),
-            exact]
+    return [Choice(fmm.BACKEND, {'fmm_eps': eps}, fmm.force_tolerance(eps),
+                   fmm.energy_tolerance(eps)), exact]
 
 
 def evaluate(positions: np.ndarray, want_blocks: bool = False,

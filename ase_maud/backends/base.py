@@ -55,7 +55,10 @@ class Backend:
     them; each is checked by its rule in :data:`ase_maud.checks.RULES`);
     ``evaluate`` receives them as keywords of the same names. ``requires``:
     modules it imports that may be missing (it is :attr:`installed` when all
-    are importable). ``hvp``: if the backend has one, the unit repulsion's
+    are importable). ``force_tolerance`` and ``energy_tolerance``: for an
+    approximate backend, the force error it promises relative to the largest
+    repulsive force, and the energy error relative to the repulsion energy,
+    as functions of its options (None: exact). ``hvp``: if the backend has one, the unit repulsion's
     Hessian-vector product ``hvp(positions (N, 3), v (m, N, 3)) -> (m, N, 3)``,
     ``sum_j B_ij (v_i - v_j)``; ``hessian``: if it has one, the unit
     repulsion's energy, forces and dense Hessian in one call,
@@ -71,6 +74,7 @@ class Backend:
     parameters: Mapping[str, Any] = field(default_factory=dict)
     requires: tuple[str, ...] = ()
     force_tolerance: Callable[..., float] | None = None
+    energy_tolerance: Callable[..., float] | None = None
     choose: Callable[..., list[Choice]] | None = None
     hvp: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
     hessian: Callable[[np.ndarray, int], tuple[float, np.ndarray, np.ndarray]] | None = None
@@ -102,20 +106,24 @@ class Backend:
         options = self.options(parameters)
         if self.choose is not None:
             return self.choose(natoms, dim, want_blocks, **options)
-        tolerance = (0.0 if self.force_tolerance is None
-                     else self.force_tolerance(**options))
-        return [Choice(self, options, tolerance)]
+        if self.exact:
+            return [Choice(self, options, 0.0)]
+        return [Choice(self, options, self.force_tolerance(**options),
+                       self.energy_tolerance(**options))]
 
 
 @dataclass(frozen=True)
 class Choice:
     """One backend picked for a call: ``backend``, the keywords ``options``
-    of its ``evaluate``, and ``tolerance``, the force error it promises
-    relative to the largest repulsive force (0.0: exact to rounding)."""
+    of its ``evaluate``, ``tolerance``, the force error it promises
+    relative to the largest repulsive force, and ``energy_tolerance``, the
+    error of the repulsion energy it promises relative to that energy (0.0:
+    exact to rounding)."""
 
     backend: Backend
     options: Mapping[str, Any]
     tolerance: float
+    energy_tolerance: float = 0.0
 
 
 def evaluate_first(choices: list[Choice], positions: np.ndarray,

@@ -45,9 +45,9 @@ class PoisonedCalculator(Calculator):
 class NoisyEnergy(MaudCalculator):
     """A MaudCalculator (exact direct sum) whose energy carries seeded
     random noise, uniform in ``[-noise, noise] |E|``, which it declares
-    (unless ``declare`` is False) as the relative error of its results
-    (``last_tolerance``, what :func:`ase_maud.calculator.accuracy.noise` reads); its
-    forces are exact. Each call's exact energy is kept in ``exact``."""
+    (unless ``declare`` is False) as the error of its energy
+    (``last_energy_error``, what :func:`ase_maud.calculator.accuracy.energy_noise`
+    reads); its forces are exact. Each call's exact energy is kept in ``exact``."""
 
     def __init__(self, noise: float, seed: int, declare: bool = True,
                  **parameters) -> None:
@@ -63,7 +63,7 @@ class NoisyEnergy(MaudCalculator):
         energy += self.noise * abs(energy) * self.rng.uniform(-1.0, 1.0)
         self.results['energy'] = self.results['free_energy'] = energy
         if self.declare:
-            self.last_tolerance = max(self.last_tolerance, self.noise)
+            self.last_energy_error = max(self.last_energy_error, self.noise * abs(self.exact[-1]))
 
 
 class UndeclaredNoise(Calculator):

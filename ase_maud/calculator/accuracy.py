@@ -11,8 +11,10 @@ calculator's own ``tol``): coarse, cheap sums far from the answer, fine ones
 near it, and never a stall on evaluation noise. Forces below ``fmax`` on sums
 too coarse to say so (:func:`settled`: the largest plus the promised error is
 not) are computed again, at the accuracy ``fmax`` asks, before a run stops.
-The energies it then compares carry the relative error :func:`noise`. Other
-calculators are left alone.
+The energies it then compares carry the error the calculator declares for
+them (:func:`energy_noise`, far below the forces': an energy sums positive
+terms), a merit made of the forces that of the forces (:func:`force_noise`).
+Other calculators are left alone.
 """
 
 from __future__ import annotations
@@ -34,13 +36,15 @@ class ToleranceAware(Protocol):
 
     ``last_force_scale``: the largest repulsive force of the last call (force
     units; None before a call); ``last_tolerance``: the force error the
-    results held promise, relative to it (0.0 exact); ``tolerance``: the
+    results held promise, relative to it (0.0 exact); ``last_energy_error``:
+    the error of the energy held (energy units; 0.0 exact); ``tolerance``: the
     relative force error asked of the next calls, which ``set_tolerance(tol)``
     sets.
     """
 
     last_force_scale: float | None
     last_tolerance: float | None
+    last_energy_error: float | None
     tolerance: float
 
     def set_tolerance(self, tol: float) -> None: ...
@@ -77,11 +81,20 @@ def settled(calc: Any, fmax: float, fmax_now: float) -> bool:
     return fmax_now + (calc.last_tolerance or 0.0) * calc.last_force_scale < fmax
 
 
-def noise(calc: Any) -> float:
-    """The relative error of the energy and forces ``calc`` holds: its
+def force_noise(calc: Any) -> float:
+    """The relative error of the forces ``calc`` holds: its
     ``last_tolerance`` if it is :class:`ToleranceAware`, else 0."""
     if is_aware(calc):
         return calc.last_tolerance or 0.0
+    return 0.0
+
+
+def energy_noise(calc: Any, energy: float) -> float:
+    """The relative error of the energy ``energy`` that ``calc`` holds: its
+    ``last_energy_error`` over ``|energy|`` if it is :class:`ToleranceAware`,
+    else 0."""
+    if is_aware(calc) and calc.last_energy_error:
+        return calc.last_energy_error / max(abs(energy), 1e-300)
     return 0.0
 
 

@@ -119,10 +119,11 @@ class MaudCalculator(LockedCalculator):
     energy counts each pair once.
 
     Accuracy per run (``calc.set(tol=...)``, :attr:`last_backend`,
-    :attr:`last_tolerance`, :attr:`last_force_scale`), threads and memory:
-    docs/calculator.md. Only what is asked is computed: ``energy``/``forces``
-    never build the blocks, ``stiffness`` computes all three in one pass,
-    ``hessian`` (dense, small scenes) comes with the energy and forces.
+    :attr:`last_tolerance`, :attr:`last_force_scale`, :attr:`last_energy_error`),
+    threads and memory: docs/calculator.md. Only what is asked is computed:
+    ``energy``/``forces`` never build the blocks, ``stiffness`` computes all
+    three in one pass, ``hessian`` (dense, small scenes) comes with the
+    energy and forces.
     """
 
     implemented_properties = ['energy', 'free_energy', 'forces', 'stiffness',
@@ -157,6 +158,7 @@ class MaudCalculator(LockedCalculator):
         self.last_backend: str | None = None
         self.last_tolerance: float | None = None
         self.last_force_scale: float | None = None
+        self.last_energy_error: float | None = None
         super().__init__(springs=springs, a=a, Q=Q, dim=dim, q=q, loads=loads,
                          backend=backend, **kwargs)
 
@@ -233,7 +235,7 @@ class MaudCalculator(LockedCalculator):
         """Clear the results and what is known of their accuracy."""
         super().reset()
         self.last_backend = self.last_tolerance = None
-        self.last_force_scale = None
+        self.last_force_scale = self.last_energy_error = None
 
     @property
     def springs(self) -> np.ndarray:
@@ -306,9 +308,11 @@ class MaudCalculator(LockedCalculator):
                     self.parameters, scaled, dim, want_blocks)
             backend, tolerance = choice.backend.name, choice.tolerance
             e_unit, f_unit = potential.energy_unit, potential.force_unit
+            energy_error = e_unit * abs(e_rep) * choice.energy_tolerance
         else:   # a = 0: springs and loads alone, in the user's units (x' = x), times Q
             n = dim * len(positions)
-            scaled, e_rep, f_rep, backend, tolerance = positions, 0.0, 0.0, 'none', 0.0
+            scaled, e_rep, f_rep, backend, tolerance, energy_error = (positions, 0.0, 0.0,
+                                                                      'none', 0.0, 0.0)
             h_rep = np.zeros((n, n)) if want_hessian else None
             e_unit = f_unit = Q
         e_spr, f_spr = potential.spring_terms(scaled)
@@ -343,10 +347,11 @@ class MaudCalculator(LockedCalculator):
         results['energy'] = float(results['energy'])
         # results of a call at other positions are gone by now (ASE clears
         # them without reset): only those still held count
-        held = self.last_tolerance if self.results else None
+        held = (self.last_tolerance, self.last_energy_error) if self.results else (0.0, 0.0)
         self.results.update(results, free_energy=results['energy'])
         self.last_backend = backend
-        self.last_tolerance = max(held or 0.0, tolerance)
+        self.last_tolerance = max(held[0] or 0.0, tolerance)
+        self.last_energy_error = max(held[1] or 0.0, energy_error)
         self.last_force_scale = potential.force_unit * (
             math.sqrt((f_rep * f_rep).sum(axis=1).max(initial=0.0))
             if potential.repulsive else 0.0)
@@ -380,10 +385,8 @@ class MaudCalculator(LockedCalculator):
         return self.get_property('stiffness', atoms)
 
     def get_hessian(self, atoms: Atoms | None = None) -> np.ndarray:
-        """The full analytic Hessian ``d2E/dr dr``, shape (dim N, dim N).
-
-        For analysis of small scenes only; refuses more than
-        :attr:`max_hessian_atoms` atoms with a ValueError.
+        """The full analytic Hessian ``d2E/dr dr``, shape (dim N, dim N), of
+        a small scene (at most :attr:`max_hessian_atoms` atoms).
 
         Parameters
         ----------
@@ -446,18 +449,15 @@ class MaudCalculator(LockedCalculator):
         cheaper = len(rows) < (1.0 - self.block_min_held) * len(atoms)
         return rows if cheaper and type(self) is MaudCalculator else None
 
-    def check_hessian_size(self, natoms: int, what: str = 'get_hessian',
-                           ) -> None:
+    def check_hessian_size(self, natoms: int, what: str = 'get_hessian') -> None:
         """Raise ValueError, naming the O(N)-memory alternatives, if a dense
         Hessian of ``natoms`` atoms exceeds :attr:`max_hessian_atoms`."""
         if natoms > self.max_hessian_atoms:
             raise ValueError(
-                f'{what}: {natoms} atoms exceed max_hessian_atoms = '
-                f'{self.max_hessian_atoms} (the dense matrix would hold '
-                f'{(self.dim * natoms)**2:.2e} entries); use'
-                ' Hessian-vector products (calc.potential.hvp, or '
-                'ase_maud.analysis.stationary.hessian_operator'
-                " and classify(atoms, method='iterative') for the lowest "
+                f'{what}: {natoms} atoms exceed max_hessian_atoms = {self.max_hessian_atoms} '
+                f'(the dense matrix would hold {(self.dim * natoms)**2:.2e} entries); use '
+                'Hessian-vector products (calc.potential.hvp, or ase_maud.analysis.stationary.'
+                "hessian_operator and classify(atoms, method='iterative') for the lowest "
                 'modes) instead')
 
     def get_spring_hessian(self, atoms: Atoms | None = None) -> sp.csr_matrix:

@@ -120,7 +120,7 @@ def relax(atoms: Atoms, model: StiffnessModel, strategy: Strategy, state: MaudSt
             fmax_now = float(lengths(forces).max())
         yield energy, fmax_now
         x = next_positions(strategy, state, monitor, step(), positions.copy(), energy,
-                           forces, accuracy.noise(calc), local_at, no_step)
+                           forces, accuracy.energy_noise(calc, energy), local_at, no_step)
         if holds:
             x[held] = positions[held]
         strategy.moved(state, x)

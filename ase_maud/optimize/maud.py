@@ -244,12 +244,16 @@ class Maud(Optimizer):
         start = opt.get_x().reshape(-1, 3)
         if self._gauge is not None:
             forces = free_forces(forces, self._gauge)
-        merit = opt.get_value() if self.target == 'minimum' else float(np.vdot(forces, forces))
+        calc = getattr(self._atoms(), 'calc', None)
+        if self.target == 'minimum':
+            merit = opt.get_value()
+            noise = accuracy.energy_noise(calc, merit)
+        else:
+            merit, noise = float(np.vdot(forces, forces)), accuracy.force_noise(calc)
         self.fmax_now = float(np.linalg.norm(forces, axis=1).max())
         try:
             x = arrays.next_positions(self.strategy, self.state, self.monitor, self.nsteps,
-                                      opt.get_x().reshape(-1, 3), merit, forces,
-                                      accuracy.noise(getattr(self._atoms(), 'calc', None)),
+                                      opt.get_x().reshape(-1, 3), merit, forces, noise,
                                       self._local_at, self._no_step)
         except MaudError as error:
             self._stop(error)

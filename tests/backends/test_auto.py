@@ -59,7 +59,13 @@ def test_auto_meets_tol(random_points, dim, kind, seed, tol):
                                                   rel=tol)
     error = np.linalg.norm(f - f0, axis=1).max()
     assert error <= tol * exact.last_force_scale
-    assert abs(e - e0) <= tol * abs(e0)
+    assert abs(e - e0) <= calc.last_energy_error
+    assert exact.last_energy_error == 0.0
+    # the energy's promise, relative to the repulsion's energy alone
+    e_rep = exact.results['energy'] - MaudCalculator(**{**common, 'a': 0.0}).get_potential_energy(
+        atoms)
+    assert calc.last_energy_error == pytest.approx(
+        fmm.energy_tolerance(fmm.eps_for(tol)) * abs(e_rep), rel=1e-6)
     assert np.abs(k - k0).max() <= 10 * tol * np.abs(k0).max()
     if dim == 2:
         assert not f[:, 2].any()
@@ -271,12 +277,14 @@ def test_no_dense_array_above_the_crossover(random_points):
 
 def test_last_tolerance_is_the_held_results(random_points):
     """An FMM call, then an exact one at new positions: the results held
-    are exact, and last_tolerance says so."""
+    are exact, and last_tolerance and last_energy_error say so."""
     atoms = Atoms(f'H{N}', random_points(N, 3, 4))
     atoms.calc = calc = MaudCalculator(tol=1e-4, crossover=CROSSOVER)
     atoms.get_forces()
     assert calc.last_backend == 'fmm' and calc.last_tolerance > 0
+    assert calc.last_energy_error > 0
     calc.set(crossover=10 * N)            # the direct sum from now on
     atoms.positions[0] += 0.1
     atoms.get_forces()
     assert calc.last_backend == 'numba' and calc.last_tolerance == 0.0
+    assert calc.last_energy_error == 0.0

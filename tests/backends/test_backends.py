@@ -179,6 +179,20 @@ def test_a_new_backend_is_one_registration(monkeypatch, random_points):
     assert calls == [False, True]
 
 
+def test_an_approximate_backend_says_both_errors(monkeypatch):
+    """An approximate backend that does not delegate is registered only with
+    the force and the energy error it promises."""
+    monkeypatch.setattr(backends, '_REGISTRY', dict(backends._REGISTRY))
+    loose = dict(evaluate=reference.evaluate, cost='N', summary='', tolerance='tol',
+                 parameters={'tol': 1e-3})
+    with pytest.raises(ValueError, match="'loose' must say the errors it promises"):
+        backends.register(Backend(name='loose', force_tolerance=lambda tol: tol, **loose))
+    backends.register(Backend(name='loose', force_tolerance=lambda tol: tol,
+                              energy_tolerance=lambda tol: tol / 100, **loose))
+    choice, = backends.get('loose').choices(10, 3, False, {'tol': 1e-3})
+    assert (choice.tolerance, choice.energy_tolerance) == (1e-3, 1e-5)
+
+
 def test_kernel_variants_have_their_own_cache_entries():
     """numba keys a cached closure by its code and closure values only, so
     the four kernels (with or without blocks, parallel or not) must differ in

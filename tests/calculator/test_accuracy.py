@@ -54,6 +54,36 @@ def test_maud_reaches_fmax_on_the_fmm_path(seed):
 
 
 @pytest.mark.parametrize('watched', [False, True])
+@pytest.mark.parametrize('seed', [3, 4])
+def test_energies_are_compared_within_their_own_error(monkeypatch, watched, seed):
+    """On the FMM path a step compares energies within the error the
+    calculator declares for them (``last_energy_error``), below the forces'
+    relative error times the energy (a tenth at most, in most steps a
+    hundredth or less), on arrays and in ASE's loop."""
+    atoms = build('hanging_net', 24, seed=seed)          # 576 points
+    atoms.calc.set(crossover=300)                         # the FMM from 300 points
+    seen = []
+    with Maud(atoms, logfile=None) as opt:
+        kind = type(opt.strategy)
+        step = kind.step
+
+        def recording(self, state, x, merit, forces, noise, local_at):
+            calc = atoms.calc
+            seen.append((noise, calc.last_energy_error / abs(merit), calc.last_tolerance))
+            return step(self, state, x, merit, forces, noise, local_at)
+        monkeypatch.setattr(kind, 'step', recording)
+        if watched:
+            opt.attach(lambda: None)
+        assert opt.run(fmax=1e-4, steps=500)
+    assert len(seen) > 10
+    ratios = []
+    for noise, declared, force_tolerance in seen:
+        assert noise == declared > 0
+        ratios.append(noise / force_tolerance)
+    assert max(ratios) < 0.15 and np.median(ratios) < 1e-2
+
+
+@pytest.mark.parametrize('watched', [False, True])
 def test_asked_tolerance_is_a_fraction_of_fmax(watched):
     """Each call asks for a force error of a tenth of the larger of the run's
     fmax and the largest force (on the free points) of the point before it,

@@ -58,8 +58,9 @@ class Backend:
     are importable). ``force_tolerance`` and ``energy_tolerance``: for an
     approximate backend, the force error it promises relative to the largest
     repulsive force, and the energy error relative to the repulsion energy,
-    as functions of its options (None: exact). ``hvp``: if the backend has one, the unit repulsion's
-    Hessian-vector product ``hvp(positions (N, 3), v (m, N, 3)) -> (m, N, 3)``,
+    as functions of its options (None: exact). ``hvp``: if the backend has
+    one, the unit repulsion's Hessian-vector product
+    ``hvp(positions (N, 3), v (m, N, 3)) -> (m, N, 3)``,
     ``sum_j B_ij (v_i - v_j)``; ``hessian``: if it has one, the unit
     repulsion's energy, forces and dense Hessian in one call,
     ``hessian(positions (N, 3), dim) -> (energy, forces (N, 3), (dim N, dim N))``.

@@ -306,13 +306,12 @@ class MaudCalculator(LockedCalculator):
             else:
                 (e_rep, f_rep, block6), choice = backends.evaluate(
                     self.parameters, scaled, dim, want_blocks)
-            backend, tolerance = choice.backend.name, choice.tolerance
+            backend, tolerance, error = (choice.backend.name, choice.tolerance,
+                                         choice.energy_tolerance)
             e_unit, f_unit = potential.energy_unit, potential.force_unit
-            energy_error = e_unit * abs(e_rep) * choice.energy_tolerance
         else:   # a = 0: springs and loads alone, in the user's units (x' = x), times Q
             n = dim * len(positions)
-            scaled, e_rep, f_rep, backend, tolerance, energy_error = (positions, 0.0, 0.0,
-                                                                      'none', 0.0, 0.0)
+            scaled, e_rep, f_rep, backend, tolerance, error = positions, 0.0, 0.0, 'none', 0.0, 0.0
             h_rep = np.zeros((n, n)) if want_hessian else None
             e_unit = f_unit = Q
         e_spr, f_spr = potential.spring_terms(scaled)
@@ -351,7 +350,8 @@ class MaudCalculator(LockedCalculator):
         self.results.update(results, free_energy=results['energy'])
         self.last_backend = backend
         self.last_tolerance = max(held[0] or 0.0, tolerance)
-        self.last_energy_error = max(held[1] or 0.0, energy_error)
+        # the energy's error (an exact sum's is 0, also where e_rep is inf)
+        self.last_energy_error = max(held[1] or 0.0, e_unit * abs(e_rep) * error if error else 0.0)
         self.last_force_scale = potential.force_unit * (
             math.sqrt((f_rep * f_rep).sum(axis=1).max(initial=0.0))
             if potential.repulsive else 0.0)

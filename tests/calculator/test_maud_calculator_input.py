@@ -75,6 +75,7 @@ def test_non_finite_position_names_atom(value, backend):
 
 
 @pytest.mark.filterwarnings('ignore:divide by zero:RuntimeWarning')
+@pytest.mark.filterwarnings('error:invalid value:RuntimeWarning')
 @pytest.mark.parametrize('dim', [2, 3])
 @pytest.mark.parametrize('backend', BACKENDS)
 def test_coincident_points_name_both(dim, backend):

@@ -20,7 +20,7 @@ from ase_maud.physics.dofs import keep_on_plane
 from ase_maud.scenes.catalogue import build
 from ase_maud.scenes.saddle_scenes import SADDLE_SCENES
 
-__all__ = ['DISPLACEMENTS', 'SHIFT', 'displaced_minimum', 'saddle_start']
+__all__ = ['DEGENERATE_RTOL', 'DISPLACEMENTS', 'SHIFT', 'displaced_minimum', 'saddle_start']
 
 #: How far ``up``, ``down`` and ``random`` move a minimum: this fraction of the
 #: mean nearest-neighbour distance.
@@ -28,6 +28,9 @@ SHIFT = 0.1
 #: The named displacements: along the lowest mode either way, or along a seeded
 #: random combination of the modes.
 DISPLACEMENTS = ('up', 'down', 'random')
+#: Eigenvalues within this fraction of the largest one of the lowest are one
+#: degenerate lowest eigenvalue (:func:`displaced_minimum`).
+DEGENERATE_RTOL = 1e-6
 
 
 def displaced_minimum(atoms: Atoms, seed: int, amp: float | str,
@@ -37,7 +40,10 @@ def displaced_minimum(atoms: Atoms, seed: int, amp: float | str,
     that is not a minimum, checked with :func:`~ase_maud.analysis.stationary.classify`)
     and a fresh copy moved along its lowest mode so that the point that moves most moves
     ``amp`` (units of ``a``), or by the named displacement (:data:`DISPLACEMENTS`,
-    :data:`SHIFT`); ``seed`` seeds the random one."""
+    :data:`SHIFT`); ``seed`` seeds the random one. Where the lowest eigenvalue is
+    degenerate (within :data:`DEGENERATE_RTOL`; the symmetric minima of a few points),
+    the mode is a random vector seeded by ``seed`` projected on its eigenspace: the
+    eigensolver's own basis of that space differs from one LAPACK build to another."""
     if atoms.calc.parameters['dim'] == 2:
         keep_on_plane(atoms)
     if amp in (0, '0'):
@@ -47,7 +53,12 @@ def displaced_minimum(atoms: Atoms, seed: int, amp: float | str,
     if point.verdict != 'minimum':
         raise ValueError(f'{label} relaxed to a {point.verdict}, '
                          'not a minimum: no lowest mode to leave it along')
+    values = point.eigenvalues
+    lowest = np.flatnonzero(values - values[0] <= DEGENERATE_RTOL * abs(values).max())
     mode = point.modes[0]
+    if len(lowest) > 1:
+        weights = np.random.default_rng(seed).normal(size=len(lowest))
+        mode = np.einsum('k,kij->ij', weights, point.modes[lowest])
     if amp in DISPLACEMENTS:
         if amp == 'random':
             weights = np.random.default_rng(seed).normal(size=len(point.modes))

@@ -28,8 +28,9 @@ SHIFT = 0.1
 #: The named displacements: along the lowest mode either way, or along a seeded
 #: random combination of the modes.
 DISPLACEMENTS = ('up', 'down', 'random')
-#: Eigenvalues within this fraction of the largest one of the lowest are one
-#: degenerate lowest eigenvalue (:func:`displaced_minimum`).
+#: Eigenvalues above the lowest by less than this fraction of the largest
+#: eigenvalue's size are the lowest too: a degenerate lowest eigenvalue
+#: (:func:`displaced_minimum`).
 DEGENERATE_RTOL = 1e-6
 
 
@@ -56,9 +57,10 @@ def displaced_minimum(atoms: Atoms, seed: int, amp: float | str,
     values = point.eigenvalues
     lowest = np.flatnonzero(values - values[0] <= DEGENERATE_RTOL * abs(values).max())
     mode = point.modes[0]
-    if len(lowest) > 1:
-        weights = np.random.default_rng(seed).normal(size=len(lowest))
-        mode = np.einsum('k,kij->ij', weights, point.modes[lowest])
+    if len(lowest) > 1:   # a seeded vector's projection: the same in any basis
+        space = point.modes[lowest]
+        seeded = np.random.default_rng(seed).normal(size=space.shape[1:])
+        mode = np.einsum('k,kij->ij', np.einsum('kij,ij->k', space, seeded), space)
     if amp in DISPLACEMENTS:
         if amp == 'random':
             weights = np.random.default_rng(seed).normal(size=len(point.modes))

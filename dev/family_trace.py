@@ -1,6 +1,6 @@
 """Where a default Maud run on a family scene (:data:`ase_maud.scenes.families.FAMILIES`)
 spends its steps: per step the energy, the largest force, its point's distance in springs
-from the nearest held point, the participation ratio of the forces
+from the nearest held point (one with no free coordinate), the participation ratio of the forces
 ``(sum |f_i|^2)^2 / sum |f_i|^4`` (how many points carry them), the longest move and the
 move of the point of the largest force; at the steps ``--blocks`` the Hessian's own 3x3
 block (its eigenvalues) at the ``--top`` points of the largest forces and at the point
@@ -24,6 +24,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from ase_maud import Maud
 from ase_maud.bench.report import write_csv
+from ase_maud.physics.dofs import free_dofs
 from ase_maud.scenes.families import FAMILIES
 
 FIELDS = ['step', 'energy', 'fmax', 'hops_to_held', 'participation', 'longest_move',
@@ -58,8 +59,8 @@ def main(argv: list[str] | None = None) -> None:
         atoms.calc.set(crossover=args.crossover)
     potential = atoms.calc.potential
     laplacian = potential.Q * potential.spring_laplacian(len(atoms))
-    held = np.unique(np.concatenate([c.get_indices() for c in atoms.constraints] or [[]]))
-    hops = (dijkstra(abs(laplacian.tocsr()), indices=held.astype(int), unweighted=True,
+    held = np.flatnonzero(~free_dofs(atoms, potential.dim).any(axis=1))   # no free coordinate
+    hops = (dijkstra(abs(laplacian.tocsr()), indices=held, unweighted=True,
                      min_only=True) if len(held) else np.full(len(atoms), np.inf))
     opt = Maud(atoms, logfile=None)
     last = atoms.positions.copy()

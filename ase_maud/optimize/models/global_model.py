@@ -41,7 +41,10 @@ class GlobalModel(StiffnessModel):
     with the step bound) since they were built (the springs' part is exact
     everywhere; only the repulsion blocks age): the calculator is then asked
     for energy and forces alone (see :meth:`needs`). ``refresh=0`` rebuilds
-    at every step. The Maud step with this model takes an L-BFGS correction
+    at every step. The test needs no neighbour search while every point's
+    move is within ``refresh`` times a lower bound of its distance, the
+    distance where ``P`` was built less twice the longest move
+    (:func:`_kept_by_bound`). The Maud step with this model takes an L-BFGS correction
     over ``P^-1``, which learns the far-field repulsion that ``P`` leaves
     out and the ageing of a kept ``P``.
     """
@@ -55,7 +58,8 @@ class GlobalModel(StiffnessModel):
         super().__init__(target, floor)
         self.refresh = check('refresh', refresh)
         self.nearest = nearest or NearestDistances()
-        self._kept: tuple[np.ndarray, SparseSolver] | None = None
+        #: Where ``P`` was built, its solver, and the nearest-neighbour distances there.
+        self._kept: tuple[np.ndarray, SparseSolver, np.ndarray] | None = None
 
     def needs(self, atoms: Atoms) -> str | None:
         return self.prop if self._stale(atoms) else None
@@ -67,6 +71,8 @@ class GlobalModel(StiffnessModel):
         moved = np.linalg.norm(positions - self._kept[0], axis=1)
         if len(positions) < 2 or self.refresh == 0:
             return bool(moved.max() > 0)
+        if _kept_by_bound(moved, self._kept[2], self.refresh):
+            return False
         return bool(np.any(moved > self.refresh * self.nearest(positions)))
 
     def at(self, atoms: Atoms, learnt: dict[str, Any] | None = None) -> Solver:
@@ -80,11 +86,17 @@ class GlobalModel(StiffnessModel):
             there = atoms.copy()   # a resumed run: P where the run built it
             there.calc = atoms.calc
             there.set_positions(built, apply_constraint=False)
-            self._kept = built, self._solver(there)
+            self._kept = built, self._solver(there), self._distances(built)
         if self._stale(atoms):
-            self._kept = atoms.positions.copy(), self._solver(atoms)
+            positions = atoms.positions.copy()
+            self._kept = positions, self._solver(atoms), self._distances(positions)
         learnt['built'] = self._kept[0]
         return self._kept[1]
+
+    def _distances(self, positions: np.ndarray) -> np.ndarray:
+        """Each point's nearest-neighbour distance at ``positions`` (none for
+        a lone point, whose model is rebuilt at any move)."""
+        return self.nearest(positions) if len(positions) > 1 else np.zeros(len(positions))
 
     def _solver(self, atoms: Atoms) -> SparseSolver:
         matrix, free, diagonal = self.assemble(atoms)
@@ -110,3 +122,18 @@ class GlobalModel(StiffnessModel):
                                  shape=(n * dim, n * dim))
         matrix = (springs + diagonal).tocsr()
         return matrix[keep][:, keep], free, repulsion + degree
+
+
+#: The bound of :func:`_kept_by_bound` is trusted to this relative margin
+#: (the neighbour search rounds distances as the bound does not).
+BOUND_RTOL = 1e-9
+
+
+def _kept_by_bound(moved: np.ndarray, built_distances: np.ndarray, refresh: float) -> bool:
+    """Whether every point's move ``moved`` (N,) is within ``refresh`` times a
+    lower bound of its nearest-neighbour distance now: its distance where
+    the model was built, ``built_distances`` (N,), less its own move and the
+    longest (the neighbour's), so at most twice the longest. True only where
+    the exact test (distances now) keeps the model too."""
+    bound = built_distances - 2.0 * moved.max()
+    return bool(np.all(moved <= refresh * bound * (1.0 - BOUND_RTOL)))

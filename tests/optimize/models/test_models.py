@@ -451,3 +451,56 @@ def test_exact_model_refuses_a_non_finite_hessian_asked_for_or_handed_over():
             ExactModel().local(broken, atoms)
         with pytest.raises(np.linalg.LinAlgError, match='not finite'):
             ExactModel().of_results(atoms, {'hessian': broken})
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_global_models_staleness_bound_keeps_only_what_the_distances_keep(seed):
+    # Random points, random moves from tiny to a neighbour distance: where the
+    # bound keeps P, the exact test (nearest distances now) keeps it too, and
+    # the bound keeps it for small moves.
+    from scipy.spatial import cKDTree
+
+    from ase_maud.optimize.models.global_model import _kept_by_bound
+
+    rng = np.random.default_rng(seed)
+    built = rng.uniform(0, 10, (rng.integers(20, 200), 3))
+    distances = cKDTree(built).query(built, k=2)[0][:, 1]
+    kept_by_bound = 0
+    for scale in np.geomspace(1e-4, 1.0, 25) * distances.min():
+        moves = rng.normal(size=built.shape) * rng.uniform(0, 1, (len(built), 1)) * scale
+        moved = np.linalg.norm(moves, axis=1)
+        now = cKDTree(built + moves).query(built + moves, k=2)[0][:, 1]
+        if _kept_by_bound(moved, distances, 0.5):
+            kept_by_bound += 1
+            assert np.all(moved <= 0.5 * now)
+    assert kept_by_bound >= 5   # the bound does keep P for small moves
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_global_model_rebuilds_where_the_exact_test_would(seed, monkeypatch):
+    # A run with the bound and a run that searches the neighbours at every
+    # check take the same steps, bit for bit; the bound spares searches.
+    import ase_maud.optimize.models.global_model as global_model
+    from ase_maud.physics.neighbours import NearestDistances
+
+    class Counted(NearestDistances):
+        searches = 0
+
+        def __call__(self, x):
+            self.searches += 1
+            return super().__call__(x)
+
+    runs = []
+    for bound in (True, False):
+        if not bound:
+            monkeypatch.setattr(global_model, '_kept_by_bound', lambda *args: False)
+        atoms = random_scene(seed, 3)
+        nearest = Counted()
+        with Maud(atoms, model=GlobalModel(nearest=nearest), logfile=None,
+                  maxstep_nn=None) as opt:
+            opt.run(fmax=1e-6, steps=60)
+        runs.append((atoms.positions.copy(), opt.nsteps, nearest.searches))
+    (with_bound, steps, few), (without, steps_without, many) = runs
+    assert steps == steps_without
+    np.testing.assert_array_equal(with_bound, without)
+    assert few < many

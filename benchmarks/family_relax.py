@@ -3,6 +3,8 @@ seeded draws of the families of :mod:`ase_maud.scenes.families` (``--families``,
 ``--seeds`` within ``--sizes`` points) and on scenes of the catalogue (``--scenes NAME:SIZE``),
 to ``--fmax``; with ``--crossover N`` each calculator takes the FMM from N points (its
 energies and forces then carry the FMM's declared errors, as on scenes of 10^5 points).
+Maud runs once per stiffness model of ``--models`` (default ``auto``; a row's optimizer is
+``Maud``, or ``Maud-near`` for ``near``, say).
 
 Per run: the calculator calls (the start's included, as ``ase-maud bench`` counts them),
 whether it converged, the end energy, the CPU seconds of the run
@@ -34,13 +36,14 @@ FIELDS = ['scene', 'seed', 'natoms', 'optimizer', 'calls', 'converged', 'energy'
           'wall_s']
 
 
-def relax(atoms, optimizer: str, fmax: float,
-          steps: int) -> tuple[int, bool, float, float]:
-    """Calculator calls (the start's included), convergence, CPU and wall seconds of one run."""
+def relax(atoms, optimizer: str, fmax: float, steps: int,
+          model: str = 'auto') -> tuple[int, bool, float, float]:
+    """Calculator calls (the start's included), convergence, CPU and wall seconds of one
+    run (Maud's with the stiffness model ``model``)."""
     cpu, wall = cpu_seconds(), time.perf_counter()
     with CallRecorder(atoms.calc) as calls:
         if optimizer == 'Maud':
-            converged = Maud(atoms, logfile=None).run(fmax=fmax, steps=steps)
+            converged = Maud(atoms, model=model, logfile=None).run(fmax=fmax, steps=steps)
         else:
             converged = ScipyLBFGSB(atoms).run(fmax=fmax, steps=steps)
     return (len(calls.samples), bool(converged), cpu_seconds() - cpu,
@@ -69,6 +72,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--scenes', nargs='*', default=[],
                         help='catalogue scenes as NAME:SIZE (hub_net:48)')
     parser.add_argument('--optimizers', nargs='+', default=['Maud'], choices=OPTIMIZERS)
+    parser.add_argument('--models', nargs='+', default=['auto'],
+                        help="Maud's stiffness models, one run each (auto, springs, near, ...)")
     parser.add_argument('--crossover', type=int, default=None,
                         help="the calculators' crossover: the FMM from this many points")
     parser.add_argument('--fmax', type=float, default=1e-4)
@@ -79,12 +84,15 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(f'{args.out} exists: not replaced')
     rows = []
     for name, seed, make in scenes(args):
-        for optimizer in args.optimizers:
+        runs = [(optimizer, model) for optimizer in args.optimizers
+                for model in (args.models if optimizer == 'Maud' else ['auto'])]
+        for optimizer, model in runs:
             atoms = make()
             if args.crossover is not None:
                 atoms.calc.set(crossover=args.crossover)
-            calls, converged, cpu, wall = relax(atoms, optimizer, args.fmax, args.steps)
-            row = {'scene': name, 'seed': seed, 'natoms': len(atoms), 'optimizer': optimizer,
+            calls, converged, cpu, wall = relax(atoms, optimizer, args.fmax, args.steps, model)
+            label = optimizer if model == 'auto' else f'{optimizer}-{model}'
+            row = {'scene': name, 'seed': seed, 'natoms': len(atoms), 'optimizer': label,
                    'calls': calls, 'converged': converged,
                    'energy': f'{atoms.get_potential_energy():.6f}', 'cpu_s': f'{cpu:.2f}',
                    'wall_s': f'{wall:.2f}'}

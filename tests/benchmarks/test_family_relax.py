@@ -14,7 +14,8 @@ from helpers import run_example
 def test_rows_of_both_optimizers_and_an_existing_out_is_refused(monkeypatch, tmp_path):
     run_example('family_relax.py', ['--families', 'hub_net', '--seeds', '5', '--sizes', '60',
                                     '90', '--scenes', 'hub_net:4', '--optimizers', 'Maud',
-                                    'L-BFGS-B', '--models', 'auto', 'near', '--fmax', '1e-6', '--out', 'rows.csv'],
+                                    'L-BFGS-B', '--models', 'auto', 'near', '--fmax', '1e-6',
+                                    '--out', 'rows.csv'],
                 monkeypatch, tmp_path, folder='benchmarks')
     rows = list(csv.DictReader((tmp_path / 'rows.csv').open()))
     assert [(r['scene'], r['optimizer']) for r in rows] == [

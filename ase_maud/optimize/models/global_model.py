@@ -86,17 +86,12 @@ class GlobalModel(StiffnessModel):
             there = atoms.copy()   # a resumed run: P where the run built it
             there.calc = atoms.calc
             there.set_positions(built, apply_constraint=False)
-            self._kept = built, self._solver(there), self._distances(built)
+            self._kept = built, self._solver(there), self.nearest(built)
         if self._stale(atoms):
             positions = atoms.positions.copy()
-            self._kept = positions, self._solver(atoms), self._distances(positions)
+            self._kept = positions, self._solver(atoms), self.nearest(positions)
         learnt['built'] = self._kept[0]
         return self._kept[1]
-
-    def _distances(self, positions: np.ndarray) -> np.ndarray:
-        """Each point's nearest-neighbour distance at ``positions`` (none for
-        a lone point, whose model is rebuilt at any move)."""
-        return self.nearest(positions) if len(positions) > 1 else np.zeros(len(positions))
 
     def _solver(self, atoms: Atoms) -> SparseSolver:
         matrix, free, diagonal = self.assemble(atoms)

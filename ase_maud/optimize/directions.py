@@ -26,7 +26,7 @@ from collections.abc import Callable, Sequence
 import numba
 import numpy as np
 
-from ase_maud.optimize.step_length import reach
+from ase_maud.optimize.step_length import lengths, reach
 
 #: Smallest ``s.y / (|s| |y|)`` of a secant pair the L-BFGS memory keeps: the
 #: cosine between ``s`` and ``H s`` for a positive-definite ``H`` is at least
@@ -49,6 +49,24 @@ def keeps_pair(s: np.ndarray, y: np.ndarray) -> bool:
     (:data:`MIN_PAIR_COSINE`)."""
     return bool(np.vdot(s, y) > MIN_PAIR_COSINE * np.vdot(s, s) ** 0.5
                 * np.vdot(y, y) ** 0.5)
+
+
+def within_reach(pairs: Sequence[Pair], memory_reach: float) -> list[Pair]:
+    """The newest of ``pairs`` (oldest first) taken near where the points are
+    now: a pair is kept while the steps of the pairs after it have moved the
+    points by at most ``memory_reach`` (a length) in all, each step counted by
+    its longest point move (a bound on any point's travel since). The newest
+    pair is always kept. A pair holds the curvature where it was taken; a
+    repulsion's curvature changes over moves of its range, so a pair taken
+    further back would teach the recursion the curvature of another shape."""
+    kept: list[Pair] = []
+    travelled = 0.0
+    for s, y in reversed(pairs):
+        if travelled > memory_reach:
+            break
+        kept.append((s, y))
+        travelled += float(lengths(np.asarray(s).reshape(-1, 3)).max(initial=0.0))
+    return kept[::-1]
 
 
 class PairRows:

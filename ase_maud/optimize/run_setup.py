@@ -31,7 +31,7 @@ from ase_maud.optimize.models.secant import SecantModel
 from ase_maud.optimize.step_rules import STEP_DEFAULTS, StepRule, step_rule
 from ase_maud.optimize.strategy import Strategy, compose
 from ase_maud.optimize.subset import SubsetView
-from ase_maud.physics.dofs import PROJECTIONS, free_dofs
+from ase_maud.physics.dofs import PROJECTIONS, free_dofs, held_in_a_plane
 from ase_maud.physics.neighbours import NearestDistances
 
 #: The longest move of a row of a cell filter's coordinates when ``maxstep``
@@ -205,14 +205,34 @@ def rule_for(model: StiffnessModel, scene: Atoms | None, images: int | None,
     instead of the nearest-neighbour bound; atoms under constraints ASE adjusts
     every move for (SHAKE for a bond length, which fails on a move long against
     the distances between points) keep the nearest-neighbour bound in every
-    model."""
+    model. A ``memory_reach`` becomes a length (:func:`memory_reach`)."""
     rule = step_rule(model, images, order=order, **steps)
+    if rule.memory_reach is not None:
+        rule = replace(rule, memory_reach=memory_reach(rule.memory_reach, scene))
     if scene is None:
         return replace(rule, maxstep_nn=None, maxstep=rule.maxstep or CELL_MAXSTEP)
     if rule.maxstep_nn is None and not all(isinstance(c, PROJECTIONS)
                                            for c in getattr(scene, 'constraints', ())):
         return replace(rule, maxstep_nn=STEP_DEFAULTS['common']['maxstep_nn'])
     return rule
+
+
+def memory_reach(reach: float, scene: Any) -> float | None:
+    """The length ``reach`` times ``a`` of ``scene``'s MaudCalculator where
+    the scene has repulsion (``a > 0``) and is held in a plane
+    (:func:`~ase_maud.physics.dofs.held_in_a_plane`: a net on its supports);
+    None elsewhere. A held net takes its large-scale stiffness from its
+    springs and supports, which ``P`` has; its memory learns the near
+    repulsion, whose curvature changes as the net takes its shape. A free
+    scene, or one hanging from a point (a tree from its root), unfolds under
+    the repulsion, and its memory learns the repulsion's large-scale
+    stiffness too, which ages slowly: forgetting it took more calls
+    (docs/optimizer.md)."""
+    calc = getattr(scene, 'calc', None)
+    if (not isinstance(calc, MaudCalculator) or not calc.potential.a
+            or not held_in_a_plane(scene)):
+        return None
+    return reach * calc.potential.a
 
 
 def image_size(system: Any) -> int | None:

@@ -21,20 +21,22 @@ from ase_maud.optimize.models.springs import SpringsModel
 #: the global and springs ones with an L-BFGS memory over their ``P`` and the
 #: whole move scaled by one factor (the springs one by the scene's size only,
 #: gamma back to 1 after every accepted step and a cubic cut on a rise, as a
-#: line search). The nodal and secant models keep Day's momentum, as the
-#: specification has it; the bfgs model (a secant ``kappa I`` with a long
-#: memory, for calculators with forces only) takes no momentum, 100 pairs, and
-#: the step of ASE's BFGS: the whole move scaled by one factor so that no
-#: point moves more than 0.2 (A; nor the common 0.45 of its nearest-neighbour
-#: distance, on atoms), gamma back to 1 after every accepted step
-#: and, on a rise, the pair of the step taken back learnt and the model's new
-#: move cut to the cubic cut's length; chosen by measurement on ASE's
-#: systems (docs/dev/benchmarks.md).
+#: line search; on a net held in a plane its memory forgets a pair once the
+#: points have moved one ``a`` since: ``memory_reach``, in units of ``a``).
+#: The nodal and secant models keep Day's momentum, as the specification has
+#: it; the bfgs model (a secant ``kappa I`` with a long memory, for
+#: calculators with forces only) takes no momentum, 100 pairs, and the step
+#: of ASE's BFGS: the whole move scaled by one factor so that no point moves
+#: more than 0.2 (A; nor the common 0.45 of its nearest-neighbour distance,
+#: on atoms), gamma back to 1 after every accepted step and, on a rise, the
+#: pair of the step taken back learnt and the model's new move cut to the
+#: cubic cut's length; chosen by measurement on ASE's systems
+#: (docs/dev/benchmarks.md).
 STEP_DEFAULTS: dict[Any, dict[str, Any]] = {
     'common': {'gamma': 1.0, 'gamma_growth': 1.1, 'overshoot_shrink': 0.6,
                'maxstep_nn': 0.45, 'maxstep': None, 'maxstep_size': None,
                'trust_region': False, 'interpolate': False, 'bound': 'each',
-               'learn_rises': False},
+               'learn_rises': False, 'memory_reach': None},
     ExactModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 0, 'trust_region': True,
                  'gamma_growth': 2.0},
     GlobalModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 30, 'bound': 'whole'},
@@ -45,7 +47,7 @@ STEP_DEFAULTS: dict[Any, dict[str, Any]] = {
                 'learn_rises': True},
     SpringsModel: {'gamma_max': 1.0, 'beta_max': 0.0, 'memory': 20, 'maxstep_nn': None,
                    'maxstep_size': 1.0, 'bound': 'whole', 'gamma_growth': 1e3,
-                   'interpolate': True},
+                   'interpolate': True, 'memory_reach': 1.0},
 }
 
 
@@ -80,6 +82,11 @@ class StepRule:
     interpolate: bool
     bound: str
     learn_rises: bool
+    #: The L-BFGS memory forgets a pair once the points have moved this far
+    #: since it was taken (:func:`~ase_maud.optimize.directions.within_reach`;
+    #: a length once :func:`~ase_maud.optimize.run_setup.memory_reach` has
+    #: scaled the default by the scene's ``a``); None: kept while it fits.
+    memory_reach: float | None
     #: Points per image when the positions are a chain of images (ASE's NEB):
     #: the nearest other point is sought within the same image only (the same
     #: atom in the next image is not a neighbour). None: one scene.

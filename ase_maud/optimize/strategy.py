@@ -83,6 +83,7 @@ from ase_maud.optimize.directions import (
     momentum_weight,
     off,
     truncated_newton,
+    within_reach,
 )
 from ase_maud.optimize.models.base import Solver, StiffnessModel
 from ase_maud.optimize.state import LocalAt, MaudState, Point
@@ -143,11 +144,14 @@ class Strategy:
 
     def remember(self, state: MaudState, s: np.ndarray, y: np.ndarray) -> None:
         """Keep the secant pair ``(s, y)`` in the L-BFGS memory (if the rule
-        has one and :func:`keeps_pair`), the oldest dropped beyond its size;
-        the pairs are views of ``state.rows``, one copy of each."""
+        has one and :func:`keeps_pair`), the oldest dropped beyond its size
+        and, with a ``memory_reach``, beyond it (:func:`within_reach`); the
+        pairs are views of ``state.rows``, one copy of each."""
         if self.rule.memory and keeps_pair(s, y):
-            state.pairs = state.rows.store([*state.pairs, (s, y)][-self.rule.memory:],
-                                           self.rule.memory)
+            pairs = [*state.pairs, (s, y)][-self.rule.memory:]
+            if self.rule.memory_reach is not None:
+                pairs = within_reach(pairs, self.rule.memory_reach)
+            state.pairs = state.rows.store(pairs, self.rule.memory)
 
 
 @dataclass(frozen=True)

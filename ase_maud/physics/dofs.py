@@ -27,6 +27,14 @@ def free_dofs(atoms: Atoms, dim: int) -> np.ndarray:
     return free[:, :dim] != 0
 
 
+def held_in_a_plane(atoms: Atoms) -> bool:
+    """Whether the points FixAtoms and FixCartesian hold in every coordinate
+    are at least three and not all on one line (a net held at its rim, say:
+    a plane can be fitted to them)."""
+    held = atoms.positions[~free_dofs(atoms, 3).any(axis=1)]
+    return len(held) >= 3 and np.linalg.matrix_rank(held - held.mean(axis=0), tol=1e-9) >= 2
+
+
 def column_null_space(matrix: np.ndarray, rcond: float) -> np.ndarray:
     """Orthonormal columns spanning the null space of ``matrix`` (m, r), its
     singular values below ``rcond`` times the largest taken for zero (as

@@ -45,7 +45,7 @@ from ase_maud.checks import check_all
 from ase_maud.counting import CallRecorder, Work, cpu_seconds, fresh_copy
 from ase_maud.errors import MaudError
 from ase_maud.optimize.maud import Maud
-from ase_maud.physics.dofs import free_dofs
+from ase_maud.physics.dofs import free_dofs, held_in_a_plane
 from ase_maud.saddles.string_method import PreconditionedString
 
 #: The largest residual force of a relaxed band (``band_fmax``), in units of ``Q a``.
@@ -314,7 +314,7 @@ def reflection(minimum: Atoms) -> Atoms:
     """
     fixed = ~free_dofs(minimum, 3).any(axis=1)
     rim = minimum.positions[fixed]
-    if len(rim) < 3 or np.linalg.matrix_rank(rim - rim.mean(axis=0), tol=1e-9) < 2:
+    if not held_in_a_plane(minimum):
         raise ValueError(f'a mirror image needs at least three fixed points not on one line '
                          f'to fit a plane to; this scene has {len(rim)} fixed points'
                          f'{"" if len(rim) < 3 else ", all on one line"}')

@@ -1,12 +1,13 @@
 """The L-BFGS memory as rows kept from step to step
 (ase_maud.optimize.directions.PairRows): the same direction, to the last bit,
 as a memory stacked afresh, through a run's appends, drops and resets; the
-pairs stored as views of their rows, one copy of each."""
+pairs stored as views of their rows, one copy of each. The memory's reach
+(within_reach): the newest pairs the points have not moved far from."""
 
 import numpy as np
 import pytest
 
-from ase_maud.optimize.directions import PairRows, lbfgs
+from ase_maud.optimize.directions import PairRows, lbfgs, within_reach
 
 
 @pytest.mark.parametrize('seed', [0, 1, 2])
@@ -65,3 +66,22 @@ def test_stored_pairs_are_their_rows_and_keep_their_values(seed):
         forces = rng.normal(size=(n, 3))
         assert np.array_equal(lbfgs(lambda f: f, forces, pairs, rows),
                               lbfgs(lambda f: f, forces, values)), step
+
+
+@pytest.mark.parametrize('seed', [6, 7, 8])
+def test_within_reach_keeps_the_pairs_taken_near_where_the_points_are(seed):
+    """A pair stays while the longest point moves of the pairs after it sum
+    to at most the reach: checked pair by pair against that sum, for reaches
+    from none to all of the pairs' travel."""
+    rng = np.random.default_rng(seed)
+    n, count = int(rng.integers(2, 30)), int(rng.integers(1, 25))
+    pairs = [(rng.normal(size=(n, 3)) * rng.uniform(0.01, 3.0), rng.normal(size=(n, 3)))
+             for _ in range(count)]
+    longest = np.array([np.linalg.norm(s, axis=1).max() for s, _ in pairs])
+    after = np.concatenate([np.cumsum(longest[::-1])[::-1][1:], [0.0]])   # travel since each
+    for reach in [0.0, *rng.uniform(0.0, longest.sum(), 5), longest.sum()]:
+        kept = within_reach(pairs, reach)
+        expected = [pair for pair, travel in zip(pairs, after, strict=True) if travel <= reach]
+        assert [id(s) for s, _ in kept] == [id(s) for s, _ in expected]
+        assert kept[-1][0] is pairs[-1][0]   # the newest always stays
+    assert len(within_reach(pairs, np.inf)) == count

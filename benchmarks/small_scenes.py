@@ -19,8 +19,9 @@ of ``--repeat`` runs from fresh copies (default 3; the calls are the same each t
 point is checked to be a minimum by the analytic Hessian
 (``ase_maud.analysis.stationary.classify``).
 ``--profile`` gives Maud's CPU a step and its shares in the kernel (the Hessian,
-or a held net's block of it) and the factorisations (timers around those calls over
-repeated unprofiled runs of one scene; it runs on an older checkout too).
+or a held net's block of it), the factorisations of the Python step and the compiled
+step (timers around those calls over repeated unprofiled runs of one scene; it runs on
+an older checkout too).
 Run with one thread and save the raw numbers::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
@@ -44,6 +45,11 @@ from ase_maud.backends import direct
 from ase_maud.bench.optimizers import ScipyLBFGSB
 from ase_maud.counting import CallRecorder
 from ase_maud.optimize.models import exact as stiffness
+
+try:   # a checkout with the compiled step (older ones run without it)
+    from ase_maud.optimize import compiled_step as compiled
+except ImportError:
+    compiled = None
 from ase_maud.physics import pair_law
 from ase_maud.physics.pair_law import spring_terms
 from ase_maud.scenes.catalogue import build
@@ -169,9 +175,10 @@ def measure(name, size, seed, fmax, steps, repeat=3):
 @contextmanager
 def timed(module, names, totals, key):
     """Within: each function ``names`` of ``module`` (those it has: an older
-    version may lack one) adds its process CPU seconds to ``totals[key]``
+    version may lack one, or the module: None) adds its process CPU seconds to ``totals[key]``
     (restored after)."""
-    kept = {name: getattr(module, name) for name in names if hasattr(module, name)}
+    kept = {name: getattr(module, name) for name in names
+            if module is not None and hasattr(module, name)}
 
     def timer(function):
         def wrapper(*args, **kwargs):
@@ -194,17 +201,22 @@ def timed(module, names, totals, key):
 def profile(name, size, seed, fmax, repeats=20):
     """Shares of Maud's run time (process CPU, the optimiser's construction
     and run) in the kernel (the one pass over the pairs that gives the
-    energy, forces and Hessian) and the factorisations (LAPACK's Cholesky
-    and eigen-decomposition, as the exact model calls them), by timers
-    around those calls in ``repeats`` unprofiled runs (cProfile's cost per
-    Python call would inflate the rest)."""
+    energy, forces and Hessian), the factorisations (LAPACK's Cholesky and
+    eigen-decomposition as the exact model calls them: the Python step's, and
+    the compiled step's eigen-decompositions) and the compiled step (its
+    merit test, Cholesky factor, solves and trust region, where a checkout
+    has it), by timers around those calls in
+    ``repeats`` unprofiled runs (cProfile's cost per Python call would
+    inflate the rest)."""
     atoms = build(name, size, seed=seed)
     run_maud(fresh(atoms), fmax, 5000)   # every kernel compiled and loaded
     copies = [fresh(atoms) for _ in range(repeats)]
-    totals = {'kernel': 0.0, 'factorisations': 0.0}
+    totals = {'kernel': 0.0, 'factorisations': 0.0, 'compiled step': 0.0}
     steps = 0
     with timed(direct, ['repulsion_hessian', 'repulsion_hessian_block'], totals, 'kernel'), \
             timed(pair_law, ['repulsion_hessian_block'], totals, 'kernel'), \
+            timed(compiled, ['scene_terms'], totals, 'kernel'), \
+            timed(compiled, ['_judge', '_move'], totals, 'compiled step'), \
             timed(stiffness, ['dpotrf', 'dpotrs', 'dsyevd'], totals, 'factorisations'):
         start = time.process_time()
         for copy in copies:
@@ -254,7 +266,8 @@ def main() -> None:
                            ('hanging_net', 5)):
             shares = profile(name, size, args.seeds[0], args.fmax)
             print('profile', shares['scene'], f"{shares['us a step']:.0f} us a step:", ' '.join(
-                f'{k} {shares[k]:.0%}' for k in ('kernel', 'factorisations', 'rest')))
+                f'{k} {shares[k]:.0%}' for k in ('kernel', 'factorisations', 'compiled step',
+                                                 'rest')))
 
 
 if __name__ == '__main__':

@@ -126,6 +126,9 @@ class MaudCalculator(LockedCalculator):
     energy and forces.
     """
 
+    #: Results :meth:`take` hands to :meth:`calculate` (None: compute them).
+    _taken: tuple[dict[str, Any], float] | None = None
+
     implemented_properties = ['energy', 'free_energy', 'forces', 'stiffness',
                               'hessian']
     # springs default to a tuple: Calculator.todict compares each parameter
@@ -285,11 +288,34 @@ class MaudCalculator(LockedCalculator):
                                  'with ase_maud.scenes.builders.keep_on_plane(atoms))')
         return positions
 
+    def take(self, atoms: Atoms, energy: float, forces: np.ndarray, hessian: np.ndarray,
+             force_scale: float) -> None:
+        """Hold the results of ``atoms``' positions that a loop on arrays
+        computed by this calculator's law in one compiled pass
+        (:func:`.potential.scene_terms`, exact: what :meth:`calculate` gives
+        for ``'hessian'``): the energy, forces (N, 3), Hessian (dim N, dim N)
+        and the largest repulsion force (``a Q``), finite. It is one call of
+        :meth:`calculate`, which holds them (and counts as any call)."""
+        with self._lock:
+            self._taken = {'energy': float(energy), 'forces': forces, 'hessian': hessian,
+                           'free_energy': float(energy)}, force_scale
+            try:
+                self.results = {}
+                self.calculate(atoms, ['hessian'], ['positions'])
+            finally:
+                self._taken = None
+
     def calculate(self, atoms: Atoms | None = None,
                   properties: Sequence[str] = ('energy',),
                   system_changes: Sequence[str] = all_changes) -> None:
         if atoms is not None:
             self._hold(atoms, system_changes)
+        if self._taken is not None:   # computed by :meth:`take`'s caller
+            self.results, self.last_force_scale = self._taken
+            self.last_backend = (backends.exact_choice(self.parameters['backend']).backend.name
+                                 if self.potential.repulsive else 'none')
+            self.last_tolerance = self.last_energy_error = 0.0
+            return
         positions = self.check_atoms(self.atoms)
         potential = self.potential
         dim, a, Q = potential.dim, potential.a, potential.Q

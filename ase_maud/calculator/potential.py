@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from contextlib import nullcontext
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -221,6 +222,17 @@ class MaudPotential:
             np.broadcast_to(np.asarray(self.stiffnesses, float), len(self.springs)).copy()))
         return _spring_sums(np.ascontiguousarray(scaled, dtype=float), springs, q)
 
+    def scene_arrays(self, natoms: int) -> SceneArrays:
+        """What :func:`scene_terms` takes for a scene of ``natoms`` points
+        (kept per N): the law's arrays, as the calculator's own sums use them."""
+        springs, q = self._kept(('spring sums', natoms), lambda: (
+            np.ascontiguousarray(self._springs_within(natoms), dtype=np.int64),
+            np.broadcast_to(np.asarray(self.stiffnesses, float), len(self.springs)).copy()))
+        self.check_loads(natoms)
+        loads = np.zeros((natoms, 3)) if self.loads is None else self.loads
+        return SceneArrays(springs, q, loads, *self._entries(natoms), float(self.a),
+                           float(self.Q), self.dim)
+
     def spring_hessian(self, natoms: int) -> sp.csr_matrix:
         """The springs' exact, constant Hessian ``Q (L_q (x) I_dim)``
         (:meth:`spring_laplacian`), shape (dim N, dim N), coordinates point
@@ -423,6 +435,67 @@ class MaudPotential:
             return topology.describe_net_load(total)
         components = self.unbounded_components(atoms) if minimum else []
         return topology.describe_unbounded(components) if components else None
+
+class SceneArrays(NamedTuple):
+    """The arrays of a scene's law (:meth:`MaudPotential.scene_arrays`):
+    the springs (K, 2) int64 and their ``q`` (K,), the loads (N, 3) (zero
+    if none), the springs' Hessian's flat entries and values
+    (:func:`_flat_entries`, times ``Q``), ``a``, ``Q`` and ``dim``."""
+
+    springs: np.ndarray
+    q: np.ndarray
+    loads: np.ndarray
+    flat: np.ndarray
+    data: np.ndarray
+    a: float
+    Q: float
+    dim: int
+
+
+@numba.njit(cache=True)
+def scene_terms(x: np.ndarray, law: SceneArrays) -> tuple[float, np.ndarray, np.ndarray, float]:
+    """The energy, forces (N, 3) and dense Hessian (dim N, dim N) at the
+    positions ``x`` (N, 3, user units) of the scene whose ``law`` is given,
+    in one compiled pass, and the largest repulsion force (``a Q``): what
+    :meth:`MaudCalculator.calculate <ase_maud.MaudCalculator.calculate>`
+    gives for ``'hessian'`` by an exact backend, the same sums in the same
+    order (:func:`.direct.repulsion_hessian`, :func:`_spring_sums`, the
+    loads, :meth:`MaudPotential.whole_hessian`'s entries), for a loop on
+    arrays. Results may be non-finite (coincident points, overflow): the
+    caller asks the calculator, which names the problem."""
+    n, dim, a, Q = x.shape[0], law.dim, law.a, law.Q
+    if a > 0:
+        scaled = x / a
+        if dim == 2:
+            scaled[:, 2] = 0.0
+        e_rep, f_rep, hessian = direct.repulsion_hessian(scaled, dim)
+        e_unit, f_unit = a * a * Q, a * Q
+        force_max = 0.0
+        for i in range(n):
+            force_max = max(force_max, np.sqrt(f_rep[i, 0] ** 2 + f_rep[i, 1] ** 2
+                                               + f_rep[i, 2] ** 2))
+    else:   # a = 0: springs and loads alone, in the user's units, times Q
+        scaled, e_rep, f_rep = x, 0.0, np.zeros((n, 3))
+        hessian = np.zeros((dim * n, dim * n))
+        e_unit = f_unit = Q
+        force_max = 0.0
+    e_spr, f_spr = _spring_sums(scaled, law.springs, law.q)
+    energy = e_unit * (e_rep + e_spr)
+    forces = f_unit * (f_rep + f_spr)
+    e_load = 0.0
+    for i in range(n):
+        for k in range(3):
+            e_load += law.loads[i, k] * x[i, k]
+    energy -= e_load
+    forces += law.loads
+    hessian *= Q
+    flat_hessian = hessian.reshape(-1)
+    for e in range(law.flat.shape[0]):
+        flat_hessian[law.flat[e]] += law.data[e]
+    if dim == 2:
+        forces[:, 2] = 0.0
+    return energy, forces, hessian, a * Q * force_max
+
 
 @numba.njit(cache=True)
 def _spring_sums(x: np.ndarray, springs: np.ndarray,

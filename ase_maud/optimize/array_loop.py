@@ -31,6 +31,7 @@ from ase.constraints import FixAtoms, FixCartesian
 from ase_maud.calculator import accuracy
 from ase_maud.calculator.maud_calculator import MaudCalculator
 from ase_maud.errors import MaudError
+from ase_maud.optimize import compiled_step
 from ase_maud.optimize.models.base import StiffnessModel
 from ase_maud.optimize.monitor import RunMonitor
 from ase_maud.optimize.state import LocalAt, MaudState
@@ -156,8 +157,11 @@ def run(opt: Any, steps: int, no_step: Callable[[str], None],
     ``no_step(why)`` stops a run with no finite step, ``stop(error)`` any
     other MaudError (both raise). Returns whether it converged."""
     opt.max_steps = opt.nsteps + steps
-    steps_made = relax(opt.atoms, opt.model, opt.strategy, opt.state, opt.monitor, opt.fmax,
-                       lambda: opt.nsteps, no_step)
+    steps_made = (compiled_step.relax(opt.atoms, opt.strategy, opt.state, opt.monitor,
+                                      lambda: opt.nsteps, no_step)
+                  if compiled_step.applies(opt.strategy, opt.state, opt.atoms)
+                  else relax(opt.atoms, opt.model, opt.strategy, opt.state, opt.monitor,
+                             opt.fmax, lambda: opt.nsteps, no_step))
     name = type(opt).__name__
     logfile = None if getattr(opt.logfile, '_logfile', '') is None else opt.logfile
     try:

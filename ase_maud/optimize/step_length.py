@@ -169,19 +169,24 @@ def reach(start: np.ndarray, step: np.ndarray, limit: np.ndarray) -> float:
     return float(reaches(start, step, limit).min(initial=np.inf))
 
 
+@numba.njit(cache=True)
 def reaches(start: np.ndarray, step: np.ndarray, limit: np.ndarray) -> np.ndarray:
     """Each point's largest ``t`` in [0, inf] with ``|start_i + t step_i| <=
     limit_i`` (``start`` within its limits; (N,)): the positive root of
     ``|start_i + t step_i|**2 = limit_i**2``, inf for a point that does not
-    move, and 0 (not a negative rounding) for one on its limit moving out."""
-    a = np.einsum('ij,ij->i', step, step)
-    b = np.einsum('ij,ij->i', start, step)
-    c = np.einsum('ij,ij->i', start, start) - limit**2
-    roots = np.full(len(a), np.inf)
-    moving = a > 0
-    roots[moving] = (-b[moving] + np.sqrt(np.maximum(b[moving]**2 - a[moving] * c[moving],
-                                                     0.0))) / a[moving]
-    return np.maximum(roots, 0.0)
+    move, and 0 (not a negative rounding) for one on its limit moving out
+    (compiled: the Python step and :mod:`.compiled_step` share it)."""
+    roots = np.full(start.shape[0], np.inf)
+    for i in range(start.shape[0]):
+        a = b = c = 0.0
+        for k in range(start.shape[1]):
+            a += step[i, k] * step[i, k]
+            b += start[i, k] * step[i, k]
+            c += start[i, k] * start[i, k]
+        c -= limit[i] ** 2
+        if a > 0:
+            roots[i] = max((-b + np.sqrt(max(b * b - a * c, 0.0))) / a, 0.0)
+    return roots
 
 
 def bound(step: np.ndarray, limit: np.ndarray, whole: bool = False) -> np.ndarray:
@@ -256,27 +261,59 @@ def damping(moves: Callable[[float], np.ndarray | None], gamma: float,
     while (f_high := excess(best)) > 0:
         high *= 10.0
         best = moves(high)
-    low, kept, slope = high * 1e-12, None, -1.0
-    g_high, g_low = f_high, np.inf   # what false position weighs: Illinois halves an end kept twice
+    bracket = damping_bracket(high, f_high)
     for _ in range(DAMPING_TRIALS):
-        if f_high >= -DAMPING_TOLERANCE or np.log(high / low) <= DAMPING_TOLERANCE:
+        if not (mid := damping_trial(bracket)):
             break
-        if np.isinf(g_low):
-            mid = max(high * np.exp(-f_high / slope), np.sqrt(low * high))
-        else:
-            mid = high * (low / high) ** (g_high / (g_high - g_low))
         move = moves(mid)
-        if (f := excess(move)) > 0:
-            low, g_low = mid, f
-            g_high *= 0.5 if kept == 'high' else 1.0
-            kept = 'high'
-        else:
-            if f > f_high:   # the secant of the moves that fit
-                slope = (f - f_high) / np.log(mid / high)
-            high, f_high, g_high, best = mid, f, f, move
-            g_low *= 0.5 if kept == 'low' else 1.0
-            kept = 'low'
+        bracket = narrowed(bracket, mid, f := excess(move))
+        if f <= 0:
+            best = move
     return best
+
+
+#: :func:`damping`'s bracket: ``(high, low, f_high, g_high, g_low, slope,
+#: kept)``, the damping whose move fits and one whose move does not, the log
+#: ratio of the fitting move to its limit, what false position weighs at each
+#: end, the secant's slope and which end stayed at the last trial (0 none
+#: yet, 1 the high end, 2 the low end).
+Bracket = tuple[float, float, float, float, float, float, float]
+
+
+@numba.njit(cache=True)
+def damping_bracket(high: float, f_high: float) -> Bracket:
+    """The bracket from ``1e-12`` of the damping ``high`` whose move fits
+    (``f_high``: its log ratio to the limit, <= 0); the secant's first slope is
+    that of a move ``f / mu``."""
+    return high, high * 1e-12, f_high, f_high, np.inf, -1.0, 0.0
+
+
+@numba.njit(cache=True)
+def damping_trial(bracket: Bracket) -> float:
+    """The next damping to try (0: the fitting end is within
+    :data:`DAMPING_TOLERANCE` of its limit, or the bracket that narrow):
+    while no lower end has a move, the secant through the last two moves
+    that fit (never below the bracket's geometric middle), then false
+    position (Illinois), in ``log mu``."""
+    high, low, f_high, g_high, g_low, slope, _ = bracket
+    if f_high >= -DAMPING_TOLERANCE or np.log(high / low) <= DAMPING_TOLERANCE:
+        return 0.0
+    if np.isinf(g_low):
+        return max(high * np.exp(-f_high / slope), np.sqrt(low * high))
+    return high * (low / high) ** (g_high / (g_high - g_low))
+
+
+@numba.njit(cache=True)
+def narrowed(bracket: Bracket, mid: float, f: float) -> Bracket:
+    """The bracket after the trial ``mid`` whose move's log ratio is ``f``:
+    its new low end if the move does not fit (``f > 0``), else its new high
+    end (Illinois halves the weight of an end kept twice)."""
+    high, low, f_high, g_high, g_low, slope, kept = bracket
+    if f > 0:
+        return high, mid, f_high, g_high * (0.5 if kept == 1.0 else 1.0), f, slope, 1.0
+    if f > f_high:   # the secant of the moves that fit
+        slope = (f - f_high) / np.log(mid / high)
+    return mid, low, f, f, g_low * (0.5 if kept == 2.0 else 1.0), slope, 2.0
 
 
 def trust_fraction(gamma: float, actual: float, predicted: float, gamma_max: float,

@@ -142,8 +142,8 @@ def test_restart_reproduces_uninterrupted_run(tmp_path, model, seed):
     # the springs model's L-BFGS memory, the secant model's learnt kappa, the
     # momentum of the nodal one and where the global one built its P all come
     # back from the files; the near one finds its pairs at every step
-    straight = build('hanging_net', 8, seed=seed)
-    with Maud(straight, logfile=None, model=model) as opt:
+    straight = build('hanging_net', 8, seed=seed)   # with files too: ASE's loop
+    with Maud(straight, logfile=None, model=model, restart=tmp_path / 'straight.json') as opt:
         opt.run(fmax=1e-300, steps=30)
     interrupted = build('hanging_net', 8, seed=seed)
     restart = tmp_path / 'maud.json'

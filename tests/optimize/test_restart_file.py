@@ -166,8 +166,8 @@ def test_loads_and_force_densities_are_part_of_the_scene(tmp_path, seed):
         atoms.calc.set(q=rng.uniform(0.5, 2.0, len(atoms.calc.springs)))
         return atoms
 
-    straight = scene()
-    with Maud(straight, logfile=None) as opt:
+    straight = scene()   # with a restart file too: ASE's loop
+    with Maud(straight, logfile=None, restart=tmp_path / 'straight.json') as opt:
         opt.run(fmax=1e-300, steps=12)
     restart, trajectory = tmp_path / 'maud.json', tmp_path / 'maud.traj'
     with Maud(scene(), logfile=None, restart=restart, trajectory=trajectory) as opt:

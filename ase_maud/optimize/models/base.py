@@ -176,7 +176,7 @@ class StiffnessModel(ABC):
         model learns."""
         return learnt
 
-    def _absolute(self, values: np.ndarray) -> np.ndarray:
+    def safe_eigenvalues(self, values: np.ndarray) -> np.ndarray:
         """Eigenvalues made safe to divide by: ``|lambda|`` (or signed, for
         ``'stationary'``) floored at ``floor`` times the largest of each row."""
         size = np.abs(values)

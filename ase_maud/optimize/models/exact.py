@@ -26,6 +26,7 @@ from ase_maud.optimize.models.base import (
 from ase_maud.physics.dofs import (
     allowed_basis,
     allowed_rigid_modes,
+    free_dofs,
     project_off,
 )
 
@@ -45,7 +46,7 @@ class ExactModel(StiffnessModel):
     when that succeeds: the Newton step costs no eigen-decomposition
     (:class:`_CholeskySolver`). Where the shifted Hessian is indefinite, or
     for ``'stationary'``, it is eigen-decomposed and its eigenvalues made
-    safe (:meth:`StiffnessModel._absolute`: absolute values for
+    safe (:meth:`StiffnessModel.safe_eigenvalues`: absolute values for
     ``'minimum'``, saddle-free Newton; signs kept for ``'stationary'``);
     ``floor`` is relative to the largest absolute eigenvalue of the whole
     matrix (default 1e-8: soft collective modes must keep their own
@@ -124,8 +125,8 @@ class ExactModel(StiffnessModel):
             quadratic = getattr(getattr(atoms.calc, 'potential', None), 'a', None) == 0
             return ((quadratic and _CholeskySolver.of(matrix, basis, free, index, 0.0))
                     or _CholeskySolver.of(matrix, basis, free, index, self.floor)
-                    or _EigenSolver(matrix, basis, free, index, self._absolute))
-        return _EigenSolver(matrix, basis, free, index, self._absolute)
+                    or _EigenSolver(matrix, basis, free, index, self.safe_eigenvalues))
+        return _EigenSolver(matrix, basis, free, index, self.safe_eigenvalues)
 
     def _internal(self, matrix: np.ndarray, rigid: np.ndarray,
                   basis: np.ndarray | None) -> _EigenSolver:
@@ -155,7 +156,10 @@ class ExactModel(StiffnessModel):
         :attr:`free_index` its components (:func:`free_index`)."""
         key = (len(atoms), dim, [_constraint_key(c) for c in atoms.constraints])
         if self._basis is None or self._basis[0] != key:
-            basis = allowed_basis(atoms, dim) if atoms.constraints else None
+            if all(isinstance(c, (FixAtoms, FixCartesian)) for c in atoms.constraints):
+                basis = _selection(free_dofs(atoms, dim)) if atoms.constraints else None
+            else:
+                basis = allowed_basis(atoms, dim)
             self._basis, self._held = (key, basis), None
             if basis is not None and (np.abs(basis).sum(axis=0) == 1).all() and (
                     np.count_nonzero(basis, axis=0) == 1).all():
@@ -165,6 +169,16 @@ class ExactModel(StiffnessModel):
                           else ~self._held)
             self._free_index = free_index(self._free)
         return self._basis[1]
+
+
+def _selection(free: np.ndarray) -> np.ndarray:
+    """:func:`allowed_basis` where the constraints hold whole coordinates
+    (FixAtoms, FixCartesian): the unit columns (dim N, m) of the ``free``
+    (N, dim) coordinates, in order, without its eigen-decompositions."""
+    kept = np.flatnonzero(free)
+    basis = np.zeros((free.size, kept.size))
+    basis[kept, np.arange(kept.size)] = 1.0
+    return basis
 
 
 def _constraint_key(constraint: Any) -> tuple:
@@ -245,6 +259,18 @@ def _cholesky(matrix: np.ndarray, shift: float) -> np.ndarray | None:
     return factor if info == 0 else None
 
 
+def eigenpairs_of(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The eigenvalues (ascending) and eigenvectors (columns) of the
+    symmetric ``matrix``: LAPACK's syevd on its lower triangle, as numpy's
+    eigh calls it (the same digits), without its wrapper; a LinAlgError if
+    it did not converge."""
+    values, vectors, info = dsyevd(matrix, lower=True)
+    if info:
+        raise np.linalg.LinAlgError(f'the eigen-decomposition did not converge '
+                                    f'(LAPACK syevd info {info})')
+    return values, vectors
+
+
 class _EigenSolver(_DenseSolver, DampedSolver, ModeSolver):
     """``K^-1`` from its eigen-decomposition, its eigenvalues made safe by
     ``absolute`` (signed and floored for ``'stationary'``; as they are for
@@ -263,12 +289,7 @@ class _EigenSolver(_DenseSolver, DampedSolver, ModeSolver):
 
     def _decomposed(self) -> tuple[np.ndarray, np.ndarray]:
         if self._pairs is None:
-            # LAPACK's syevd on the lower triangle, as numpy's eigh calls it
-            # (the same digits), without its wrapper
-            values, vectors, info = dsyevd(self.matrix, lower=True)
-            if info:
-                raise np.linalg.LinAlgError(f'the eigen-decomposition did not converge '
-                                            f'(LAPACK syevd info {info})')
+            values, vectors = eigenpairs_of(self.matrix)
             kept = len(values) - self.lifted
             self._pairs = self.absolute(values[:kept]), vectors[:, :kept]
         return self._pairs

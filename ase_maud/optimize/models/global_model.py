@@ -110,7 +110,7 @@ class GlobalModel(StiffnessModel):
         degree = springs.diagonal()[::dim, None, None] * np.eye(dim)  # Q deg_q(m) I
         values, vectors = np.linalg.eigh(blocks - degree)
         repulsion = np.einsum('nik,nk,njk->nij', vectors,
-                              self._absolute(values), vectors)
+                              self.safe_eigenvalues(values), vectors)
         free = free_dofs(atoms, dim)
         keep = np.flatnonzero(free.ravel())
         diagonal = sp.bsr_matrix((repulsion, np.arange(n), np.arange(n + 1)),

@@ -45,7 +45,7 @@ class NodalModel(StiffnessModel):
             total = (size if self.target == 'minimum' else values).sum(axis=1)
             trace = np.where(total < 0, -1.0, 1.0) * np.maximum(np.abs(total), floor)
             return _TraceSolver(trace, free)
-        return _BlockSolver(vectors, self._absolute(values), free)
+        return _BlockSolver(vectors, self.safe_eigenvalues(values), free)
 
 
 class _TraceSolver(Solver):

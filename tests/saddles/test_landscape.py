@@ -108,20 +108,31 @@ def test_a_landscape_on_two_workers_is_the_one_in_process(scene, size, seed, cli
     assert _same_graph(spread, here) and here.saddles
 
 
-@pytest.mark.integration
-@pytest.mark.parametrize('seed', range(2))
-def test_a_large_landscape_on_two_workers_is_the_one_in_process(seed, client):
-    """Above the exact model's size (a tree of 60 points, 177 free
-    coordinates, above EXACT_MAX_DOFS: the springs model's lowest modes
-    climb) the landscape finds verified saddles, and two dask workers find
-    the same graph (seeds 0-3 measured to pass at 60 points; 100 points took
-    three times as long)."""
+@functools.cache
+def _large_landscape(seed):
+    """A tree of 60 points (177 free coordinates, above EXACT_MAX_DOFS: the
+    springs model's lowest modes climb) at its minimum, and its landscape
+    (one mode), computed once for the tests that read them."""
     minimum = _minimum('tree', 60, seed)
     assert 3 * (len(minimum) - 1) > EXACT_MAX_DOFS   # the root is fixed
-    here = landscape(minimum, modes=1, fmax=FMAX, steps=500)
+    return minimum, landscape(minimum, modes=1, fmax=FMAX, steps=500)
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize('seed', range(2))
+def test_a_large_landscape_finds_verified_saddles(seed):
+    """Above the exact model's size the landscape finds saddles, each a
+    verified index-1 saddle (seeds 0-3 measured to pass at 60 points; 100
+    points took three times as long)."""
+    _, here = _large_landscape(seed)
     assert here.saddles and here.failed == 0
     for saddle in here.saddles:
         point = classify(fresh_copy(saddle), ftol=FMAX)
         assert point.verdict == 'saddle' and point.index == 1
+
+
+@pytest.mark.integration
+def test_a_large_landscape_on_two_workers_is_the_one_in_process(client):
+    minimum, here = _large_landscape(0)
     spread = landscape(minimum, modes=1, fmax=FMAX, steps=500, client=client)
     assert _same_graph(spread, here)

@@ -94,6 +94,7 @@ CARRIED = {
     },
     'calculator': {
         'CLOSEST_REDUCED_DISTANCE': 'physics.pair_law',
+        'PLANE_TOLERANCE': 'calculator.potential',
         'raise_on_closest': 'physics.pair_law',
     },
     'cli': {

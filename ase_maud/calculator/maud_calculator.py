@@ -41,9 +41,6 @@ from ase_maud.checks import all_finite, check
 from ase_maud.physics import pair_law as physics
 from ase_maud.physics.pair_law import raise_on_closest
 
-#: Relative tolerance on the spread of z for a ``dim=2`` scene.
-PLANE_TOLERANCE = 1e-10
-
 
 class MaudCalculator(LockedCalculator):
     """ASE calculator for the Maud potential.
@@ -76,8 +73,9 @@ class MaudCalculator(LockedCalculator):
         Default None: no loads.
     dim : 2 or 3
         ``2``: every point lies on one plane ``z = const`` (checked to a
-        relative :data:`PLANE_TOLERANCE`), forces have ``z = 0`` exactly and
-        the blocks are 2x2. ``3`` (default): 3x3 blocks.
+        relative :data:`~ase_maud.calculator.potential.PLANE_TOLERANCE`),
+        forces have ``z = 0`` exactly and the blocks are 2x2. ``3``
+        (default): 3x3 blocks.
     backend : str
         The repulsion kernel, a name in the registry :mod:`.backends`:
         ``auto`` (default) picks per call the cheapest backend that meets
@@ -257,42 +255,16 @@ class MaudCalculator(LockedCalculator):
         return self.potential.a
 
     def check_atoms(self, atoms: Atoms) -> np.ndarray:
-        """Validate ``atoms`` for this potential; return its positions.
-
-        Raises ValueError naming the problem: no atoms, periodic boundaries, a spring
-        index beyond the last atom, loads not one per atom, a non-finite
-        position, or (``dim=2``) a point off the plane of the others.
-        """
-        if atoms.pbc.any():
-            raise ValueError(f'periodic boundaries are not supported (pbc='
-                             f'{atoms.pbc.tolist()}): 1/L needs an Ewald sum;'
-                             ' set atoms.pbc = False')
-        natoms = len(atoms)
-        if natoms == 0:
-            raise ValueError('no atoms: a scene needs at least one point')
-        self.potential.check_size(natoms)   # the rest was checked by set
-        positions = atoms.get_positions()
-        if not np.isfinite(positions).all():
-            bad = np.flatnonzero(~np.isfinite(positions).all(axis=1))[0]
-            raise ValueError(f'atom {bad} has a non-finite position '
-                             f'{positions[bad].tolist()}')
-        if self.dim == 2 and natoms > 1:
-            z = positions[:, 2]
-            extent = max(np.ptp(positions[:, :2]), self.length_scale)
-            off = np.abs(z - z[0])
-            if off.max() > PLANE_TOLERANCE * extent:
-                k = int(np.argmax(off))
-                raise ValueError(f'dim=2 needs every point on one plane z = '
-                                 f'const: atom {k} has z = {z[k]}, atom 0 '
-                                 f'has z = {z[0]} (ASE drivers move z: hold it '
-                                 'with ase_maud.scenes.builders.keep_on_plane(atoms))')
-        return positions
+        """Validate ``atoms`` for this potential; return its positions
+        (:meth:`MaudPotential.checked_positions`: a ValueError names the
+        problem)."""
+        return self.potential.checked_positions(atoms)
 
     def take(self, atoms: Atoms, energy: float, forces: np.ndarray, hessian: np.ndarray,
              force_scale: float) -> None:
         """Hold the results of ``atoms``' positions that a loop on arrays
         computed by this calculator's law in one compiled pass
-        (:func:`.potential.scene_terms`, exact: what :meth:`calculate` gives
+        (:func:`.compiled_sums.scene_terms`, exact: what :meth:`calculate` gives
         for ``'hessian'``): the energy, forces (N, 3), Hessian (dim N, dim N)
         and the largest repulsion force (``a Q``), finite. It is one call of
         :meth:`calculate`, which holds them (and counts as any call)."""

@@ -6,7 +6,7 @@ step at the cost of one kernel pass and one factorisation.
 momentum, no memory, a trust region) costs a few hundred microseconds a step
 on a scene of tens of points, most of it numpy and Python calls of a few
 microseconds each around a kernel pass of a few. Here the same step is
-three compiled calls: :func:`~ase_maud.calculator.potential.scene_terms`,
+three compiled calls: :func:`~ase_maud.calculator.compiled_sums.scene_terms`,
 the energy, forces and Hessian in one pass; :func:`_judge`, the merit test
 of the last move (a rise takes it back and halves gamma, else gamma grows:
 :func:`~ase_maud.optimize.step_length.merit_change`'s test) and the local
@@ -35,8 +35,8 @@ import numpy as np
 from ase import Atoms
 
 from ase_maud.backends import exact_choice
+from ase_maud.calculator.compiled_sums import scene_terms
 from ase_maud.calculator.maud_calculator import MaudCalculator
-from ase_maud.calculator.potential import scene_terms
 from ase_maud.optimize.models.base import TINY
 from ase_maud.optimize.models.exact import EXACT_MAX_DOFS, ExactModel, eigenpairs_of
 from ase_maud.optimize.monitor import RunMonitor

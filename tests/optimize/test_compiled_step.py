@@ -7,7 +7,7 @@ import pytest
 from ase.constraints import FixAtoms, FixCartesian
 
 from ase_maud import Maud
-from ase_maud.calculator.potential import scene_terms
+from ase_maud.calculator.compiled_sums import scene_terms
 from ase_maud.counting import CallRecorder, fresh_copy
 from ase_maud.optimize import compiled_step
 from ase_maud.scenes.catalogue import build

@@ -5,7 +5,8 @@ import itertools
 import numpy as np
 import pytest
 
-from ase_maud.calculator.potential import MaudPotential, _flat_entries
+from ase_maud.calculator.compiled_sums import flat_entries
+from ase_maud.calculator.potential import MaudPotential
 from ase_maud.physics import pair_law as physics
 
 #: Central-difference step and tolerance for pair vectors of length ~1.
@@ -203,12 +204,12 @@ def test_the_kept_hessian_entries_are_the_summed_entries_to_the_bit(dim, seed):
         pairs = np.concatenate([pairs, pairs[::2, ::-1], pairs[:3]])
     for weights in (np.full(len(pairs), 10 ** rng.uniform(-8, 8)),
                     10 ** rng.uniform(-8, 8, len(pairs))):
-        flat, data = _flat_entries(pairs.astype(np.int64), weights, dim, n)
+        flat, data = flat_entries(pairs.astype(np.int64), weights, dim, n)
         expected_flat, expected = summed_entries(pairs, weights, dim, n)
         order = np.argsort(flat)
         np.testing.assert_array_equal(flat[order], expected_flat)
         assert data[order].tobytes() == expected.tobytes()
-    flat, data = _flat_entries(np.zeros((0, 2), np.int64), np.zeros(0), dim, n)
+    flat, data = flat_entries(np.zeros((0, 2), np.int64), np.zeros(0), dim, n)
     assert flat.size == data.size == 0
 
 

@@ -13,7 +13,9 @@ local model there (:func:`relax`). It applies where :func:`applies` says:
 plain ``Atoms`` whose only constraints hold coordinates (``FixAtoms``,
 ``FixCartesian``) and a MaudCalculator, a run seeking a minimum, and no
 trajectory, restart file or attached observer (the log is written as ASE
-writes it). The calculator holds the results of the last positions
+writes it). With the exact model the steps are compiled
+(:mod:`~ase_maud.optimize.compiled_step`, where it applies: the same moves
+to round-off). The calculator holds the results of the last positions
 throughout, so a run stopped at any step leaves the atoms and their results
 consistent.
 """

@@ -28,7 +28,6 @@ to round-off.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from typing import Any
 
 import numba
 import numpy as np
@@ -43,7 +42,7 @@ from ase_maud.optimize.monitor import RunMonitor
 from ase_maud.optimize.state import MaudState, Point
 from ase_maud.optimize.step_length import (
     DAMPING_TRIALS,
-    _scales,
+    bound_factors,
     damping_bracket,
     damping_trial,
     lengths,
@@ -51,16 +50,16 @@ from ase_maud.optimize.step_length import (
     narrowed,
     reaches,
 )
-from ase_maud.optimize.strategy import Minimise
+from ase_maud.optimize.strategy import Minimise, Strategy
 from ase_maud.physics.dofs import free_dofs
-from ase_maud.physics.neighbours import _nearest_dense
+from ase_maud.physics.neighbours import nearest_over_pairs
 
 #: Kinds of local model: the shifted Hessian's Cholesky factor, or its
 #: eigen-decomposition.
 CHOLESKY, EIGEN = 1, 2
 
 
-def applies(strategy: Any, state: MaudState, atoms: Atoms) -> bool:
+def applies(strategy: Strategy, state: MaudState, atoms: Atoms) -> bool:
     """Whether the compiled step makes ``strategy``'s steps on ``atoms`` (a
     run on arrays, :func:`ase_maud.optimize.array_loop.applies`): the exact
     model seeking a minimum with its default rule's kind of step (no
@@ -102,7 +101,7 @@ def relax(atoms: Atoms, strategy: Minimise, state: MaudState, monitor: RunMonito
                          -1.0 if rule.maxstep_nn is None else rule.maxstep_nn,
                          -1.0 if rule.maxstep is None else rule.maxstep,
                          model.floor, float(potential.a == 0)])
-    numbers = np.array([state.gamma, float(state.k), 0.0, 0.0])   # see _step
+    numbers = np.array([state.gamma, float(state.k), 0.0, 0.0])   # see _judge
     last_x, last_f = np.zeros((len(atoms), 3)), np.zeros((len(atoms), 3))
     n = len(rows)
     matrix, factor, values = np.zeros((n, n)), np.zeros((n, n)), np.zeros(n)
@@ -210,7 +209,7 @@ def _move(last_x, last_f, numbers, matrix, factor, values, index, settings):
         direction = _damping(factor, values, last_f, gamma, limit, index)
     numbers[1] += 1.0
     direction = direction * gamma
-    return direction * _scales(direction, limit).reshape(-1, 1)
+    return direction * bound_factors(direction, limit).reshape(-1, 1)
 
 
 @numba.njit(cache=True)
@@ -327,7 +326,7 @@ def _limits(x, nearest, longest_allowed, quadratic):
     if quadratic:
         return limit
     if nearest >= 0:
-        limit = nearest * (_nearest_dense(x) if x.shape[0] > 1 else limit)
+        limit = nearest * (nearest_over_pairs(x) if x.shape[0] > 1 else limit)
     if longest_allowed >= 0:
         limit = np.minimum(limit, longest_allowed)
     return limit

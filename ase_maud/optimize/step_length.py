@@ -193,14 +193,14 @@ def bound(step: np.ndarray, limit: np.ndarray, whole: bool = False) -> np.ndarra
     """Scale each point's move down to its allowed length, or (``whole``)
     the whole move by the one factor that brings every point within its
     length (a descent direction stays one)."""
-    scale = _scales(step, limit)
+    scale = bound_factors(step, limit)
     if whole:
         return step * scale.min(initial=1.0)
     return step * scale[:, None]
 
 
 @numba.njit(cache=True)
-def _scales(step: np.ndarray, limit: np.ndarray) -> np.ndarray:
+def bound_factors(step: np.ndarray, limit: np.ndarray) -> np.ndarray:
     """Each point's factor within its limit: ``limit / length`` where its
     move is longer, else 1 (:func:`bound`; compiled, the same digits)."""
     scale = lengths(step)

@@ -41,11 +41,11 @@ def _nearest(points: np.ndarray) -> np.ndarray:
     """Each point's distance to its nearest other point (N >= 2)."""
     if len(points) > DENSE_MAX_POINTS:
         return cKDTree(points).query(points, k=2)[0][:, 1]
-    return _nearest_dense(np.asarray(points, dtype=float))
+    return nearest_over_pairs(np.asarray(points, dtype=float))
 
 
 @numba.njit(cache=True)
-def _nearest_dense(points: np.ndarray) -> np.ndarray:
+def nearest_over_pairs(points: np.ndarray) -> np.ndarray:
     """Each point's distance to its nearest other point over every pair
     (SciPy's ``cdist`` formula, the squares summed in order, the same digits,
     compiled: a step of a small scene asks once)."""

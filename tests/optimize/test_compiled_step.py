@@ -137,6 +137,28 @@ def test_other_runs_keep_the_python_step(keywords, why):
     assert not compiled_step.applies(opt.strategy, opt.state, numpy_sums)
 
 
+def test_a_subclass_of_the_calculator_keeps_the_python_step():
+    """A MaudCalculator subclass may compute its results otherwise (noise, a
+    correction): the compiled pass, which makes MaudCalculator's own, does
+    not stand in for it."""
+    from ase_maud import MaudCalculator
+
+    class Shifted(MaudCalculator):
+        def calculate(self, *args, **kwargs):
+            super().calculate(*args, **kwargs)
+            self.results['energy'] += 1.0
+
+    atoms = build('all_pairs', 8, seed=44)
+    atoms.calc = Shifted(**atoms.calc.parameters)
+    opt = Maud(atoms, logfile=None)
+    assert not compiled_step.applies(opt.strategy, opt.state, atoms)
+    opt.run(fmax=1e-6)
+    plain = atoms.copy()
+    plain.calc = MaudCalculator(**atoms.calc.parameters)
+    assert atoms.get_potential_energy() == pytest.approx(
+        plain.get_potential_energy() + 1.0, rel=1e-12)
+
+
 @pytest.mark.parametrize('seed', [40, 41])
 def test_a_non_finite_pass_is_the_calculator_s_to_judge(seed, monkeypatch):
     """Where the compiled pass gives a non-finite result the calculator

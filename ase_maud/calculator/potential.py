@@ -250,18 +250,20 @@ class MaudPotential:
         (units of ``a``), at ``a = Q = 1``: :func:`.physics.spring_terms`'s
         law, ``Q q L**2 / 2`` and ``-Q q d``, summed spring by spring in one
         compiled pass (:func:`.compiled_sums.spring_sums`)."""
-        n = len(scaled)
-        springs, q = self._kept(('spring sums', n), lambda: (
-            np.ascontiguousarray(self._springs_within(n), dtype=np.int64),
+        return spring_sums(np.ascontiguousarray(scaled, dtype=float),
+                           *self._spring_arrays(len(scaled)))
+
+    def _spring_arrays(self, natoms: int) -> tuple[np.ndarray, np.ndarray]:
+        """The springs (K, 2) int64 and their ``q`` (K,) as the compiled sums
+        take them, kept per N."""
+        return self._kept(('spring sums', natoms), lambda: (
+            np.ascontiguousarray(self._springs_within(natoms), dtype=np.int64),
             np.broadcast_to(np.asarray(self.stiffnesses, float), len(self.springs)).copy()))
-        return spring_sums(np.ascontiguousarray(scaled, dtype=float), springs, q)
 
     def scene_arrays(self, natoms: int) -> SceneArrays:
         """What :func:`.compiled_sums.scene_terms` takes for a scene of ``natoms`` points
         (kept per N): the law's arrays, as the calculator's own sums use them."""
-        springs, q = self._kept(('spring sums', natoms), lambda: (
-            np.ascontiguousarray(self._springs_within(natoms), dtype=np.int64),
-            np.broadcast_to(np.asarray(self.stiffnesses, float), len(self.springs)).copy()))
+        springs, q = self._spring_arrays(natoms)
         self.check_loads(natoms)
         loads = np.zeros((natoms, 3)) if self.loads is None else self.loads
         return SceneArrays(springs, q, loads, *self._entries(natoms), float(self.a),

@@ -46,9 +46,10 @@ from ase_maud.optimize.step_length import (
     damping_bracket,
     damping_trial,
     lengths,
+    longest,
     merit_tolerance,
     narrowed,
-    reaches,
+    reach,
 )
 from ase_maud.optimize.strategy import Minimise, Strategy
 from ase_maud.physics.dofs import free_dofs
@@ -129,7 +130,8 @@ def relax(atoms: Atoms, strategy: Minimise, state: MaudState, monitor: RunMonito
     started = False
     while True:
         yield energy, fmax_now
-        if _judge(positions, energy, forces, started, last_x, last_f, numbers, matrix,
+        slack = merit_tolerance(numbers[2], 0.0)   # both energies exact: no noise
+        if _judge(positions, energy, forces, started, slack, last_x, last_f, numbers, matrix,
                   factor, hessian, rows, settings) and numbers[3] == EIGEN:
             try:   # as the model makes it, its eigenvalues made safe by the model
                 found, factor[:] = eigenpairs_of(matrix)
@@ -153,14 +155,15 @@ def relax(atoms: Atoms, strategy: Minimise, state: MaudState, monitor: RunMonito
 
 
 @numba.njit(cache=True)
-def _judge(x, merit, forces, has_last, last_x, last_f, numbers, matrix, factor, hessian,
-           rows, settings):
+def _judge(x, merit, forces, has_last, slack, last_x, last_f, numbers, matrix, factor,
+           hessian, rows, settings):
     """The step's start after an evaluation at ``x`` (``merit``, ``forces``
     with held components zero, ``hessian``), as
     :class:`~ase_maud.optimize.strategy.Minimise` judges it with the exact
     model: the last move taken back if it raised the merit (gamma halved,
     the local model kept), else ``x`` where the step starts (gamma grown)
     with its local model (:func:`_local`); whether it was built anew.
+    ``slack``: the last merit's (:func:`~ase_maud.optimize.step_length.merit_tolerance`).
     ``last_x``, ``last_f`` (N, 3) and
     ``numbers`` (gamma, steps since a restart, the last merit, the local
     model's kind) are the state, ``matrix`` and ``factor`` its local model,
@@ -169,9 +172,8 @@ def _judge(x, merit, forces, has_last, last_x, last_f, numbers, matrix, factor, 
     none), floor, and whether the energy is quadratic."""
     gamma_max, growth, floor, quadratic = settings[0], settings[1], settings[4], settings[5] > 0
     rose = False
-    if has_last:   # the merit test (merit_change; both energies exact: no noise)
+    if has_last:   # the merit test (merit_change)
         change = merit - numbers[2]
-        slack = 1e-12 * max(abs(numbers[2]), 1e-300)
         if abs(change) <= slack:
             change, slack = -0.5 * _dot(last_f + forces, x - last_x), 0.0
         rose = change > slack
@@ -201,7 +203,7 @@ def _move(last_x, last_f, numbers, matrix, factor, values, index, settings):
     kind = int(numbers[3])
     limit = _limits(last_x, nearest, longest_allowed, quadratic)
     newton = _solve(kind, factor, values, last_f, index)
-    if gamma * _longest(newton, limit) <= 1.0:
+    if gamma * longest(newton, limit) <= 1.0:
         direction = newton
     elif kind == CHOLESKY:
         direction = _dogleg(matrix, last_f, newton, gamma, limit, index)
@@ -333,22 +335,6 @@ def _limits(x, nearest, longest_allowed, quadratic):
 
 
 @numba.njit(cache=True)
-def _longest(move, limit):
-    """The largest ratio of a point's move to its limit."""
-    ratio = 0.0
-    steps = lengths(move)
-    for i in range(steps.shape[0]):
-        ratio = max(ratio, steps[i] / limit[i])
-    return ratio
-
-
-@numba.njit(cache=True)
-def _reach(start, step, limit):
-    """:func:`~ase_maud.optimize.step_length.reach`."""
-    return reaches(start, step, limit).min() if start.shape[0] else np.inf
-
-
-@numba.njit(cache=True)
 def _dogleg(matrix, forces, newton, gamma, limit, index):
     """:func:`~ase_maud.optimize.step_length.trust_region`'s dogleg path for
     the definite model ``matrix`` on the components ``index``."""
@@ -356,12 +342,12 @@ def _dogleg(matrix, forces, newton, gamma, limit, index):
     curvature = (rhs * _eigen_sum(matrix, rhs)).sum()
     zero = np.zeros_like(forces)
     if not curvature > 0:
-        return forces * _reach(zero, gamma * forces, limit)
+        return forces * reach(zero, gamma * forces, limit)
     cauchy = forces * (_dot(forces, forces) / curvature)
-    t = _reach(zero, gamma * cauchy, limit)
+    t = reach(zero, gamma * cauchy, limit)
     if t < 1:
         return t * cauchy
-    t = _reach(gamma * cauchy, gamma * (newton - cauchy), limit)
+    t = reach(gamma * cauchy, gamma * (newton - cauchy), limit)
     if t < 1:
         return cauchy + t * (newton - cauchy)
     return newton
@@ -380,7 +366,7 @@ def _damping(vectors, values, forces, gamma, limit, index):
         return _scatter(_eigen_sum(vectors, coefficients / (values + mu)), index, natoms)
 
     def excess(move):
-        return np.log(max(gamma * _longest(move, limit), TINY))
+        return np.log(max(gamma * longest(move, limit), TINY))
 
     high = max(np.abs(values).max() if values.shape[0] else 0.0, TINY)
     best = moves(high)

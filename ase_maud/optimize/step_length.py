@@ -162,11 +162,12 @@ class Limits:
         return limit
 
 
+@numba.njit(cache=True)
 def reach(start: np.ndarray, step: np.ndarray, limit: np.ndarray) -> float:
     """The largest ``t`` in [0, inf] with every point's ``|start_i + t
     step_i| <= limit_i`` (``start`` within its limits): the smallest of
-    :func:`reaches`."""
-    return float(reaches(start, step, limit).min(initial=np.inf))
+    :func:`reaches` (compiled: both steps share it)."""
+    return reaches(start, step, limit).min() if start.shape[0] else np.inf
 
 
 @numba.njit(cache=True)
@@ -209,9 +210,11 @@ def bound_factors(step: np.ndarray, limit: np.ndarray) -> np.ndarray:
     return scale
 
 
+@numba.njit(cache=True)
 def longest(move: np.ndarray, limit: np.ndarray) -> float:
-    """The largest ratio of a point's move to its limit."""
-    return float((lengths(move) / limit).max(initial=0.0))
+    """The largest ratio of a point's move to its limit (compiled: both
+    steps share it)."""
+    return (lengths(move) / limit).max() if move.shape[0] else 0.0
 
 
 def trust_region(model: DampedSolver, forces: np.ndarray, newton: np.ndarray, gamma: float,

@@ -356,10 +356,10 @@ class MaudPotential:
         return kept[1]
 
     def _entries(self, n: int) -> tuple[np.ndarray, np.ndarray]:   # the springs' Hessian's, per N
-        return self._kept(('hessian entries', n), lambda: flat_entries(
-            np.ascontiguousarray(self._springs_within(n), dtype=np.int64),
-            np.broadcast_to(np.asarray(self.Q * self.stiffnesses, float),
-                            len(self.springs)).copy(), self.dim, n))
+        def entries():
+            springs, q = self._spring_arrays(n)
+            return flat_entries(springs, self.Q * q, self.dim, n)
+        return self._kept(('hessian entries', n), entries)
 
     def whole_hessian(self, repulsion: np.ndarray) -> np.ndarray:
         """The dense Hessian from the unit repulsion's (dim N, dim N): ``Q``

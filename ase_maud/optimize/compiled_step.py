@@ -45,7 +45,7 @@ from ase_maud.optimize.step_length import (
     bound_factors,
     damping_bracket,
     damping_trial,
-    lengths,
+    largest_length,
     longest,
     merit_tolerance,
     narrowed,
@@ -93,10 +93,10 @@ def relax(atoms: Atoms, strategy: Minimise, state: MaudState, monitor: RunMonito
     calc, model, rule = atoms.calc, strategy.model, strategy.rule
     potential = calc.potential
     law = potential.scene_arrays(len(atoms))
-    free = free_dofs(atoms, law.dim)
-    rows = np.flatnonzero(free)   # the Hessian's free coordinates
+    free = free_dofs(atoms, 3)
+    rows = np.flatnonzero(free[:, :law.dim])   # the Hessian's free coordinates
     index = 3 * (rows // law.dim) + rows % law.dim   # ... as components of an (N, 3) array
-    held = ~free_dofs(atoms, 3)
+    held = np.flatnonzero(~free)   # held components of an (N, 3) array
     positions = atoms.arrays['positions']
     settings = np.array([rule.gamma_max, rule.gamma_growth,
                          -1.0 if rule.maxstep_nn is None else rule.maxstep_nn,
@@ -114,16 +114,13 @@ def relax(atoms: Atoms, strategy: Minimise, state: MaudState, monitor: RunMonito
         if not held_already:
             energy, forces, hessian, force_scale = scene_terms(positions, law)
             model.work.hessians += 1
-            if (np.isfinite(energy) and np.isfinite(forces).all()
-                    and np.isfinite(hessian).all()):
+            if np.isfinite(energy) and _finite(forces) and _finite(hessian):
                 calc.take(atoms, energy, forces, hessian, force_scale)
             else:   # the calculator's own call names the problem
                 calc.compute(atoms, ['hessian'])
-        energy, forces, hessian = (calc.results[name]
-                                   for name in ('energy', 'forces', 'hessian'))
-        forces = forces.copy()
-        forces[held] = 0.0
-        return energy, forces, hessian, float(lengths(forces).max(initial=0.0))
+        results = calc.results
+        forces, largest = _free_forces(results['forces'], held)
+        return results['energy'], forces, results['hessian'], largest
 
     energy, forces, hessian, fmax_now = evaluate(
         'hessian' in calc.results and not calc.check_state(atoms))
@@ -145,12 +142,9 @@ def relax(atoms: Atoms, strategy: Minimise, state: MaudState, monitor: RunMonito
         state.solver = None
         monitor.check(step(), last_x, numbers[2], last_f, state.gamma, rule.gamma0,
                       merit_tolerance(numbers[2], 0.0))
-        if not np.isfinite(move).all():
+        if not _finite(move):
             no_step(f'the {model.name} stiffness model gave a non-finite move')
-        x = last_x + move
-        x[held] = positions[held]
-        state.v = x - last_x
-        positions[:] = x
+        state.v = _moved(positions, last_x, move, held)
         energy, forces, hessian, fmax_now = evaluate()
 
 
@@ -212,6 +206,36 @@ def _move(last_x, last_f, numbers, matrix, factor, values, index, settings):
     numbers[1] += 1.0
     direction = direction * gamma
     return direction * bound_factors(direction, limit).reshape(-1, 1)
+
+
+@numba.njit(cache=True)
+def _finite(values):
+    """Whether every entry of the 2D array ``values`` is finite."""
+    for i in range(values.shape[0]):
+        for k in range(values.shape[1]):
+            if not np.isfinite(values[i, k]):
+                return False
+    return True
+
+
+@numba.njit(cache=True)
+def _free_forces(forces, held):
+    """A copy of ``forces`` (N, 3) with its ``held`` components (flat
+    indices) zero, and the largest force's length (0 if none)."""
+    free = forces.copy()
+    free.reshape(-1)[held] = 0.0
+    return free, largest_length(free, np.zeros(3))
+
+
+@numba.njit(cache=True)
+def _moved(positions, last_x, move, held):
+    """``positions`` (N, 3) moved to ``last_x + move`` but for the ``held``
+    components (flat indices), kept where they are; the move made (the
+    positions now less ``last_x``)."""
+    x = last_x + move
+    x.reshape(-1)[held] = positions.reshape(-1)[held]
+    positions[:] = x
+    return x - last_x
 
 
 @numba.njit(cache=True)

@@ -43,13 +43,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
 from ase import Atoms
 
 from ase_maud.calculator.maud_calculator import MaudCalculator
 from ase_maud.checks import as_number, as_whole
 from ase_maud.errors import DivergenceError, NoEquilibriumError, StagnationError
-from ase_maud.optimize.step_length import lengths
+from ase_maud.optimize.step_length import largest_length
 
 #: fmax counts as progress when it falls below ``(1 - FMAX_PROGRESS)`` of its
 #: best so far.
@@ -82,6 +83,23 @@ def balance_ahead(move: np.ndarray, pull: np.ndarray, forces: np.ndarray) -> flo
     if push <= 0:
         return 0.0
     return push / curvature if curvature > 0 else np.inf
+
+
+@numba.njit(cache=True)
+def measures(x: np.ndarray, forces: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """What :meth:`RunMonitor.check` watches at a step, in one compiled pass:
+    the centroid (3,) of the points ``x`` (N, 3), the largest distance of a
+    point from it and the largest force's length (``forces`` (N, 3); 0 if
+    none). The sums are numpy's (``x.sum(axis=0) / N``, the rows' lengths),
+    in the same order; a NaN anywhere is the result's."""
+    n = x.shape[0]
+    centre = np.zeros(3)
+    for i in range(n):
+        for k in range(3):
+            centre[k] += x[i, k]
+    if n:
+        centre /= n
+    return centre, largest_length(x, centre), largest_length(forces, np.zeros(3))
 
 
 def divergence_judged(atoms: Atoms | None) -> bool:
@@ -168,12 +186,10 @@ class RunMonitor:
         """Raise DivergenceError or StagnationError (module docstring) at
         ``step``; ``gamma0`` is the step factor's start, ``tolerance`` the
         slack of a merit comparison."""
-        centre = x.sum(axis=0) / len(x)
-        size = lengths(x - centre).max()
+        centre, size, fmax = measures(x, forces)
         if self.size0 is None:
             self.size0 = max(size, self.length_scale * len(x), np.finfo(float).tiny)
             self.centre0 = centre
-        fmax = float(lengths(forces).max(initial=0.0))
         if not self.bounded:
             self._judge_growth(step, x, forces, size, np.linalg.norm(centre - self.centre0))
         if fmax < (1 - FMAX_PROGRESS) * self.best[0]:

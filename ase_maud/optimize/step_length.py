@@ -73,6 +73,22 @@ def lengths(rows: np.ndarray) -> np.ndarray:
     return out
 
 
+@numba.njit(cache=True)
+def largest_length(rows: np.ndarray, origin: np.ndarray) -> float:
+    """The largest length of a row of ``rows`` (N, 3) less ``origin`` (3,):
+    ``lengths(rows - origin).max()``, the same digits, compiled; 0 if there
+    are no rows, NaN if a row's length is."""
+    largest = 0.0
+    for i in range(rows.shape[0]):
+        square = 0.0
+        for k in range(3):
+            square += (rows[i, k] - origin[k]) * (rows[i, k] - origin[k])
+        length = np.sqrt(square)
+        if length > largest or length != length:   # a NaN is kept: nothing is larger
+            largest = length
+    return largest
+
+
 def merit_tolerance(merit: float, noise: float = 1e-12) -> float:
     """Slack when comparing merits: ``noise`` (relative; 1e-12 is the
     rounding of energies that sum N**2 terms) times ``|merit|``."""

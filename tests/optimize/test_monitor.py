@@ -7,7 +7,7 @@ import pytest
 
 from ase_maud import Maud, MaudError
 from ase_maud.errors import DivergenceError, StagnationError
-from ase_maud.optimize.monitor import ENERGY_PROGRESS, RunMonitor
+from ase_maud.optimize.monitor import ENERGY_PROGRESS, RunMonitor, measures
 from ase_maud.scenes.catalogue import build
 
 
@@ -60,6 +60,22 @@ def test_monitor_lets_a_spring_held_run_grow(seed):
     bounded = RunMonitor(divergence_factor=2.0, patience=1000, bounded=True)
     _grow(bounded, x, lambda y: np.ones_like(y))   # proved: never diverged
     assert bounded.marks == 0
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_measures_are_numpys(seed):
+    # the centroid, the largest distance from it and the largest force, to
+    # the last digit of numpy's formulas, at any scale; a NaN is the result's
+    rng = np.random.default_rng(seed)
+    for n in (1, 2, int(rng.integers(3, 400))):
+        x = rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-8, 8) + rng.normal(size=3)
+        forces = rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-8, 8)
+        centre, size, fmax = measures(x, forces)
+        assert (centre == x.sum(axis=0) / n).all()
+        assert size == np.linalg.norm(x - centre, axis=1).max()
+        assert fmax == np.linalg.norm(forces, axis=1).max()
+        x[rng.integers(n), rng.integers(3)] = np.nan
+        assert np.isnan(measures(x, forces)[1]) and np.isnan(measures(forces, x)[2])
 
 
 def test_monitor_names_stagnation_and_an_underflowed_gamma():

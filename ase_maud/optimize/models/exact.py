@@ -156,15 +156,17 @@ class ExactModel(StiffnessModel):
         :attr:`free_index` its components (:func:`free_index`)."""
         key = (len(atoms), dim, [_constraint_key(c) for c in atoms.constraints])
         if self._basis is None or self._basis[0] != key:
-            if all(isinstance(c, (FixAtoms, FixCartesian)) for c in atoms.constraints):
-                basis = _selection(free_dofs(atoms, dim)) if atoms.constraints else None
+            if not atoms.constraints:
+                basis = held = None
+            elif all(isinstance(c, (FixAtoms, FixCartesian)) for c in atoms.constraints):
+                free = free_dofs(atoms, dim)
+                basis, held = _selection(free), ~free
             else:
                 basis = allowed_basis(atoms, dim)
-            self._basis, self._held = (key, basis), None
-            if basis is not None and (np.abs(basis).sum(axis=0) == 1).all() and (
-                    np.count_nonzero(basis, axis=0) == 1).all():
-                self._held = ~np.abs(basis).sum(axis=1).astype(bool).reshape(-1, dim)
-                self._kept_index = np.flatnonzero(~self._held)
+                held = None if basis is None else _held_coordinates(basis, dim)
+            self._basis, self._held = (key, basis), held
+            if held is not None:
+                self._kept_index = np.flatnonzero(~held)
             self._free = (np.ones((len(atoms), dim), dtype=bool) if self._held is None
                           else ~self._held)
             self._free_index = free_index(self._free)
@@ -179,6 +181,15 @@ def _selection(free: np.ndarray) -> np.ndarray:
     basis = np.zeros((free.size, kept.size))
     basis[kept, np.arange(kept.size)] = 1.0
     return basis
+
+
+def _held_coordinates(basis: np.ndarray, dim: int) -> np.ndarray | None:
+    """The coordinates (N, dim) an :func:`allowed_basis` holds if its
+    columns are coordinates (up to sign), else None."""
+    if not ((np.abs(basis).sum(axis=0) == 1).all()
+            and (np.count_nonzero(basis, axis=0) == 1).all()):
+        return None
+    return ~np.abs(basis).sum(axis=1).astype(bool).reshape(-1, dim)
 
 
 def _constraint_key(constraint: Any) -> tuple:

@@ -26,6 +26,10 @@ Run with one thread and save the raw numbers::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
         python benchmarks/small_scenes.py --out small-scenes.csv --profile
+
+On a shared machine one pass's CPU varies by tens of per cent: ``--pool pass1.csv
+pass2.csv ...`` takes each run's CPU as its median over several passes' CSVs and prints
+the ratios and a table of medians over the seeds (no run).
 """
 
 from __future__ import annotations
@@ -229,6 +233,34 @@ def profile(name, size, seed, fmax, repeats=20):
             'rest': 1 - sum(shares.values()), 'us a step': 1e6 * total / steps}
 
 
+def pool(paths: list[str]) -> None:
+    """Print the ratios to L-BFGS-B (ASE) of the passes in the CSVs ``paths``
+    (this script's, the same seeds), each run's CPU the median over the passes,
+    and per scene the medians over the seeds."""
+    passes = []
+    for path in paths:
+        with open(path, newline='') as handle:
+            passes.append(list(csv.DictReader(handle)))
+    rows = passes[0]
+    cpu = {name: np.median([[float(row[f'{name} CPU s']) for row in runs] for runs in passes],
+                           axis=0) for name in ('Maud', 'L-BFGS-B (ASE)')}
+    ratio = cpu['Maud'] / cpu['L-BFGS-B (ASE)']
+    print(f'{len(paths)} passes, CPU / L-BFGS-B (ASE): median {np.median(ratio):.3f}, worst '
+          f'{ratio.max():.3f}, above 0.5: {int((ratio > 0.5).sum())} of {len(ratio)}')
+    print('scene | points | Maud calls | Maud ms | L-BFGS-B calls | L-BFGS-B ms | BFGS calls '
+          '| FIRE calls | CPU x L-BFGS-B')
+    for scene in dict.fromkeys(row['scene'] for row in rows):
+        runs = [k for k, row in enumerate(rows) if row['scene'] == scene]
+        calls = {name: np.median([float(rows[k][f'{name} calls']) for k in runs])
+                 for name in ('Maud', 'L-BFGS-B (ASE)', 'BFGS', 'FIRE')}
+        ms = {name: f'{1e3 * np.median(cpu[name][runs]):.1f}' for name in cpu}
+        calls = {name: f'{value:.0f}' if np.isfinite(value) else 'not converged'
+                 for name, value in calls.items()}
+        print(' | '.join([scene, rows[runs[0]]['points'], calls['Maud'], ms['Maud'],
+                          calls['L-BFGS-B (ASE)'], ms['L-BFGS-B (ASE)'], calls['BFGS'],
+                          calls['FIRE'], f'{np.median(ratio[runs]):.2f}']))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--seeds', type=int, nargs='+', default=[101, 102, 103])
@@ -238,7 +270,12 @@ def main() -> None:
     parser.add_argument('--profile', action='store_true')
     parser.add_argument('--repeat', type=int, default=3,
                         help='runs of each optimiser whose median CPU is reported')
+    parser.add_argument('--pool', nargs='+', metavar='CSV',
+                        help='pool the passes in these CSVs (module docstring) and stop')
     args = parser.parse_args()
+    if args.pool:
+        pool(args.pool)
+        return
     for name, size in SCENES[:3]:   # compile and warm every kernel
         measure(name, size, 0, 1e-2, 50, 1)
     rows = [measure(name, size, seed, args.fmax, args.steps, args.repeat)

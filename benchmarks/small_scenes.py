@@ -242,6 +242,10 @@ def pool(paths: list[str]) -> None:
         with open(path, newline='') as handle:
             passes.append(list(csv.DictReader(handle)))
     rows = passes[0]
+    for path, runs in zip(paths, passes, strict=True):
+        if [(r['scene'], r['seed']) for r in runs] != [(r['scene'], r['seed']) for r in rows]:
+            raise SystemExit(f'{path}: other scenes or seeds than {paths[0]}: not passes '
+                             'of one suite')
     cpu = {name: np.median([[float(row[f'{name} CPU s']) for row in runs] for runs in passes],
                            axis=0) for name in ('Maud', 'L-BFGS-B (ASE)')}
     ratio = cpu['Maud'] / cpu['L-BFGS-B (ASE)']
@@ -251,11 +255,11 @@ def pool(paths: list[str]) -> None:
           '| FIRE calls | CPU x L-BFGS-B')
     for scene in dict.fromkeys(row['scene'] for row in rows):
         runs = [k for k, row in enumerate(rows) if row['scene'] == scene]
-        calls = {name: np.median([float(rows[k][f'{name} calls']) for k in runs])
-                 for name in ('Maud', 'L-BFGS-B (ASE)', 'BFGS', 'FIRE')}
-        ms = {name: f'{1e3 * np.median(cpu[name][runs]):.1f}' for name in cpu}
+        medians = {name: np.median([float(rows[k][f'{name} calls']) for k in runs])
+                   for name in ('Maud', 'L-BFGS-B (ASE)', 'BFGS', 'FIRE')}
         calls = {name: f'{value:.0f}' if np.isfinite(value) else 'not converged'
-                 for name, value in calls.items()}
+                 for name, value in medians.items()}
+        ms = {name: f'{1e3 * np.median(cpu[name][runs]):.1f}' for name in cpu}
         print(' | '.join([scene, rows[runs[0]]['points'], calls['Maud'], ms['Maud'],
                           calls['L-BFGS-B (ASE)'], ms['L-BFGS-B (ASE)'], calls['BFGS'],
                           calls['FIRE'], f'{np.median(ratio[runs]):.2f}']))

@@ -184,6 +184,28 @@ def test_a_non_finite_pass_is_the_calculator_s_to_judge(seed, monkeypatch):
     np.testing.assert_allclose(start.positions, reference.positions, rtol=0, atol=1e-8)
 
 
+@pytest.mark.parametrize('seed', [44, 45])
+def test_a_non_finite_move_stops_the_run_where_it_was(seed, monkeypatch):
+    """A move with a NaN stops the run with a MaudError that says so; the
+    points stay where the last evaluation was, held ones too."""
+    from ase_maud.errors import MaudError
+    atoms = _scene('hanging_net', 5, {}, seed)
+    moves, kept = [], []
+    move = compiled_step._move
+
+    def third_fails(*args):
+        moves.append(move(*args))
+        kept.append(atoms.positions.copy())
+        return moves[-1] * np.nan if len(moves) == 3 else moves[-1]
+
+    monkeypatch.setattr(compiled_step, '_move', third_fails)
+    with Maud(atoms, logfile=None) as opt:
+        with pytest.raises(MaudError, match='no finite step from step 2.*non-finite move'):
+            opt.run(fmax=1e-8)
+    assert len(moves) == 3 and np.isfinite(atoms.positions).all()
+    np.testing.assert_array_equal(atoms.positions, kept[-1])
+
+
 @pytest.mark.parametrize('seed', [42, 43])
 def test_a_large_held_net_keeps_the_python_step_s_block_of_the_hessian(seed):
     """Where most points are held the exact model asks for the Hessian's block

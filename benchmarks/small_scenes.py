@@ -18,10 +18,11 @@ process's (``time.process_time``), after every kernel was compiled and run once,
 of ``--repeat`` runs from fresh copies (default 3; the calls are the same each time). Every end
 point is checked to be a minimum by the analytic Hessian
 (``ase_maud.analysis.stationary.classify``).
-``--profile`` gives Maud's CPU a step and its shares in the kernel (the Hessian,
-or a held net's block of it), the factorisations of the Python step and the compiled
-step (timers around those calls over repeated unprofiled runs of one scene; it runs on
-an older checkout too).
+``--profile`` gives Maud's CPU a step and a start (the optimiser's construction and
+first evaluation), and their shares in the kernel (the Hessian, or a held net's block of
+it), the factorisations of the Python step and the compiled step, of a whole run and of
+its steps alone (timers around those calls over repeated unprofiled runs of one scene;
+it runs on an older checkout too).
 Run with one thread and save the raw numbers::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
@@ -202,21 +203,12 @@ def timed(module, names, totals, key):
             setattr(module, name, function)
 
 
-def profile(name, size, seed, fmax, repeats=20):
-    """Shares of Maud's run time (process CPU, the optimiser's construction
-    and run) in the kernel (the one pass over the pairs that gives the
-    energy, forces and Hessian), the factorisations (LAPACK's Cholesky and
-    eigen-decomposition as the exact model calls them: the Python step's, and
-    the compiled step's eigen-decompositions) and the compiled step (its
-    merit test, Cholesky factor, solves and trust region, where a checkout
-    has it), by timers around those calls in
-    ``repeats`` unprofiled runs (cProfile's cost per Python call would
-    inflate the rest)."""
-    atoms = build(name, size, seed=seed)
-    run_maud(fresh(atoms), fmax, 5000)   # every kernel compiled and loaded
-    copies = [fresh(atoms) for _ in range(repeats)]
+def _timed(copies, fmax, steps):
+    """Maud's runs of at most ``steps`` steps on ``copies``: the process CPU of
+    all, of the kernel, the factorisations and the compiled step (timers
+    around those calls, :func:`profile`), and the steps made."""
     totals = {'kernel': 0.0, 'factorisations': 0.0, 'compiled step': 0.0}
-    steps = 0
+    made = 0
     with timed(direct, ['repulsion_hessian', 'repulsion_hessian_block'], totals, 'kernel'), \
             timed(pair_law, ['repulsion_hessian_block'], totals, 'kernel'), \
             timed(compiled, ['scene_terms'], totals, 'kernel'), \
@@ -225,12 +217,34 @@ def profile(name, size, seed, fmax, repeats=20):
         start = time.process_time()
         for copy in copies:
             with Maud(copy, logfile=None) as opt:
-                opt.run(fmax=fmax)
-            steps += opt.nsteps
+                opt.run(fmax=fmax, steps=steps)
+            made += opt.nsteps
         total = time.process_time() - start
-    shares = {key: value / total for key, value in totals.items()}
-    return {'scene': f'{name}:{size}', 'seed': seed, **shares,
-            'rest': 1 - sum(shares.values()), 'us a step': 1e6 * total / steps}
+    return total, totals, made
+
+
+def profile(name, size, seed, fmax, repeats=20):
+    """Shares of Maud's CPU (process CPU) in the kernel (the one pass over
+    the pairs that gives the energy, forces and Hessian), the factorisations
+    (LAPACK's Cholesky and eigen-decomposition as the exact model calls
+    them: the Python step's, and the compiled step's eigen-decompositions),
+    the compiled step (its merit test, Cholesky factor, solves and trust
+    region, where a checkout has it) and the rest, by timers around those
+    calls in ``repeats`` unprofiled runs (cProfile's cost per Python call
+    would inflate the rest): of a whole run (the optimiser's construction
+    and first evaluation included), and of its steps alone (the same runs
+    less as many stopped before their first step)."""
+    atoms = build(name, size, seed=seed)
+    run_maud(fresh(atoms), fmax, 5000)   # every kernel compiled and loaded
+    total, totals, steps = _timed([fresh(atoms) for _ in range(repeats)], fmax, 5000)
+    start, at_start, _ = _timed([fresh(atoms) for _ in range(repeats)], fmax, 0)
+    row = {'scene': f'{name}:{size}', 'seed': seed, 'us a step': 1e6 * total / steps,
+           'us a start': 1e6 * start / repeats}
+    for label, cpu, parts in (('run', total, totals), ('step', total - start, {
+            key: totals[key] - at_start[key] for key in totals})):
+        row.update({f'{key} ({label})': value / cpu for key, value in parts.items()})
+        row[f'rest ({label})'] = 1 - sum(parts.values()) / cpu
+    return row
 
 
 def pool(paths: list[str]) -> None:
@@ -306,9 +320,12 @@ def main() -> None:
         for name, size in (('all_pairs', 12), ('random_graph', 40), ('all_pairs', 30),
                            ('hanging_net', 5)):
             shares = profile(name, size, args.seeds[0], args.fmax)
-            print('profile', shares['scene'], f"{shares['us a step']:.0f} us a step:", ' '.join(
-                f'{k} {shares[k]:.0%}' for k in ('kernel', 'factorisations', 'compiled step',
-                                                 'rest')))
+            print('profile', shares['scene'], f"{shares['us a step']:.0f} us a step, "
+                  f"{shares['us a start']:.0f} us a start; shares of", '; '.join(
+                      f'{label}: ' + ' '.join(f'{key} {shares[f"{key} ({label})"]:.0%}' for key in
+                                               ('kernel', 'factorisations', 'compiled step',
+                                                'rest'))
+                      for label in ('run', 'step')))
 
 
 if __name__ == '__main__':

@@ -177,8 +177,8 @@ def _judge(x, merit, forces, has_last, slack, last_x, last_f, numbers, matrix, f
         return False
     if has_last:
         numbers[0] = min(numbers[0] * growth, gamma_max)
-    last_x[:] = x
-    last_f[:] = forces
+    _copy(x, last_x)
+    _copy(forces, last_f)
     numbers[2] = merit
     numbers[3] = _local(hessian, rows, floor, quadratic, matrix, factor)
     return True
@@ -233,9 +233,20 @@ def _moved(positions, last_x, move, held):
     components (flat indices), kept where they are; the move made (the
     positions now less ``last_x``)."""
     x = last_x + move
-    x.reshape(-1)[held] = positions.reshape(-1)[held]
-    positions[:] = x
+    for k in held:
+        x.flat[k] = positions.flat[k]
+    _copy(x, positions)
     return x - last_x
+
+
+@numba.njit(cache=True)
+def _copy(source, target):
+    """``source``'s entries into ``target`` (both (N, 3)), by a loop: numba's
+    slice assignment from an array compiles its shape-mismatch message, about
+    ten seconds of a cold cache."""
+    for i in range(source.shape[0]):
+        for k in range(source.shape[1]):
+            target[i, k] = source[i, k]
 
 
 @numba.njit(cache=True)
@@ -339,7 +350,8 @@ def _eigen_sum(vectors, c):
 def _scatter(v, index, natoms):
     """Free components (n,) as a move (N, 3), zero where held."""
     out = np.zeros(3 * natoms)
-    out[index] = v
+    for k in range(index.shape[0]):
+        out[index[k]] = v[k]
     return out.reshape(natoms, 3)
 
 

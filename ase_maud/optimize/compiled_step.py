@@ -242,8 +242,8 @@ def _moved(positions, last_x, move, held):
 @numba.njit(cache=True)
 def _copy(source, target):
     """``source``'s entries into ``target`` (both (N, 3)), by a loop: numba's
-    slice assignment from an array compiles its shape-mismatch message, about
-    ten seconds of a cold cache."""
+    slice assignment from an array compiles a formatted shape-mismatch message,
+    seconds of a cold cache (docs/dev/bench/step_bookkeeping)."""
     for i in range(source.shape[0]):
         for k in range(source.shape[1]):
             target[i, k] = source[i, k]

@@ -485,6 +485,21 @@ class MaudCalculator(LockedCalculator):
         return self.potential.spring_hessian(len(atoms))
 
 
+def potential_of(atoms: Any) -> MaudPotential | None:
+    """The :class:`~ase_maud.calculator.potential.MaudPotential` of
+    ``atoms``' calculator (its springs, ``a``, ``Q``, loads) if that is a
+    MaudCalculator, a subclass too; None for another calculator, none, or an
+    object without one (a band of images, a filter)."""
+    calc = getattr(atoms, 'calc', None)
+    return calc.potential if isinstance(calc, MaudCalculator) else None
+
+
+def scene_dim(atoms: Any) -> int:
+    """2 for ``atoms`` whose MaudCalculator keeps them in a plane, else 3."""
+    potential = potential_of(atoms)
+    return 3 if potential is None else potential.dim
+
+
 #: The name under which ASE's trajectory stores a MaudCalculator.
 CALC_NAME = 'maudcalculator'
 

@@ -48,6 +48,7 @@ from matplotlib.ticker import MaxNLocator
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from ase_maud.analysis.stationary import force_tolerance
+from ase_maud.calculator.maud_calculator import potential_of
 from ase_maud.physics.pair_law import spring_force
 from ase_maud.physics.topology import fixed_atoms
 
@@ -130,10 +131,10 @@ def spring_values(atoms: Atoms, colour: str) -> np.ndarray | None:
 def loaded_points(atoms: Atoms) -> np.ndarray:
     """Boolean mask of the points with a non-zero load (the potential's
     ``loads``, where it has loads; else none)."""
-    loads = getattr(getattr(atoms.calc, 'potential', None), 'loads', None)
-    if loads is None:
+    potential = potential_of(atoms)
+    if potential is None or potential.loads is None:
         return np.zeros(len(atoms), bool)
-    return np.any(loads != 0, axis=1)
+    return np.any(potential.loads != 0, axis=1)
 
 
 def arrow_scale(largest_force: float, extent: float) -> float:

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from ase.calculators.calculator import PropertyNotImplementedError
 
+from ase_maud.calculator.maud_calculator import potential_of
 from ase_maud.errors import MaudError
 
 
@@ -41,7 +42,7 @@ class Handoff:
     def of(cls, x: np.ndarray, atoms: Any) -> Handoff:
         """The handoff at positions ``x`` of ``atoms`` (None: no calculator)."""
         calc = getattr(atoms, 'calc', None)
-        return cls(x.copy(), calc, getattr(calc, 'potential', None))
+        return cls(x.copy(), calc, potential_of(atoms))
 
     def __eq__(self, other: object) -> bool:
         return (isinstance(other, Handoff) and np.array_equal(self.x, other.x)

@@ -23,12 +23,14 @@ import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian
 
+from ase_maud.calculator.maud_calculator import potential_of
+
 
 def gauge_point(atoms: Any) -> int | None:
     """The one point that holds ``atoms`` (Atoms with a MaudCalculator
     potential and no loads) if the scene is held there alone (FixAtoms of
     one point, and on a dim=2 scene the plane's z holds), else None."""
-    potential = getattr(getattr(atoms, 'calc', None), 'potential', None)
+    potential = potential_of(atoms)
     if not isinstance(atoms, Atoms) or potential is None or (
             potential.loads is not None and np.any(potential.loads)):
         return None

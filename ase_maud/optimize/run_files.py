@@ -14,7 +14,7 @@ from ase import Atoms
 from ase.filters import Filter
 from ase.mep.neb import BaseNEB
 
-from ase_maud.calculator.maud_calculator import MaudCalculator, stored_parameters
+from ase_maud.calculator.maud_calculator import MaudCalculator, potential_of, stored_parameters
 from ase_maud.checks import check_writable
 from ase_maud.files.output_paths import check_run_files
 from ase_maud.files.run_lock import RunLock
@@ -34,12 +34,12 @@ class SceneSignature:
     def __call__(self, atoms: Atoms | None) -> dict[str, Any]:
         if atoms is None:
             return {}
-        calc = atoms.calc
-        key = (id(calc), id(getattr(calc, 'potential', None)), len(atoms),
+        potential = potential_of(atoms)
+        key = (id(atoms.calc), id(potential), len(atoms),
                tuple(map(id, atoms.constraints)))
         if self._key != key:
             self._key = key
-            self._held = signature(atoms, getattr(calc, 'potential', None))
+            self._held = signature(atoms, potential)
         return self._held
 
 
@@ -59,7 +59,7 @@ def other_scene(frame: Atoms, atoms: Atoms) -> str | None:
     fixed points, and with a MaudCalculator its springs, a, Q, dim), or None."""
     if len(frame) != len(atoms):
         return f'points {len(frame)} in it, {len(atoms)} in the atoms given'
-    potential = getattr(atoms.calc, 'potential', None)
+    potential = potential_of(atoms)
     stored = stored_parameters(frame)
     held = signature(frame, MaudCalculator(**stored).potential
                      if stored and potential is not None else None)

@@ -23,7 +23,7 @@ from ase.calculators.singlepoint import SinglePointCalculator
 from ase.filters import Filter, StrainFilter, UnitCellFilter
 
 from ase_maud.calculator import accuracy
-from ase_maud.calculator.maud_calculator import MaudCalculator
+from ase_maud.calculator.maud_calculator import MaudCalculator, potential_of
 from ase_maud.checks import check
 from ase_maud.optimize.models.base import StiffnessModel
 from ase_maud.optimize.models.registry import choose_model
@@ -124,9 +124,8 @@ _STRUTS = ('the net has {} members in compression (q < 0): its energy is no long
 def compressed(scene) -> np.ndarray:
     """The springs of ``scene``'s MaudPotential with ``q < 0`` (none for
     anything else)."""
-    potential = getattr(getattr(scene, 'calc', None), 'potential', None)
-    struts = getattr(potential, 'compressed', None)
-    return np.zeros(0, dtype=int) if struts is None else struts
+    potential = potential_of(scene)
+    return np.zeros(0, dtype=int) if potential is None else potential.compressed
 
 
 def _quadratic(scene: Any):
@@ -137,8 +136,8 @@ def _quadratic(scene: Any):
         return None
 
     def quadratic() -> bool:
-        potential = getattr(getattr(scene, 'calc', None), 'potential', None)
-        return potential is not None and getattr(potential, 'a', None) == 0
+        potential = potential_of(scene)
+        return potential is not None and potential.a == 0
     return quadratic
 
 

@@ -628,3 +628,25 @@ def test_pairs_closer_than_float64_allows_name_two_atoms(gap):
 @pytest.mark.parametrize('seed', [0, 1])
 def test_threads_sharing_one_calculator_get_their_own_results(seed):
     assert wrong_results_of_threads(seed) == 0
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_potential_of_and_scene_dim_name_a_maud_scene_and_nothing_else(seed):
+    """``potential_of`` gives a MaudCalculator's potential (a subclass's too)
+    and None for another calculator, no calculator or no atoms; ``scene_dim``
+    its dim, else 3."""
+    from ase.calculators.emt import EMT
+
+    from ase_maud.bench.doubles import NoisyEnergy
+    from ase_maud.calculator.maud_calculator import potential_of, scene_dim
+    rng = np.random.default_rng(seed)
+    dim = int(rng.choice([2, 3]))
+    atoms = build('all_pairs2d' if dim == 2 else 'all_pairs', int(rng.integers(4, 9)), seed=seed)
+    assert potential_of(atoms) is atoms.calc.potential
+    assert scene_dim(atoms) == atoms.calc.dim == dim
+    atoms.calc = NoisyEnergy(1e-3, seed, True, **atoms.calc.parameters)
+    assert potential_of(atoms) is atoms.calc.potential
+    atoms.calc = EMT()
+    assert potential_of(atoms) is None and scene_dim(atoms) == 3
+    atoms.calc = None
+    assert potential_of(atoms) is None and potential_of(None) is None

@@ -10,6 +10,7 @@ from typing import Any
 
 from ase import Atoms
 
+from ase_maud.calculator.maud_calculator import potential_of, scene_dim
 from ase_maud.checks import check
 from ase_maud.optimize.models.base import StiffnessModel
 from ase_maud.optimize.models.exact import EXACT_MAX_DOFS, ExactModel
@@ -51,11 +52,11 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
     if target == 'saddle':
         name = _saddle_model(atoms, name, offers)
     if name == 'auto':
-        dim = 2 if getattr(calc, 'dim', 3) == 2 else 3
+        dim = scene_dim(atoms)
         if ('hessian' in offers and free_dofs(atoms, dim).sum() <= EXACT_MAX_DOFS
                 and all(isinstance(c, PROJECTIONS) for c in atoms.constraints)):
             name = 'exact'
-        elif hasattr(calc, 'potential'):
+        elif potential_of(atoms) is not None:
             name = 'springs'
         elif 'stiffness' in offers:
             name = 'nodal'
@@ -69,7 +70,7 @@ def choose_model(atoms: Atoms, name: str = 'auto', target: str = 'minimum',
         raise ValueError(f'model={name!r} needs a calculator with the property '
                          f'{cls.prop!r} (such as MaudCalculator); this one '
                          f'offers {sorted(offers)}')
-    if name in ('springs', 'near', 'global') and not hasattr(calc, 'potential'):
+    if name in ('springs', 'near', 'global') and potential_of(atoms) is None:
         raise ValueError(f"model={name!r} needs a calculator with springs and the "
                          'repulsion (a MaudCalculator: its potential); this one is a '
                          f"{type(calc).__name__}: use model='auto', 'bfgs' or 'secant'")
@@ -92,13 +93,12 @@ def _saddle_model(atoms: Atoms | None, name: Any, offers: set[str]) -> str:
     if name not in ('auto', 'exact', 'springs'):
         raise ValueError(f"target='saddle' needs model='exact' or 'springs' (or 'auto'), "
                          f'got model={name!r}')
-    calc = getattr(atoms, 'calc', None)
-    if atoms is None or not ('hessian' in offers and hasattr(calc, 'potential')):
+    if not ('hessian' in offers and potential_of(atoms) is not None):
         raise ValueError("target='saddle' needs one scene whose calculator gives the "
                          'Hessian and its products (such as MaudCalculator)')
     if name != 'auto':
         return name
-    dim = 2 if getattr(calc, 'dim', 3) == 2 else 3
+    dim = scene_dim(atoms)
     return 'exact' if free_dofs(atoms, dim).sum() <= EXACT_MAX_DOFS else 'springs'
 
 

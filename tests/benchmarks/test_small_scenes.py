@@ -68,9 +68,14 @@ def test_passes_of_another_suite_are_refused(tmp_path):
 
 @pytest.mark.integration
 def test_the_profile_times_the_kernel_factorisations_and_compiled_step():
+    """Each timer fires, and none is counted twice: within one run the timed
+    calls are disjoint spans of the process clock, so every share of the run
+    is positive whatever the machine's load. The shares of the steps alone
+    are differences of two runs' clocks, noisy on a busy machine: only
+    finite."""
     shares = small_scenes.profile('all_pairs', 6, 3, 1e-6, repeats=2)
-    for label in ('run', 'step'):
-        parts = [shares[f'{key} ({label})'] for key in
-                 ('kernel', 'factorisations', 'compiled step', 'rest')]
-        assert all(part > 0 for part in parts), (label, parts)   # no timer counted twice
+    keys = ('kernel', 'factorisations', 'compiled step', 'rest')
+    run = [shares[f'{key} (run)'] for key in keys]
+    assert all(part > 0 for part in run), run
+    assert np.all(np.isfinite([shares[f'{key} (step)'] for key in keys]))
     assert shares['us a step'] > 0 and shares['us a start'] > 0

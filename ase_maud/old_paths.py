@@ -118,8 +118,8 @@ CARRIED = {
         'A_PER_MEAN_SPRING': 'physics.topology',
         'default_a': 'physics.topology',
         'write_net': 'io.net_writer',
-        'CALC_NAME': 'calculator.maud_calculator',
-        'stored_parameters': 'calculator.maud_calculator',
+        'CALC_NAME': 'calculator.identify',
+        'stored_parameters': 'calculator.identify',
     },
     'lock': {
         'FileInUseError': 'errors',

@@ -64,7 +64,7 @@ def test_a_moved_module_warns_once_naming_its_new_home(old):
     ('physics', 'repulsion_block', 'ase_maud.physics.pair_law.repulsion_block'),
     ('analysis', 'Work', 'ase_maud.counting.Work'),
     ('cli', 'describe', 'ase_maud.cli.classify.describe'),
-    ('io', 'CALC_NAME', 'ase_maud.calculator.maud_calculator.CALC_NAME'),
+    ('io', 'CALC_NAME', 'ase_maud.calculator.identify.CALC_NAME'),
 ])
 def test_a_module_that_became_a_subpackage_hands_its_old_names_on(package, name, home):
     with pytest.warns(FutureWarning, match=f'ase_maud.{package}.{name} is now {home}'):

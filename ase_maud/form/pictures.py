@@ -48,7 +48,7 @@ from matplotlib.ticker import MaxNLocator
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from ase_maud.analysis.stationary import force_tolerance
-from ase_maud.calculator.maud_calculator import potential_of
+from ase_maud.calculator.identify import potential_of
 from ase_maud.physics.pair_law import spring_force
 from ase_maud.physics.topology import fixed_atoms
 

@@ -75,7 +75,8 @@ from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian
 from ase.io.trajectory import Trajectory
 
-from ase_maud.calculator.maud_calculator import CALC_NAME, MaudCalculator, stored_parameters
+from ase_maud.calculator.identify import CALC_NAME, stored_parameters
+from ase_maud.calculator.maud_calculator import MaudCalculator
 from ase_maud.checks import as_whole, check, check_writable, did_you_mean
 from ase_maud.files.trajectory import first_frame
 from ase_maud.io.compas import read_compas, read_compas_forces

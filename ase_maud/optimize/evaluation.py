@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from ase.calculators.calculator import PropertyNotImplementedError
 
-from ase_maud.calculator.maud_calculator import potential_of
+from ase_maud.calculator.identify import potential_of
 from ase_maud.errors import MaudError
 
 

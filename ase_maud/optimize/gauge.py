@@ -23,7 +23,7 @@ import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian
 
-from ase_maud.calculator.maud_calculator import potential_of
+from ase_maud.calculator.identify import potential_of
 
 
 def gauge_point(atoms: Any) -> int | None:

@@ -14,7 +14,8 @@ from ase import Atoms
 from ase.filters import Filter
 from ase.mep.neb import BaseNEB
 
-from ase_maud.calculator.maud_calculator import MaudCalculator, potential_of, stored_parameters
+from ase_maud.calculator.identify import potential_of, stored_parameters
+from ase_maud.calculator.maud_calculator import MaudCalculator
 from ase_maud.checks import check_writable
 from ase_maud.files.output_paths import check_run_files
 from ase_maud.files.run_lock import RunLock

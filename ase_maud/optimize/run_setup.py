@@ -23,7 +23,8 @@ from ase.calculators.singlepoint import SinglePointCalculator
 from ase.filters import Filter, StrainFilter, UnitCellFilter
 
 from ase_maud.calculator import accuracy
-from ase_maud.calculator.maud_calculator import MaudCalculator, potential_of
+from ase_maud.calculator.identify import potential_of
+from ase_maud.calculator.maud_calculator import MaudCalculator
 from ase_maud.checks import check
 from ase_maud.optimize.models.base import StiffnessModel
 from ase_maud.optimize.models.registry import choose_model

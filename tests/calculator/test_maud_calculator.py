@@ -638,7 +638,7 @@ def test_potential_of_and_scene_dim_name_a_maud_scene_and_nothing_else(seed):
     from ase.calculators.emt import EMT
 
     from ase_maud.bench.doubles import NoisyEnergy
-    from ase_maud.calculator.maud_calculator import potential_of, scene_dim
+    from ase_maud.calculator.identify import potential_of, scene_dim
     rng = np.random.default_rng(seed)
     dim = int(rng.choice([2, 3]))
     atoms = build('all_pairs2d' if dim == 2 else 'all_pairs', int(rng.integers(4, 9)), seed=seed)

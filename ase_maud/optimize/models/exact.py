@@ -13,7 +13,7 @@ from ase import Atoms
 from ase.constraints import FixAtoms, FixCartesian
 from scipy.linalg.lapack import dpotrf, dpotrs, dsyevd
 
-from ase_maud.calculator.maud_calculator import MaudCalculator, potential_of
+from ase_maud.calculator.maud_calculator import MaudCalculator
 from ase_maud.checks import all_finite
 from ase_maud.optimize.models.base import (
     DampedSolver,
@@ -122,8 +122,7 @@ class ExactModel(StiffnessModel):
         if self.target == 'minimum':
             # a quadratic energy (a net without repulsion, a = 0): its own
             # Hessian, unshifted where definite, whose Newton move is the minimum
-            potential = potential_of(atoms)
-            quadratic = potential is not None and potential.a == 0
+            quadratic = isinstance(atoms.calc, MaudCalculator) and atoms.calc.potential.a == 0
             return ((quadratic and _CholeskySolver.of(matrix, basis, free, index, 0.0))
                     or _CholeskySolver.of(matrix, basis, free, index, self.floor)
                     or _EigenSolver(matrix, basis, free, index, self.safe_eigenvalues))

@@ -10,7 +10,7 @@ from typing import Any
 
 from ase import Atoms
 
-from ase_maud.calculator.maud_calculator import potential_of, scene_dim
+from ase_maud.calculator.identify import potential_of, scene_dim
 from ase_maud.checks import check
 from ase_maud.optimize.models.base import StiffnessModel
 from ase_maud.optimize.models.exact import EXACT_MAX_DOFS, ExactModel

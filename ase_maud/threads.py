@@ -28,6 +28,17 @@ STARTUP_VARIABLES = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS
 THREAD_VARIABLES = (*STARTUP_VARIABLES, 'NUMBA_NUM_THREADS')
 
 
+def pin_blas(n: int) -> None:
+    """Run OpenMP and BLAS on ``n`` threads: the pools loaded so far limited
+    in place (threadpoolctl, for the rest of the process), and
+    :data:`STARTUP_VARIABLES` set to ``n`` for those loaded later and for
+    child processes."""
+    from threadpoolctl import threadpool_limits
+
+    os.environ.update(dict.fromkeys(STARTUP_VARIABLES, str(n)))
+    threadpool_limits(limits=n)
+
+
 def pin_threads(n: int, restart: bool) -> None:
     """Run OpenMP, BLAS and numba on ``n`` threads.
 
@@ -40,11 +51,9 @@ def pin_threads(n: int, restart: bool) -> None:
     else warn.
     """
     import numba  # here: after ase_maud set numba's cache dir
-    from threadpoolctl import threadpool_limits
 
     value = str(n)
-    os.environ.update(dict.fromkeys(STARTUP_VARIABLES, value))
-    threadpool_limits(limits=n)   # for the rest of the process
+    pin_blas(n)
     pool = numba.config.NUMBA_NUM_THREADS
     if pool < n:
         if restart:

@@ -14,12 +14,11 @@ from pathlib import Path
 
 import pytest
 from ase.io import Trajectory, write
-from threadpoolctl import threadpool_limits
 
 from ase_maud.io.net_writer import write_net
 from ase_maud.io.nets import read_frames
 from ase_maud.scenes.catalogue import build
-from ase_maud.threads import STARTUP_VARIABLES
+from ase_maud.threads import STARTUP_VARIABLES, pin_blas
 
 import helpers
 
@@ -39,17 +38,14 @@ TESTS = Path(__file__).resolve().parent
 def pytest_configure(config):
     """In a pytest-xdist worker, unless the environment sets any of
     :data:`~ase_maud.threads.STARTUP_VARIABLES`: BLAS and OpenMP on the cores
-    shared among the workers (at least one thread each), in the pools loaded
-    now (threadpoolctl) and, by the variables, in those loaded later and in
-    child processes. Left at a thread per core in every worker, the pools
-    oversubscribe the machine: on 2 cores the fast tier took 8-10 minutes
-    where it takes under 3 (2026-12-07)."""
+    shared among the workers, at least one thread each
+    (:func:`~ase_maud.threads.pin_blas`). Left at a thread per core in every
+    worker, the pools oversubscribe the machine: on 2 cores the fast tier
+    took 8-10 minutes where it takes under 3 (2026-12-07)."""
     workers = os.environ.get('PYTEST_XDIST_WORKER_COUNT')
     if workers is None or any(os.environ.get(v) for v in STARTUP_VARIABLES):
         return
-    threads = max(1, (os.cpu_count() or 1) // int(workers))
-    os.environ.update(dict.fromkeys(STARTUP_VARIABLES, str(threads)))
-    threadpool_limits(limits=threads)
+    pin_blas(max(1, (os.cpu_count() or 1) // int(workers)))
 
 
 def pytest_collection_modifyitems(config, items):

@@ -116,7 +116,8 @@ def main() -> None:
     with open(args.out / 'tree_library.csv', 'w', newline='') as file:
         writer = csv.DictWriter(file, list(rows[0]))
         writer.writeheader()
-        writer.writerows(rows)
+        writer.writerows({k: f'{v:.3g}' if isinstance(v, float) else v for k, v in row.items()}
+                         for row in rows)
     text = '\n'.join([f'# pytreegrav against the direct sum, tol {args.tol}',
                       f'{time.strftime("%Y-%m-%d %H:%M")}, numba threads '
                       f'{numba.get_num_threads()}, load {load} at start, '

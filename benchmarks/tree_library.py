@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import importlib.util
 import time
 from pathlib import Path
 
@@ -109,6 +110,8 @@ def main() -> None:
     args = parser.parse_args()
     if args.out.exists():
         parser.error(f'--out {args.out} exists: give a new directory')
+    if importlib.util.find_spec('pytreegrav') is None:
+        parser.error('pytreegrav is not installed: pip install pytreegrav')
     args.out.mkdir(parents=True)
     load = open('/proc/loadavg').read().split()[:3]
     rows = [row for geometry in args.geometries for n in args.sizes

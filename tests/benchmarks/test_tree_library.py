@@ -9,7 +9,7 @@ import pytest
 
 from ase_maud.backends import direct
 
-from helpers import ROOT
+from helpers import ROOT, run_example
 
 
 @pytest.fixture
@@ -51,3 +51,17 @@ def test_rows_measure_each_setting_against_the_direct_sum(tool, monkeypatch, see
     errors = {(r['theta'], r['quadrupole']): r['force_error'] for r in rows[2:]}
     for (theta, quadrupole), error in errors.items():
         assert error == pytest.approx(theta * (0.1 if quadrupole else 1.0) * 1e-3, rel=1e-9)
+
+
+def test_without_pytreegrav_it_says_how_to_install_it_and_writes_nothing(
+        monkeypatch, tmp_path, capsys):
+    import importlib.util
+    find_spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, 'find_spec',
+                        lambda name, *a: None if name == 'pytreegrav' else find_spec(name, *a))
+    monkeypatch.syspath_prepend(str(ROOT / 'benchmarks'))
+    with pytest.raises(SystemExit):
+        run_example('tree_library.py', ['--out', 'run'], monkeypatch, tmp_path,
+                    folder='benchmarks')
+    assert 'pip install pytreegrav' in capsys.readouterr().err
+    assert not (tmp_path / 'run').exists()

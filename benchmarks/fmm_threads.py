@@ -95,6 +95,11 @@ def call(p, eps, order, targets=None):
     return fmm._unscale(0.5 * pot.sum(), grad, hess if order == 3 else None)
 
 
+def load_average() -> str:
+    """The machine's load averages over 1, 5 and 15 minutes, as one string."""
+    return ' '.join(open('/proc/loadavg').read().split()[:3])
+
+
 def timed(function, *args):
     """``(result, wall s, CPU s of this process)``."""
     wall, cpu = time.perf_counter(), cpu_seconds()
@@ -228,7 +233,7 @@ def split(sizes, eps_list, repeats, geometries, writer):
                            'wall_s_min': walls[0],
                            'wall_s_median': walls[len(walls) // 2],
                            'cpu_s_min': min(t[1] for t in times),
-                           'load': ' '.join(open('/proc/loadavg').read().split()[:3])}
+                           'load': load_average()}
                     writer.writerow(row)
                     print(row, flush=True)
 
@@ -260,7 +265,7 @@ def split_memory(sizes, eps_list, geometries, writer):
                         time.sleep(0.1)
                     row = {'geometry': geometry, 'n': n, 'fmm_eps': eps, 'workers': count,
                            'wall_s': float(child.stdout.read()), 'peak_mb': round(peak),
-                           'load': ' '.join(open('/proc/loadavg').read().split()[:3])}
+                           'load': load_average()}
                     writer.writerow(row)
                     print(row, flush=True)
 
@@ -319,7 +324,7 @@ def main():
     head = (f'Measured {time.strftime("%Y-%m-%d %H:%M")}, numba threads '
             f'{numba.get_num_threads()}, fmm3dpy one thread a process, '
             f'{len(os.sched_getaffinity(0))} cores; load at start '
-            f'{open("/proc/loadavg").read().split()[:3]}: `'
+            f'{load_average()}: `'
             + ' '.join(f'{v}={os.environ[v]}' for v in
                        ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'NUMBA_NUM_THREADS')
                        if v in os.environ)
@@ -357,8 +362,8 @@ def main():
                      f'{numba.get_num_threads()} threads {best["numba"]:.3g} s: '
                      f'{best["auto"] / best["numba"]:.2f}x; the fmm backend at fmm_eps '
                      f'1e-4 {best["fmm"]:.3g} s, {best["fmm"] / best["numba"]:.2f}x (fmm threads '
-                     f'{fmm.threads()}, load {open("/proc/loadavg").read().split()[:3]}).\n')
-    lines.append(f'Load at end: {open("/proc/loadavg").read().split()[:3]}')
+                     f'{fmm.threads()}, load {load_average()}).\n')
+    lines.append(f'Load at end: {load_average()}')
     text = '\n'.join(lines) + '\n'
     (args.out / 'summary.md').write_text(text)
     print(text)

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
-from fmm_threads import GEOMETRIES, scene, timed
+from fmm_threads import GEOMETRIES, load_average, scene, timed
 
 from ase_maud.backends import auto, direct
 
@@ -113,7 +113,7 @@ def main() -> None:
     if importlib.util.find_spec('pytreegrav') is None:
         parser.error('pytreegrav is not installed: pip install pytreegrav')
     args.out.mkdir(parents=True)
-    load = open('/proc/loadavg').read().split()[:3]
+    load = load_average()
     rows = [row for geometry in args.geometries for n in args.sizes
             for row in rows_of(geometry, n, args.thetas, args.repeats, args.tol)]
     with open(args.out / 'tree_library.csv', 'w', newline='') as file:
@@ -124,7 +124,7 @@ def main() -> None:
     text = '\n'.join([f'# pytreegrav against the direct sum, tol {args.tol}',
                       f'{time.strftime("%Y-%m-%d %H:%M")}, numba threads '
                       f'{numba.get_num_threads()}, load {load} at start, '
-                      f'{open("/proc/loadavg").read().split()[:3]} at end', '']
+                      f'{load_average()} at end', '']
                      + summary(rows, args.tol)) + '\n'
     (args.out / 'summary.md').write_text(text)
     print(text)

@@ -141,6 +141,8 @@ RULES: dict[str, Rule] = {
     'window': Rule('a positive number (a barrier above the minimum, energy units), inf '
                    '(every saddle), or None (no window: one round of attempts)',
                    lambda v: v > 0, none=True, infinite=True),
+    'sweep': _choice(True, False, words=' (a local activation at every free point once '
+                     "a window's rounds end)"),
     # the command line's own
     'count': Rule('a whole number >= 1', lambda v: v >= 1, whole=True),
     'seed': Rule('a whole number >= 0', lambda v: v >= 0, whole=True),
@@ -202,10 +204,12 @@ def check_each(name: str, values: Any, what: str) -> np.ndarray:
 
 
 def _matches(value: Any, choice: Any) -> bool:
-    """A string equal to a string ``choice``, or an integer (not a float, not
-    a bool) equal to an integer one."""
+    """A string equal to a string ``choice``, a bool that is a bool one, or
+    an integer (not a float, not a bool) equal to an integer one."""
     if isinstance(choice, str):
         return isinstance(value, str) and value == choice
+    if isinstance(choice, bool):
+        return value is choice
     return (as_whole(value) is not None and not isinstance(value, float)
             and value == choice)
 

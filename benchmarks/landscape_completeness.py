@@ -35,8 +35,11 @@ over every saddle they reach, counted or not). Cost:
 :attr:`ase_maud.saddles.landscape.Landscape.cost`, every calculator call, Hessian-vector product
 vector and Hessian of the whole map (the start's classification, the attempts, the saddles'
 classifications and descents), in force-call equivalents, and ``ase_maud.counting.cpu_seconds`` CPU
-seconds (every thread: run with one), both also per counted saddle found. Each saddle the
-default missed is printed with its barrier and the reference attempt that found it. Rows
+seconds (every thread: run with one), both also per counted saddle found. Each of the
+reference's counted saddles is printed with its barrier, whether the default found it, the
+reference attempt that found it first, and how many attempts of each run reached it (how
+many of them local activations: a saddle few points reach needs an activation at one of
+them). Rows
 go to ``OUT/landscape_completeness.csv``. Run::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
@@ -150,11 +153,22 @@ def compare(scene: str, size: int, seed: int, window: float, factor: int, ref_se
                      'cost_per_saddle': round(result.cost / len(kept)) if kept else '',
                      'cpu_s': round(cpu, 2),
                      'cpu_per_saddle': round(cpu / len(kept), 3) if kept else ''})
-    for (_, barrier, attempt), hit in sorted(zip(theirs, found, strict=True),
-                                                  key=lambda item: item[0][1]):
+    for (saddle, barrier, attempt), hit in sorted(zip(theirs, found, strict=True),
+                                                       key=lambda item: item[0][1]):
         print(f'  {scene}: barrier {barrier:.5f} {"found" if hit else "MISSED"} '
-              f'(reference: {attempt.describe()})')
+              f'(reference: {attempt.describe()}); reached by '
+              + ', '.join('{} attempts of the {} ({} local)'.format(*reached(run, saddle), name)
+                          for name, run in (('reference', reference), ('default', default))))
     return rows
+
+
+def reached(found: Landscape, saddle: Atoms) -> tuple[int, int]:
+    """The attempts of ``found``'s search that reached ``saddle`` (found it, or
+    found it again), and how many of them were local activations."""
+    search = found.search
+    index = next((i for i, s in enumerate(search.saddles) if same_point(s, saddle)), None)
+    hits = [a for a in search.attempts if index is not None and a.saddle == index]
+    return len(hits), sum(a.kind == 'local' for a in hits)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -278,7 +278,10 @@ def build_parser() -> argparse.ArgumentParser:
                    'any) and that joins it (default: one round)')
     p.add_argument('--empty-rounds', type=ruled('empty_rounds', int), default=6,
                    metavar='ROUNDS', help='with --window, the rounds in a row that find '
-                   'no new saddle before the search stops (default: %(default)s)')
+                   'no new saddle before the rounds stop (default: %(default)s)')
+    p.add_argument('--no-sweep', dest='sweep', action='store_false',
+                   help='with --window, stop with the rounds (default: then a local '
+                   'activation at every free point not yet activated)')
     p.add_argument('--fmax', type=ruled('fmax'), default=1e-6,
                    help='fmax of every relaxation and climb (default: %(default)s)')
     p.add_argument('--steps', type=ruled('steps', int), default=1000,

@@ -34,7 +34,8 @@ def saddles_command(args: argparse.Namespace) -> int:
         found = landscape(atoms, modes=args.modes, fmax=args.fmax, steps=args.steps,
                           client=client, local=args.local, budget=args.budget,
                           seed=args.seed, partner=partner, mirror=args.mirror,
-                          window=args.window, empty_rounds=args.empty_rounds)
+                          window=args.window, empty_rounds=args.empty_rounds,
+                          sweep=args.sweep)
     print(found.search.report())
     energies = [m.get_potential_energy() for m in found.minima]
     barriers = [s.get_potential_energy() for s in found.saddles]

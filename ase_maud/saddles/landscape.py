@@ -5,7 +5,8 @@ the minima each saddle joins.
 (:func:`ase_maud.saddles.search.search_saddles`: climbs along each of its
 ``modes`` lowest Hessian modes, both ways, then ``local`` local
 activations, in rounds until ``empty_rounds`` in a row find no new saddle
-below an energy ``window`` if one is given, and a band of images to a second
+below an energy ``window`` if one is given (then a local activation at every
+free point not yet activated), and a band of images to a second
 minimum if one is given and nothing else found a saddle), relaxes from each
 index-1 saddle found to the minimum on either side of its unstable mode
 (:func:`ase_maud.analysis.stationary.displace_along_mode`), and returns a
@@ -145,7 +146,8 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
               energy_rtol: float = ENERGY_RTOL, distance_atol: float = DISTANCE_ATOL,
               client: Any = None, local: int = 1, budget: int | None = None,
               seed: int = 0, partner: Atoms | None = None, mirror: bool | None = None,
-              window: float | None = None, empty_rounds: int = 6) -> Landscape:
+              window: float | None = None, empty_rounds: int = 6,
+              sweep: bool = True) -> Landscape:
     """The :class:`Landscape` around the minimum ``atoms`` (a MaudCalculator
     scene relaxed to ``fmax``; a ValueError if it is not a minimum): the
     saddles of :func:`~ase_maud.saddles.search.search_saddles`, each saddle's
@@ -189,6 +191,12 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
         joins the minimum (None: one round).
     empty_rounds : int, default 6
         See ``window``.
+    sweep : bool, default True
+        With a ``window`` and ``local`` above 0: once the rounds end, a local
+        activation at every free point not yet activated (a local saddle of a net is reached
+        from one to three of its points:
+        :func:`~ase_maud.saddles.search.search_saddles`); False: stop with
+        the rounds.
 
     Returns
     -------
@@ -235,7 +243,7 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
                                   fmax=fmax, steps=steps, seed=seed, energy_rtol=energy_rtol,
                                   distance_atol=distance_atol, client=client, point=point,
                                   partner=partner, mirror=mirror, window=window,
-                                  empty_rounds=empty_rounds,
+                                  empty_rounds=empty_rounds, sweep=sweep,
                                   connected=None if window is None else joins_start)
     distinct = found.search.saddles   # the saddles found, each once
     found.failed += sum(a.outcome not in _NOT_FAILED for a in found.search.attempts)

@@ -3,6 +3,7 @@ connected saddles below the window that the landscape finds, on 2D trap clusters
 
 import runpy
 
+import numpy as np
 import pytest
 
 from ase_maud.analysis.stationary import classify
@@ -11,10 +12,28 @@ from ase_maud.saddles.landscape import landscape, same_point
 
 from helpers import ROOT, trap_cluster
 
+BENCHMARK = runpy.run_path(str(ROOT / 'benchmarks' / 'landscape_completeness.py'))
 #: The benchmark's count of the saddles that join the start below a window.
-COUNTED = runpy.run_path(str(ROOT / 'benchmarks'
-                             / 'landscape_completeness.py'))['counted']
+COUNTED = BENCHMARK['counted']
 WINDOW = 1.0
+
+
+def test_reached_counts_the_attempts_that_reached_a_saddle_and_the_local_ones():
+    """``reached``: for each saddle of a landscape (a trap cluster, a seed of
+    its points drawn afresh), the attempts whose end is that saddle, found or
+    known, and how many were local activations; none for a point the search
+    never reached (its start)."""
+    seed = int(np.random.default_rng().integers(1000))   # drawn in the test (xdist)
+    start = trap_cluster(13)
+    found = landscape(start, modes=1, local=3, seed=seed)
+    search = found.search
+    assert search.saddles
+    for index, saddle in enumerate(search.saddles):
+        ends = [a for a in search.attempts if a.saddle == index]
+        assert BENCHMARK['reached'](found, saddle) == (
+            len(ends), sum(a.kind == 'local' for a in ends))
+        assert ends
+    assert BENCHMARK['reached'](found, start) == (0, 0)
 
 
 @pytest.mark.integration

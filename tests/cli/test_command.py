@@ -375,11 +375,12 @@ def test_argument_errors_are_one_line_with_status_2(capsys, argv, message):
     assert error.rstrip().endswith('--help')
 
 
-@pytest.mark.parametrize('seed, window', [(0, None), (1, None), (2, 1.0)])
-def test_saddles_prints_draws_and_writes_the_landscape(tmp_path, capsys, seed, window):
+@pytest.mark.parametrize('seed, window, sweep', [(0, None, True), (1, None, True),
+                                                 (2, 1.0, True), (3, 1.0, False)])
+def test_saddles_prints_draws_and_writes_the_landscape(tmp_path, capsys, seed, window, sweep):
     """``ase-maud saddles`` relaxes the net, finds the landscape the library
-    finds from the same minimum (with ``--window``, its rounds too), and
-    writes the picture and its JSON."""
+    finds from the same minimum (with ``--window``, its rounds and its sweep
+    too, or not with ``--no-sweep``), and writes the picture and its JSON."""
     import json
 
     from ase_maud import Maud
@@ -388,20 +389,22 @@ def test_saddles_prints_draws_and_writes_the_landscape(tmp_path, capsys, seed, w
     atoms = build('all_pairs2d', 9, seed=seed)
     write_net(tmp_path / 'c.traj', atoms)
     out = tmp_path / 'graph.png'
-    rounds = [] if window is None else ['--window', str(window)]
+    rounds = ([] if window is None else ['--window', str(window)]) + (
+        [] if sweep else ['--no-sweep'])
     assert main(['saddles', str(tmp_path / 'c.traj'), '--modes', '2', '--out',
                  str(out), *rounds]) == 0
     lines = capsys.readouterr().out.splitlines()
     graph = json.loads(out.with_suffix('.json').read_text())
     assert out.stat().st_size > 0
     Maud(atoms, logfile=None).run(fmax=1e-6, steps=1000)
-    found = landscape(atoms, modes=2, window=window)
+    found = landscape(atoms, modes=2, window=window, sweep=sweep)
     assert len(graph['minima']) == len(found.minima)
     saddle_lines = [line for line in lines if line.startswith('saddle ')]
     assert len(graph['saddles']) == len(found.saddles) == len(saddle_lines)
     assert lines[0].endswith("force calls' CPU:")   # the search's report: one line an attempt
-    assert sum(line.startswith('  mode ') for line in lines) == len(
-        [a for a in found.search.attempts if a.kind == 'mode'])
+    for kind in ('mode', 'local'):
+        assert sum(line.startswith(f'  {kind} ') for line in lines) == len(
+            [a for a in found.search.attempts if a.kind == kind])
     assert window is not None or len(found.search.attempts) == 2 * 2 + 1   # one round
     assert sorted(s['energy'] for s in graph['saddles']) == pytest.approx(
         sorted(s.get_potential_energy() for s in found.saddles), rel=1e-9)

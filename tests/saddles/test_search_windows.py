@@ -4,6 +4,7 @@ whole map, on 2D trap clusters."""
 
 import math
 
+import numpy as np
 import pytest
 
 from ase_maud.analysis.stationary import classify
@@ -37,17 +38,54 @@ def test_a_window_goes_on_in_rounds_while_they_find_new_saddles_below_it():
 @pytest.mark.parametrize('empty_rounds', [1, 3])
 def test_the_rounds_stop_after_the_stated_rounds_in_a_row_find_nothing_new(empty_rounds):
     """Where no saddle counts (the test ``connected`` refuses every one),
-    the search makes exactly ``empty_rounds`` rounds of ``modes`` modes both
-    ways and ``local`` points, says so and reports them."""
+    the search without its sweep makes exactly ``empty_rounds`` rounds of
+    ``modes`` modes both ways and ``local`` points, says so and reports
+    them."""
     start = trap_cluster(13)
     search = search_saddles(start, modes=1, local=1, window=WINDOW, empty_rounds=empty_rounds,
-                            connected=lambda saddle: False)
+                            connected=lambda saddle: False, sweep=False)
     assert search.rounds == empty_rounds
     assert [(a.kind, a.where) for a in search.attempts] == [
         pair for r in range(empty_rounds)
         for pair in (('mode', r), ('mode', r), ('local', search.attempts[3 * r + 2].where))]
     assert len({a.where for a in search.attempts if a.kind == 'local'}) == empty_rounds
     assert f'attempts ({empty_rounds} round' in search.report().splitlines()[0]
+
+
+def test_after_the_rounds_a_sweep_activates_every_free_point_not_yet_activated():
+    """With a window and ``local`` above 0 the rounds end as they do
+    without the sweep, then each free point that no round activated is
+    activated once, in the order the search's seed draws (a fresh one);
+    a saddle a sweep reaches is a saddle of the search."""
+    seed = int(np.random.default_rng().integers(1000))
+    start = trap_cluster(13)
+    rounds = search_saddles(start, modes=1, local=1, window=WINDOW, empty_rounds=1, seed=seed,
+                            connected=lambda saddle: False, sweep=False)
+    swept = search_saddles(start, modes=1, local=1, window=WINDOW, empty_rounds=1, seed=seed,
+                           connected=lambda saddle: False)
+    made = len(rounds.attempts)
+    assert [(a.kind, a.where, a.sign) for a in swept.attempts[:made]] == [
+        (a.kind, a.where, a.sign) for a in rounds.attempts]
+    assert swept.rounds == rounds.rounds == 1
+    assert all(a.kind == 'local' for a in swept.attempts[made:])
+    assert sorted(a.where for a in swept.attempts if a.kind == 'local') == list(range(13))
+    assert len(swept.saddles) == len({a.saddle for a in swept.attempts if a.saddle is not None})
+    assert len(swept.saddles) >= len(rounds.saddles)
+
+
+def test_a_search_without_a_window_or_local_activations_makes_no_sweep():
+    """The sweep follows a window's rounds only, and not where ``local=0``
+    asks for no local activation."""
+    start = trap_cluster(13)
+    assert len(search_saddles(start, modes=1, local=1).attempts) == 3
+    assert not any(a.kind == 'local' for a in search_saddles(
+        start, modes=1, local=0, window=WINDOW, empty_rounds=1).attempts)
+
+
+@pytest.mark.parametrize('sweep', [1, 'yes', None])
+def test_the_sweep_is_checked(sweep):
+    with pytest.raises(ValueError, match='sweep must be one of'):
+        search_saddles(trap_cluster(13), modes=1, local=1, window=WINDOW, sweep=sweep)
 
 
 def test_a_new_saddle_below_the_window_starts_the_count_of_empty_rounds_again():

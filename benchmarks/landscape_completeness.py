@@ -157,7 +157,7 @@ def compare(scene: str, size: int, seed: int, window: float, factor: int, ref_se
                                                        key=lambda item: item[0][1]):
         print(f'  {scene}: barrier {barrier:.5f} {"found" if hit else "MISSED"} '
               f'(reference: {attempt.describe()}); reached by '
-              + ', '.join('{} attempts of the {} ({} local)'.format(*reached(run, saddle), name)
+              + ', '.join('{1} attempts of the {0} ({2} local)'.format(name, *reached(run, saddle))
                           for name, run in (('reference', reference), ('default', default))))
     return rows
 

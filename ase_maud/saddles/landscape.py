@@ -193,8 +193,8 @@ def landscape(atoms: Atoms, modes: int = 2, fmax: float = 1e-6, steps: int = 100
         See ``window``.
     sweep : bool, default True
         With a ``window`` and ``local`` above 0: once the rounds end, a local
-        activation at every free point not yet activated (a local saddle of a net is reached
-        from one to three of its points:
+        activation at every free point not yet activated (a local saddle of
+        a net is reached from one to three of its points:
         :func:`~ase_maud.saddles.search.search_saddles`); False: stop with
         the rounds.
 

@@ -12,7 +12,8 @@ From it:
 - **default**: :func:`ase_maud.saddles.landscape.landscape` with its default arguments (its modes,
   local activations and seed; ``--modes`` sets the modes a round) to ``--fmax``, told the
   window (``window=``: it goes on in rounds, the next modes and points each, until its
-  ``empty_rounds`` rounds in a row find no new saddle below it); with
+  ``empty_rounds`` rounds in a row find no new saddle below it, then activates every free
+  point no round activated: its ``sweep``); with
   ``--one-round``, not told it (one round: what the landscape did before it took a window);
 - **reference**: the same function with ``--factor`` (default 10) times as many attempts
   (:class:`ase_maud.saddles.attempts.Attempt`: each climb along a mode, one way, or each local

@@ -6,6 +6,7 @@ included), and :func:`fresh_copy`, a start with a calculator of its own.
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass
 
@@ -16,12 +17,15 @@ from ase.calculators.calculator import Calculator
 #: CPU seconds that worker processes spent on this process's calls (the
 #: FMM's, :mod:`ase_maud.backends.fmm`): ``time.process_time`` leaves them out.
 _worker_cpu_s = 0.0
+_WORKER_CPU_LOCK = threading.Lock()
 
 
 def add_worker_cpu(seconds: float) -> None:
-    """Count ``seconds`` of CPU a worker process spent on a call of this one."""
+    """Count ``seconds`` of CPU a worker process spent on a call of this one
+    (from any thread)."""
     global _worker_cpu_s
-    _worker_cpu_s += seconds
+    with _WORKER_CPU_LOCK:
+        _worker_cpu_s += seconds
 
 
 def worker_cpu_seconds() -> float:

@@ -78,7 +78,9 @@ def _make_numba_kernel(with_blocks, parallel):
     to the same chunk, so every thread gets the same amount of work; chunk
     ``t`` adds its energy to ``energy[t]`` and its sums to ``acc[t]`` (rows
     fx, fy, fz and, with blocks, kxx, kyy, kxy, kxz, kyz), summed by
-    :func:`direct_sum` (no races, O(threads * N) memory). ``error_model='numpy'``:
+    :func:`direct_sum` (no races, O(threads * N) memory). ``nogil``: Python
+    threads that each sum a scene of their own (a band's images) run at once.
+    ``error_model='numpy'``:
     a division by zero (coincident points) gives inf instead of raising, and
     the check for it would keep the loops from vectorising.
     """
@@ -88,7 +90,8 @@ def _make_numba_kernel(with_blocks, parallel):
     # ``parallel`` is read in the body so that it is a closure variable:
     # numba's cache keys a closure by its code and closure values, not by its
     # compile options, and would otherwise give both variants one entry.
-    @numba.njit(parallel=parallel, fastmath=True, error_model='numpy', cache=True)
+    @numba.njit(parallel=parallel, fastmath=True, error_model='numpy', cache=True,
+                nogil=True)
     def kernel(x, y, z, energy, acc):
         n, nchunks = x.size, energy.size
         assert parallel or nchunks == 1

@@ -62,6 +62,7 @@ import atexit
 import multiprocessing
 import os
 import sys
+import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -197,27 +198,32 @@ def _can_fork() -> bool:
 
 
 _POOL: dict = {}
+#: Held while the pool is made or stopped: threads that each evaluate a scene
+#: (a band's images) share one pool.
+_POOL_LOCK = threading.RLock()
 
 
 def _pool(count: int) -> ProcessPoolExecutor:
     """The worker processes, created on first use (forked; each imports
     nothing new) and again after :func:`shutdown`, a fork of this process
     or a broken pool."""
-    pool = _POOL.get('pool')
-    if pool is None or _POOL['pid'] != os.getpid() or _POOL['count'] != count:
-        shutdown()
-        pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context('fork'))
-        _POOL.update(pool=pool, pid=os.getpid(), count=count)
-    return pool
+    with _POOL_LOCK:
+        pool = _POOL.get('pool')
+        if pool is None or _POOL['pid'] != os.getpid() or _POOL['count'] != count:
+            shutdown()
+            pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context('fork'))
+            _POOL.update(pool=pool, pid=os.getpid(), count=count)
+        return pool
 
 
 def shutdown() -> None:
     """Stop the worker processes, if any (also at exit); the next large
     call starts them again."""
-    pool = _POOL.pop('pool', None)
-    if pool is not None and _POOL.get('pid') == os.getpid():
-        pool.shutdown(wait=True, cancel_futures=True)
-    _POOL.clear()
+    with _POOL_LOCK:
+        pool = _POOL.pop('pool', None)
+        if pool is not None and _POOL.get('pid') == os.getpid():
+            pool.shutdown(wait=True, cancel_futures=True)
+        _POOL.clear()
 
 
 atexit.register(shutdown)

@@ -20,6 +20,12 @@ the images are spaced evenly by arc length along the cubic spline through the ba
 (SciPy's ``CubicSpline``; the climbing image stays where it is, each side spaced on its
 own), so a string needs no springs between its images.
 
+The moving images are evaluated at once, each on a thread of its own, as many at a time as
+numba has threads (``numba.get_num_threads()``), each image's direct sum on its thread
+alone: a band's steps are the same whatever numba's thread count, and the work between
+calls (each image's factorisation, its neighbour search) runs on every core. The models
+start afresh at each :meth:`PreconditionedString.relax`.
+
 A band is relaxed when every moving image's residual, ``|f_i - m c_i P_i t_i|`` (largest
 component, force units), is below a target: zero exactly where ``d_i`` is, the force across
 the path in ``P_i``'s metric (Makri et al., eq. 11). The metric shapes the path but not its
@@ -29,7 +35,10 @@ stationary points: a climbing image at rest has zero forces.
 from __future__ import annotations
 
 import itertools
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
+import numba
 import numpy as np
 from ase import Atoms
 from scipy.interpolate import CubicSpline
@@ -60,34 +69,66 @@ class PreconditionedString:
         were taken, with a climbing image if ``climb``; whether it got there. The images
         are left at the last positions evaluated."""
         positions = np.array([image.positions for image in self.band])
-        moving = list(zip(self.band[1:-1], self.models, strict=True))
-        for taken in range(steps + 1):
-            energies = [_energy(image, model) for image, model in moving]
-            top = 1 + int(np.argmax(energies)) if climb else None
-            tangents = _tangents(positions)
-            moves, self.residual = [], 0.0
-            for i, (image, model) in enumerate(moving, 1):
-                forces = image.get_forces()
-                tangent = tangents[i]
-                solver = model.at(image)
-                step = solver.solve(forces)
-                towards = solver.dot(tangent)
-                along = (2 if i == top else 1) * np.vdot(step, towards) / np.vdot(tangent, towards)
-                self.residual = max(self.residual,
-                                    float(np.abs(forces - along * towards).max()))
-                moves.append(step - along * tangent)
-            if self.residual < target:
-                return True
-            if taken == steps:
-                return False
-            for i, move in enumerate(moves, 1):
-                longest = float(np.linalg.norm(move, axis=1).max())
-                positions[i] += (min(1.0, self.max_move / longest) if longest > 0 else 0.0) * move
-            positions = _spaced(positions, top)
-            for image, moved in zip(self.band[1:-1], positions[1:-1], strict=True):
-                image.positions = moved
-            self.steps += 1
-        return False
+        images = self.band[1:-1]
+        lanes = [ThreadPoolExecutor(1, initializer=numba.set_num_threads, initargs=(1,))
+                 for _ in images]
+        running = threading.BoundedSemaphore(min(numba.get_num_threads(), len(images)))
+
+        def each(function, *columns):
+            """``function`` of each moving image's row of ``columns``, each image on its
+            own thread, at most numba's thread count of them at once."""
+            def task(*row):
+                with running:
+                    return function(*row)
+            futures = [lane.submit(task, *row)
+                       for lane, row in zip(lanes, zip(*columns, strict=True), strict=True)]
+            return [future.result() for future in futures]
+
+        try:
+            for taken in range(steps + 1):
+                tangents = _tangents(positions)
+                evaluated = each(_evaluate, images, self.models, tangents[1:-1])
+                top = 1 + int(np.argmax([energy for energy, *_ in evaluated])) if climb else None
+                moves, self.residual = [], 0.0
+                for i, (_, forces, step, towards) in enumerate(evaluated, 1):
+                    along = ((2 if i == top else 1) * np.vdot(step, towards)
+                             / np.vdot(tangents[i], towards))
+                    self.residual = max(self.residual,
+                                        float(np.abs(forces - along * towards).max()))
+                    moves.append(step - along * tangents[i])
+                if self.residual < target:
+                    return True
+                if taken == steps:
+                    return False
+                for i, move in enumerate(moves, 1):
+                    longest = float(np.linalg.norm(move, axis=1).max())
+                    positions[i] += (min(1.0, self.max_move / longest) if longest > 0
+                                     else 0.0) * move
+                positions = _spaced(positions, top)
+                for image, moved in zip(images, positions[1:-1], strict=True):
+                    image.positions = moved
+                self.steps += 1
+            return False
+        finally:
+            each(self._renew, range(len(images)))
+            for lane in lanes:
+                lane.shutdown()
+
+    def _renew(self, k: int) -> None:
+        """A new model for moving image ``k``, the old one (and its factorisation) let
+        go on this thread: SciPy's SuperLU frees its memory only on the thread that
+        allocated it (a factorisation freed on another is never freed)."""
+        self.models[k] = GlobalModel()
+
+
+def _evaluate(image: Atoms, model: GlobalModel,
+              tangent: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """What the step of ``image`` needs: its energy, forces ``f``, ``P^-1 f`` and
+    ``P t`` (``P`` its ``model``'s, ``t`` the band's unit ``tangent`` there)."""
+    energy = _energy(image, model)
+    forces = image.get_forces()
+    solver = model.at(image)
+    return energy, forces, solver.solve(forces), solver.dot(tangent)
 
 
 def _energy(image: Atoms, model: GlobalModel) -> float:

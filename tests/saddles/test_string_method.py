@@ -3,6 +3,9 @@ tangents checked on a circle, the capped step, and a climbing image at rest on
 a small dome's snap-through saddle (verified index 1 by a fresh calculator, at
 the energy the refinement of saddle_between reaches)."""
 
+import threading
+
+import numba
 import numpy as np
 import pytest
 
@@ -10,7 +13,7 @@ from ase_maud import Maud
 from ase_maud.analysis.stationary import classify
 from ase_maud.counting import fresh_copy
 from ase_maud.saddles import string_method
-from ase_maud.saddles.between_minima import mirrored, saddle_between
+from ase_maud.saddles.between_minima import mirrored, reflection, saddle_between
 from ase_maud.saddles.string_method import MAX_MOVE, PreconditionedString
 from ase_maud.scenes.saddle_scenes import rim
 
@@ -99,3 +102,46 @@ def test_a_climbing_image_at_rest_is_the_snap_through_saddle(seed):
     assert (point.index, point.n_zero) == (1, 0)
     assert top.get_potential_energy() == pytest.approx(
         found.saddle.get_potential_energy(), rel=1e-9)
+
+
+def test_the_images_step_on_threads_of_their_own_the_same_whatever_the_count(monkeypatch):
+    """A band of a 24x24 dome (576 points: numba's direct sum splits it into chunks on
+    more than one thread) relaxed for a few steps with numba on one thread and on two:
+    the same positions to the last bit; each image evaluated on a thread of its own with
+    numba on one, as many at a time as numba had threads."""
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba's pool has one thread")
+    seed = int(np.random.default_rng().integers(1000))
+    first = rim(24, seed)
+    assert Maud(first, logfile=None).run(fmax=1e-4, steps=2000)
+    second = reflection(first)
+    at_once, seen = [], set()
+    evaluate, semaphore = string_method._evaluate, string_method.threading.BoundedSemaphore
+
+    def recorded(image, *args):
+        seen.add((id(image), threading.get_ident(), numba.get_num_threads()))
+        return evaluate(image, *args)
+
+    def counted(value):
+        at_once.append(value)
+        return semaphore(value)
+
+    monkeypatch.setattr(string_method, '_evaluate', recorded)
+    monkeypatch.setattr(string_method.threading, 'BoundedSemaphore', counted)
+    ends = []
+    for threads in (1, 2):
+        band = [fresh_copy(first) for _ in range(5)] + [fresh_copy(second)]
+        for t, image in zip(np.linspace(0, 1, 6), band, strict=True):
+            image.positions = (1 - t) * first.positions + t * second.positions
+        before = numba.get_num_threads()
+        numba.set_num_threads(threads)
+        seen.clear()
+        try:
+            PreconditionedString(band).relax(target=1e-12, steps=4, climb=True)
+        finally:
+            numba.set_num_threads(before)
+        ends.append(np.array([image.positions for image in band]))
+        assert len(seen) == 4 and {count for *_, count in seen} == {1}
+        assert len({ident for _, ident, _ in seen}) == 4
+    assert at_once == [1, 2]
+    assert np.array_equal(*ends), seed

@@ -9,9 +9,10 @@ energy-and-forces call timed (the unit), the default search for one saddle (its 
 scene's), and the saddle it returns verified by a fresh
 calculator and ``classify`` (index 1 and forces below 1e-6). Counted per search: calls,
 Hessian-vector product vectors, Hessians, CPU seconds (``counting.cpu_seconds``: run with
-one thread) and the headline, CPU in units of one force call of the scene; the process's peak
-resident memory after the search. Printed a row a search, then a table per family; written to
-``--out`` (``rows.csv``, ``summary.md``; an existing file is never replaced)::
+one thread), wall seconds and numba's threads, and the headline, CPU in units of one force
+call of the scene; the process's peak resident memory after the search. Printed a row a
+search, then a table per family; written to ``--out`` (``rows.csv``, ``summary.md``; an
+existing file is never replaced)::
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
         python benchmarks/saddle_families.py --seeds 0 1 --sizes 300 600 --out saddle-families
@@ -23,9 +24,11 @@ import argparse
 import csv
 import resource
 import sys
+import time
 import warnings
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from ase_maud import Maud, MaudError, classify, search_saddles
@@ -52,15 +55,16 @@ def one(family: str, seed: int, sizes: tuple[int, int]) -> dict | None:
     if point.verdict != 'minimum':
         print(f'{family:12s} {seed:3d} left out: relaxed to a {point.verdict}', flush=True)
         return None
-    cpu = cpu_seconds()
+    cpu, wall = cpu_seconds(), time.perf_counter()
     found = search_saddles(atoms, wanted=1, seed=seed)
-    cpu = cpu_seconds() - cpu
+    cpu, wall = cpu_seconds() - cpu, time.perf_counter() - wall
     row = {'family': family, 'seed': seed, 'natoms': len(atoms),
            'dim': atoms.calc.parameters['dim'], 'verified': False, 'index': '', 'fmax': '',
            'barrier': '', 'found_by': '', 'calls': sum(a.calls for a in found.attempts),
            'hvp_vectors': sum(a.hvp_vectors for a in found.attempts) + found.work.hvp_vectors,
            'hessians': sum(a.hessians for a in found.attempts) + found.work.hessians,
-           'cpu_s': round(cpu, 3), 'force_call_cpu_s': found.force_call_cpu_s,
+           'cpu_s': round(cpu, 3), 'wall_s': round(wall, 3),
+           'threads': numba.get_num_threads(), 'force_call_cpu_s': found.force_call_cpu_s,
            'cpu_in_force_calls': round(cpu / found.force_call_cpu_s),
            'peak_rss_mb': round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
            'attempts': len(found.attempts)}
@@ -115,7 +119,8 @@ def main() -> int:
             print(f"{family:12s} {seed:3d} N {row['natoms']:5d} verified {row['verified']!s:5s} "
                   f"{row['calls']:6d} calls {row['hvp_vectors']:6d} HVP {row['hessians']:4d} "
                   f"Hessians {row['cpu_s']:8.1f} CPU s = {row['cpu_in_force_calls']:8d} force "
-                  f"calls' CPU, peak {row['peak_rss_mb']} MB, by {row['found_by'] or '-'}",
+                  f"calls' CPU, {row['wall_s']:.1f} s wall on {row['threads']} threads, "
+                  f"peak {row['peak_rss_mb']} MB, by {row['found_by'] or '-'}",
                   flush=True)
     if not rows:
         print('no scene relaxed to a minimum: nothing written', file=sys.stderr)

@@ -23,8 +23,10 @@ own), so a string needs no springs between its images.
 The moving images are evaluated at once, each on a thread of its own, as many at a time as
 numba has threads (``numba.get_num_threads()``), each image's direct sum on its thread
 alone: a band's steps are the same whatever numba's thread count, and the work between
-calls (each image's factorisation, its neighbour search) runs on every core. The models
-start afresh at each :meth:`PreconditionedString.relax`.
+calls (each image's factorisation, its neighbour search) runs on every core. With numba
+on one thread the images are evaluated in turn on the caller's thread (a thread switch an
+image cost about an eighth of a 500-point band's CPU). The models start afresh at each
+:meth:`PreconditionedString.relax`.
 
 A band is relaxed when every moving image's residual, ``|f_i - m c_i P_i t_i|`` (largest
 component, force units), is below a target: zero exactly where ``d_i`` is, the force across
@@ -36,7 +38,9 @@ from __future__ import annotations
 
 import itertools
 import threading
+from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
+from typing import Any
 
 import numba
 import numpy as np
@@ -70,24 +74,11 @@ class PreconditionedString:
         are left at the last positions evaluated."""
         positions = np.array([image.positions for image in self.band])
         images = self.band[1:-1]
-        lanes = [ThreadPoolExecutor(1, initializer=numba.set_num_threads, initargs=(1,))
-                 for _ in images]
-        running = threading.BoundedSemaphore(min(numba.get_num_threads(), len(images)))
-
-        def each(function, *columns):
-            """``function`` of each moving image's row of ``columns``, each image on its
-            own thread, at most numba's thread count of them at once."""
-            def task(*row):
-                with running:
-                    return function(*row)
-            futures = [lane.submit(task, *row)
-                       for lane, row in zip(lanes, zip(*columns, strict=True), strict=True)]
-            return [future.result() for future in futures]
-
+        lanes = _Lanes(len(images))
         try:
             for taken in range(steps + 1):
                 tangents = _tangents(positions)
-                evaluated = each(_evaluate, images, self.models, tangents[1:-1])
+                evaluated = lanes.each(_evaluate, images, self.models, tangents[1:-1])
                 top = 1 + int(np.argmax([energy for energy, *_ in evaluated])) if climb else None
                 moves, self.residual = [], 0.0
                 for i, (_, forces, step, towards) in enumerate(evaluated, 1):
@@ -110,15 +101,44 @@ class PreconditionedString:
                 self.steps += 1
             return False
         finally:
-            each(self._renew, range(len(images)))
-            for lane in lanes:
-                lane.shutdown()
+            lanes.each(self._renew, range(len(images)))
+            lanes.shutdown()
 
     def _renew(self, k: int) -> None:
         """A new model for moving image ``k``, the old one (and its factorisation) let
         go on this thread: SciPy's SuperLU frees its memory only on the thread that
         allocated it (a factorisation freed on another is never freed)."""
         self.models[k] = GlobalModel()
+
+
+class _Lanes:
+    """Where the ``count`` moving images are evaluated: with numba on more than one
+    thread, each on a thread of its own (numba on one thread there), at most numba's
+    thread count of them at once; with numba on one, in turn on the caller's thread
+    (handing each to a thread of its own would only add a thread switch an image)."""
+
+    def __init__(self, count: int):
+        threads = numba.get_num_threads()
+        self.threads = ([ThreadPoolExecutor(1, initializer=numba.set_num_threads, initargs=(1,))
+                         for _ in range(count)] if threads > 1 else [])
+        self.running = threading.BoundedSemaphore(min(threads, count)) if self.threads else None
+
+    def each(self, function: Callable[..., Any], *columns: Iterable[Any]) -> list[Any]:
+        """``function`` of each moving image's row of ``columns``, in the images' order."""
+        rows = zip(*columns, strict=True)
+        if not self.threads:
+            return [function(*row) for row in rows]
+
+        def task(*row):
+            with self.running:
+                return function(*row)
+        futures = [thread.submit(task, *row)
+                   for thread, row in zip(self.threads, rows, strict=True)]
+        return [future.result() for future in futures]
+
+    def shutdown(self) -> None:
+        for thread in self.threads:
+            thread.shutdown()
 
 
 def _evaluate(image: Atoms, model: GlobalModel,
